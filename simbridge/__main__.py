@@ -1,0 +1,5 @@
+import sys
+
+from simbridge.cli import main
+
+sys.exit(main())

@@ -1,0 +1,427 @@
+"""The flight core shared by both flavours: arming, modes and what each mode flies,
+the land detector, auto-disarm, the offboard-stream rules and failsafes, and the geofence.
+
+It speaks in setpoints, modes and MAV_RESULT codes; MAVLink framing lives in
+:mod:`simbridge.autopilot.server`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from simbridge.autopilot.flavours import (
+    MAV_RESULT_ACCEPTED,
+    MAV_RESULT_DENIED,
+    MAV_RESULT_FAILED,
+    MAV_RESULT_TEMPORARILY_REJECTED,
+    Flavour,
+    ModeSpec,
+    Nav,
+    Tunables,
+)
+from simbridge.control import Setpoint
+from simbridge.geo import Vec3
+from simbridge.physics import VehicleState
+from simbridge.vehicle import Vehicle
+
+# STATUSTEXT severities
+SEV_CRITICAL, SEV_WARNING, SEV_NOTICE, SEV_INFO = 2, 4, 5, 6
+
+# MAV_LANDED_STATE
+LANDED_ON_GROUND, LANDED_IN_AIR, LANDED_TAKEOFF, LANDED_LANDING = 1, 2, 3, 4
+
+EventSink = Callable[[str, dict[str, Any]], None]
+TextSink = Callable[[int, str], None]
+
+_OFFBOARD_STREAM_MIN_S = 1.0  # PX4: setpoints must have streamed about 1 s ...
+_OFFBOARD_STREAM_MAX_GAP_S = 0.5  # ... above 2 Hz before OFFBOARD is accepted
+_LANDED_CONFIRM_S = 0.4
+_TAKEOFF_REACHED_M = 0.3
+
+
+@dataclass(frozen=True, slots=True)
+class CommandOutcome:
+    result: int
+    text: str | None = None
+    severity: int = SEV_WARNING
+
+
+ACCEPTED = CommandOutcome(MAV_RESULT_ACCEPTED)
+
+
+class Autopilot:
+    """One vehicle's autopilot state machine.
+
+    Args:
+        flavour: PX4 or ArduPilot rules.
+        vehicle: the airframe it flies.
+        home_ned_m: home position (ground level) in the world frame.
+        emit_event: called with (event name, fields) for the episode log.
+        emit_text: called with (severity, text) for STATUSTEXT.
+    """
+
+    def __init__(
+        self,
+        flavour: Flavour,
+        vehicle: Vehicle,
+        home_ned_m: Vec3,
+        emit_event: EventSink,
+        emit_text: TextSink,
+    ) -> None:
+        self.flavour = flavour
+        self.vehicle = vehicle
+        self.home_ned_m = home_ned_m
+        self._emit_event = emit_event
+        self._emit_text = emit_text
+        self.params: dict[str, float] = {p.name: float(p.default) for p in flavour.params}
+        self.tun: Tunables = flavour.tunables(self.params)
+        vehicle.set_limits(self.tun.limits)
+        self.armed = False
+        self.mode: ModeSpec = flavour.mode(flavour.ground_start_mode)
+        self.failsafe = False
+        self.landed = True
+        self.landed_state = LANDED_ON_GROUND
+        self._landed_since: float | None = None
+        self._t_s = 0.0
+        self._armed_at_s = 0.0
+        self._has_flown = False
+        self._hold: Setpoint | None = None
+        self._takeoff_target_d: float | None = None
+        self._rtl_phase = "climb"
+        self._external: Setpoint | None = None
+        self._external_is_velocity = False
+        self._external_at_s = -math.inf
+        self._stream_start_s = -math.inf
+        self._last_fence_text_s = -math.inf
+
+    # ------------------------------------------------------------------ spawn
+    def spawn_in_air(self, state: VehicleState) -> None:
+        """Armed, in the air, holding where the vehicle is (``--start air``)."""
+        self.armed = True
+        self._has_flown = True
+        self.landed = False
+        self.landed_state = LANDED_IN_AIR
+        self._armed_at_s = state.t_s
+        self._set_mode(self.flavour.mode(self.flavour.air_start_mode), state, announce=False)
+
+    # ------------------------------------------------------------------ parameters
+    def set_param(self, name: str, value: float) -> bool:
+        if name not in self.params or not math.isfinite(value):
+            return False
+        old = self.params[name]
+        self.params[name] = value
+        try:
+            tun = self.flavour.tunables(self.params)
+        except ValueError as exc:
+            self.params[name] = old
+            self._emit_text(SEV_WARNING, f"Param {name} rejected: {exc}")
+            return False
+        self.tun = tun
+        self.vehicle.set_limits(tun.limits)
+        return True
+
+    # ------------------------------------------------------------------ commands
+    def arm(self, arm: bool, force: bool = False) -> CommandOutcome:
+        s = self.vehicle.state
+        if arm:
+            if self.armed:
+                return ACCEPTED
+            if not self.mode.armable and not force:
+                text = (
+                    f"Arming denied: {self.mode.name} mode"
+                    if self.flavour.name == "px4"
+                    else "Arm: Mode not armable"
+                )
+                return self._refuse(text, self._arm_refusal())
+            if not self.landed and not force:
+                return self._refuse("Arming denied: vehicle not landed", self._arm_refusal())
+            self.armed = True
+            self._armed_at_s = s.t_s
+            self._has_flown = False
+            self._landed_since = s.t_s
+            self.vehicle.controller.reset()
+            self._hold = Setpoint.hold(s.pos_ned_m, s.euler_rad[2])
+            self._emit_event("armed", {})
+            self._emit_text(SEV_INFO, "Armed by external command")
+            return ACCEPTED
+        if not self.armed:
+            return ACCEPTED
+        if not self.landed and not force:
+            return self._refuse("Disarming denied: not landed", self._arm_refusal())
+        self._disarm("external command")
+        return ACCEPTED
+
+    def _arm_refusal(self) -> int:
+        return MAV_RESULT_TEMPORARILY_REJECTED if self.flavour.name == "px4" else MAV_RESULT_FAILED
+
+    def set_mode(self, spec: ModeSpec) -> CommandOutcome:
+        s = self.vehicle.state
+        if spec.nav is Nav.EXTERNAL and self.flavour.offboard_needs_stream and not self._stream_ok():
+            return self._refuse(
+                "Switching to Offboard rejected: no setpoint stream", MAV_RESULT_TEMPORARILY_REJECTED
+            )
+        if spec.nav is Nav.TAKEOFF and self.armed and not self.landed:
+            return self._refuse("Takeoff denied: already flying", MAV_RESULT_TEMPORARILY_REJECTED)
+        self.failsafe = False
+        self._set_mode(spec, s)
+        return ACCEPTED
+
+    def takeoff(self, alt_m: float | None) -> CommandOutcome:
+        """NAV_TAKEOFF; ``alt_m`` is relative to the ground under the vehicle (NaN/None: default)."""
+        if alt_m is not None and not (math.isfinite(alt_m) and 0.5 <= alt_m <= self.tun.fence_alt_m):
+            return self._refuse(f"Takeoff altitude {alt_m} m out of range", MAV_RESULT_DENIED)
+        if not self.armed:
+            return self._refuse("Takeoff denied: disarmed", self._arm_refusal())
+        if not self.landed:
+            return self._refuse("Takeoff denied: already flying", MAV_RESULT_TEMPORARILY_REJECTED)
+        if self.flavour.name == "ardupilot" and self.mode.nav is not Nav.EXTERNAL:
+            return self._refuse("Takeoff requires GUIDED mode", MAV_RESULT_FAILED)
+        s = self.vehicle.state
+        if self.flavour.name == "px4":
+            self._set_mode(self.flavour.mode("AUTO.TAKEOFF"), s)
+        climb = alt_m if alt_m is not None else self.tun.takeoff_alt_m
+        self._takeoff_target_d = -(s.ground_height_m + climb)
+        self._hold = Setpoint.hold((s.pos_ned_m[0], s.pos_ned_m[1], self._takeoff_target_d), s.euler_rad[2])
+        if self.flavour.name == "ardupilot":
+            self._external = self._hold
+            self._external_is_velocity = False
+        self.landed_state = LANDED_TAKEOFF
+        return ACCEPTED
+
+    def land(self) -> CommandOutcome:
+        land = next(m for m in self.flavour.modes if m.nav is Nav.LAND)
+        return self.set_mode(land)
+
+    def rtl(self) -> CommandOutcome:
+        rtl = next(m for m in self.flavour.modes if m.nav is Nav.RTL)
+        return self.set_mode(rtl)
+
+    def external_setpoint(self, sp: Setpoint, is_velocity: bool) -> CommandOutcome:
+        """A SET_POSITION_TARGET_LOCAL_NED already decoded into the world frame."""
+        s = self.vehicle.state
+        problem = self._fence_problem(sp)
+        if problem is not None:
+            self.reject_setpoint(problem)
+            return CommandOutcome(MAV_RESULT_DENIED)
+        if not self.flavour.offboard_needs_stream and self.mode.nav is not Nav.EXTERNAL:
+            return CommandOutcome(MAV_RESULT_DENIED)  # ArduPilot acts on targets only in GUIDED
+        if s.t_s - self._external_at_s > _OFFBOARD_STREAM_MAX_GAP_S:
+            self._stream_start_s = s.t_s
+        self._external_at_s = s.t_s
+        self._external = sp
+        self._external_is_velocity = is_velocity
+        return ACCEPTED
+
+    def reject_setpoint(self, problem: str) -> None:
+        """A setpoint the MAVLink layer could not decode: say so, at most once a second."""
+        s = self.vehicle.state
+        if s.t_s - self._last_fence_text_s > 1.0:
+            self._last_fence_text_s = s.t_s
+            self._emit_text(SEV_WARNING, f"Setpoint rejected: {problem}")
+
+    def text_warning(self, text: str) -> None:
+        self._emit_text(SEV_WARNING, text)
+
+    # ------------------------------------------------------------------ per-step
+    def tick(self, s: VehicleState) -> Setpoint | None:
+        """Decide what to fly for the next step. ``None`` means motors off."""
+        self._t_s = s.t_s
+        self._update_land_detector(s)
+        if not self.armed:
+            return None
+        if self.landed:
+            return self._on_ground(s)
+        return self._fly(s)
+
+    def _fly(self, s: VehicleState) -> Setpoint | None:
+        nav = self.mode.nav
+        if nav is Nav.EXTERNAL:
+            return self._fly_external(s)
+        if nav is Nav.TAKEOFF:
+            return self._fly_takeoff(s)
+        if nav is Nav.LAND:
+            return self._fly_land(s, self._hold)
+        if nav is Nav.RTL:
+            return self._fly_rtl(s)
+        return self._hold
+
+    def _on_ground(self, s: VehicleState) -> Setpoint | None:
+        t = self.tun
+        since = self._landed_since if self._landed_since is not None else s.t_s
+        wants_up = self._wants_climb(s)
+        if not wants_up:
+            limit = t.disarm_after_land_s if self._has_flown else t.disarm_preflight_s
+            if s.t_s - since >= limit:
+                self._disarm("landed" if self._has_flown else "auto-disarm: no takeoff")
+                return None
+            # idle on the ground: ask for a gentle descent so thrust stays below weight
+            return Setpoint(pos_ne_m=None, pos_d_m=None, vel_ned_m_s=(0.0, 0.0, 0.5))
+        nav = self.mode.nav
+        if nav is Nav.TAKEOFF:
+            return self._fly_takeoff(s)
+        if nav is Nav.EXTERNAL:
+            return self._fly_external(s)
+        return self._hold
+
+    def _wants_climb(self, s: VehicleState) -> bool:
+        nav = self.mode.nav
+        if nav is Nav.TAKEOFF:
+            return True
+        if nav is Nav.EXTERNAL and self._external is not None:
+            sp = self._external
+            if sp.pos_d_m is not None:
+                return sp.pos_d_m < s.pos_ned_m[2] - 0.3
+            return sp.vel_ned_m_s[2] < -0.1
+        if nav is Nav.HOLD and self._hold is not None and self._hold.pos_d_m is not None:
+            return self._hold.pos_d_m < s.pos_ned_m[2] - 0.5
+        return False
+
+    def _fly_takeoff(self, s: VehicleState) -> Setpoint | None:
+        if self._hold is None or self._takeoff_target_d is None:
+            self._takeoff_target_d = -(s.ground_height_m + self.tun.takeoff_alt_m)
+            self._hold = Setpoint.hold((s.pos_ned_m[0], s.pos_ned_m[1], self._takeoff_target_d))
+        if abs(s.pos_ned_m[2] - self._takeoff_target_d) < _TAKEOFF_REACHED_M:
+            self._takeoff_target_d = None
+            after = self.flavour.after_takeoff_mode
+            if after is not None:
+                self._set_mode(self.flavour.mode(after), s, announce=True)
+            self._emit_text(SEV_INFO, "Takeoff complete")
+        return self._hold
+
+    def _fly_land(self, s: VehicleState, over: Setpoint | None) -> Setpoint:
+        t = self.tun
+        agl = s.height_agl_m
+        if agl > 2 * t.land_slow_below_m:
+            vz = t.limits.max_speed_down_m_s
+        elif agl > t.land_slow_below_m:
+            frac = (agl - t.land_slow_below_m) / t.land_slow_below_m
+            vz = t.land_speed_m_s + frac * (t.limits.max_speed_down_m_s - t.land_speed_m_s)
+        else:
+            vz = t.land_speed_m_s
+        self.landed_state = LANDED_LANDING
+        ne = over.pos_ne_m if over is not None else (s.pos_ned_m[0], s.pos_ned_m[1])
+        yaw = over.yaw_rad if over is not None else None
+        return Setpoint(pos_ne_m=ne, pos_d_m=None, vel_ned_m_s=(0.0, 0.0, vz), yaw_rad=yaw)
+
+    def _fly_rtl(self, s: VehicleState) -> Setpoint:
+        hn, he, hd = self.home_ned_m
+        ret_d = min(hd - self.tun.rtl_alt_m, s.pos_ned_m[2])  # never descend to return
+        if self._rtl_phase == "climb":
+            if s.pos_ned_m[2] - ret_d < 0.5:
+                self._rtl_phase = "return"
+            return Setpoint(pos_ne_m=self._hold_ne(s), pos_d_m=ret_d)
+        if self._rtl_phase == "return":
+            if math.hypot(s.pos_ned_m[0] - hn, s.pos_ned_m[1] - he) < 1.0:
+                self._rtl_phase = "land"
+            return Setpoint(pos_ne_m=(hn, he), pos_d_m=ret_d)
+        return self._fly_land(s, Setpoint(pos_ne_m=(hn, he)))
+
+    def _hold_ne(self, s: VehicleState) -> tuple[float, float]:
+        if self._hold is not None and self._hold.pos_ne_m is not None:
+            return self._hold.pos_ne_m
+        return (s.pos_ned_m[0], s.pos_ned_m[1])
+
+    def _fly_external(self, s: VehicleState) -> Setpoint | None:
+        t = self.tun
+        age = s.t_s - self._external_at_s
+        if t.offboard_loss_s is not None and age > t.offboard_loss_s and self._external_at_s > -math.inf:
+            mode_name = t.offboard_loss_mode or "AUTO.LOITER"
+            self.failsafe = True
+            self._set_mode(self.flavour.mode(mode_name), s, announce=False)
+            self._emit_event("failsafe", {"reason": "offboard_loss", "action": mode_name})
+            self._emit_text(SEV_CRITICAL, f"Failsafe: offboard lost, {mode_name}")
+            return self._fly(s)
+        sp = self._external
+        if sp is None:
+            return self._hold
+        if (
+            self._external_is_velocity
+            and t.velocity_target_timeout_s is not None
+            and age > t.velocity_target_timeout_s
+        ):
+            # ArduPilot GUID_TIMEOUT: a stale velocity target becomes a stop
+            self._external = Setpoint.hold(s.pos_ned_m, s.euler_rad[2])
+            self._external_is_velocity = False
+            return self._external
+        return sp
+
+    # ------------------------------------------------------------------ land detector
+    def _update_land_detector(self, s: VehicleState) -> None:
+        if self.landed:
+            if not s.on_ground and s.height_agl_m > 0.4:
+                self.landed = False
+                self._has_flown = True
+                self._landed_since = None
+                self.landed_state = LANDED_IN_AIR if self.mode.nav is not Nav.TAKEOFF else LANDED_TAKEOFF
+            return
+        if s.on_ground and abs(s.vel_ned_m_s[2]) < 0.3 and not self._wants_climb(s):
+            if self._landed_since is None:
+                self._landed_since = s.t_s
+            elif s.t_s - self._landed_since >= _LANDED_CONFIRM_S:
+                self.landed = True
+                self.landed_state = LANDED_ON_GROUND
+                self._emit_event("touchdown", {"pos_ned_m": [round(v, 3) for v in s.pos_ned_m]})
+                self._emit_text(SEV_INFO, "Landing detected")
+        else:
+            self._landed_since = None
+            if self.landed_state == LANDED_ON_GROUND:
+                self.landed_state = LANDED_IN_AIR
+
+    # ------------------------------------------------------------------ helpers
+    def _disarm(self, why: str) -> None:
+        self.armed = False
+        self._external = None
+        self._external_at_s = -math.inf
+        self.failsafe = False
+        self._emit_event("disarmed", {"reason": why})
+        self._emit_text(SEV_INFO, f"Disarmed ({why})")
+        if self.mode.nav in (Nav.LAND, Nav.RTL, Nav.TAKEOFF, Nav.EXTERNAL):
+            self._set_mode(self.flavour.mode(self.flavour.ground_start_mode), self.vehicle.state)
+
+    def _set_mode(self, spec: ModeSpec, s: VehicleState, announce: bool = True) -> None:
+        changed = spec != self.mode
+        self.mode = spec
+        self._hold = Setpoint.hold(s.pos_ned_m, s.euler_rad[2])
+        if spec.nav is not Nav.TAKEOFF:
+            self._takeoff_target_d = None
+        if spec.nav is Nav.RTL:
+            self._rtl_phase = "climb"
+        if spec.nav is Nav.EXTERNAL and not self.flavour.offboard_needs_stream:
+            # ArduPilot GUIDED starts by holding where it is until a target arrives
+            self._external = self._hold
+            self._external_is_velocity = False
+            self._external_at_s = s.t_s
+        if changed:
+            self._emit_event("mode", {"mode": spec.name})
+            if announce:
+                self._emit_text(SEV_INFO, f"Mode {spec.name}")
+
+    def _stream_ok(self) -> bool:
+        t = self._t_s
+        fresh = t - self._external_at_s <= _OFFBOARD_STREAM_MAX_GAP_S
+        return fresh and t - self._stream_start_s >= _OFFBOARD_STREAM_MIN_S
+
+    def _fence_problem(self, sp: Setpoint) -> str | None:
+        values = [*sp.vel_ned_m_s]
+        if sp.pos_ne_m is not None:
+            values += list(sp.pos_ne_m)
+        if sp.pos_d_m is not None:
+            values.append(sp.pos_d_m)
+        for v in (sp.yaw_rad, sp.yaw_rate_rad_s):
+            if v is not None:
+                values.append(v)
+        if not all(math.isfinite(v) for v in values):
+            return "NaN or infinite value"
+        hn, he, hd = self.home_ned_m
+        if sp.pos_ne_m is not None and math.hypot(sp.pos_ne_m[0] - hn, sp.pos_ne_m[1] - he) > self.tun.fence_radius_m:
+            return f"outside geofence ({self.tun.fence_radius_m:.0f} m from home)"
+        if sp.pos_d_m is not None and hd - sp.pos_d_m > self.tun.fence_alt_m:
+            return f"above geofence ({self.tun.fence_alt_m:.0f} m over home)"
+        return None
+
+    def _refuse(self, text: str, result: int) -> CommandOutcome:
+        self._emit_text(SEV_WARNING, text)
+        return CommandOutcome(result, text)

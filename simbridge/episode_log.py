@@ -1,0 +1,60 @@
+"""The episode log: JSON lines of vehicle state (10 Hz of simulated time) and events.
+
+Every line has ``t_s`` (simulated seconds). State lines have ``"event": "state"``; event lines
+name the event: ``armed``, ``disarmed``, ``mode`` (``mode``: the new mode's name), ``failsafe``,
+``touchdown`` (``pos_ned_m``, ``surface``, ``safe``, ``reasons``), ``start`` and ``stop``.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any, TextIO
+
+from simbridge.physics import VehicleState
+
+
+class EpisodeLog:
+    """Append-only JSON-lines writer; events are flushed at once so a crash loses no event."""
+
+    STATE_INTERVAL_S = 0.1
+
+    def __init__(self, path: Path | None) -> None:
+        self._fh: TextIO | None = None
+        if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            self._fh = path.open("w", encoding="utf-8")
+        self._next_state_s = 0.0
+
+    def event(self, t_s: float, name: str, fields: dict[str, Any]) -> None:
+        if self._fh is None:
+            return
+        self._fh.write(json.dumps({"t_s": round(t_s, 4), "event": name, **fields}) + "\n")
+        self._fh.flush()
+
+    def state(self, s: VehicleState, mode: str, armed: bool, landed_state: int, battery_pct: float) -> None:
+        if self._fh is None or s.t_s + 1e-9 < self._next_state_s:
+            return
+        self._next_state_s = s.t_s + self.STATE_INTERVAL_S
+        self._fh.write(
+            json.dumps(
+                {
+                    "t_s": round(s.t_s, 4),
+                    "event": "state",
+                    "pos_ned_m": [round(v, 4) for v in s.pos_ned_m],
+                    "vel_ned_m_s": [round(v, 4) for v in s.vel_ned_m_s],
+                    "quat_wxyz": [round(v, 6) for v in s.quat],
+                    "agl_m": round(s.height_agl_m, 3),
+                    "mode": mode,
+                    "armed": armed,
+                    "landed_state": landed_state,
+                    "battery_pct": round(battery_pct, 2),
+                }
+            )
+            + "\n"
+        )
+
+    def close(self) -> None:
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None

@@ -1,0 +1,198 @@
+"""MAVLink 2 over one UDP socket with several peers, on asyncio.
+
+pymavlink supplies the codec (a bare ``MAVLink`` object fed with ``parse_buffer``); asyncio owns
+the socket. Every frame we send goes to every live peer, as a flight controller's UDP link does;
+replies are addressed inside the message (target system/component), never by "last sender".
+
+URLs: ``udpout:HOST:PORT`` sends to a fixed address (and also to peers that talk to us);
+``udpin:HOST:PORT`` (alias ``udp:``) binds and learns peers from what arrives.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from pymavlink.dialects.v20 import common as mavlink2
+
+Address = tuple[str, int]
+MessageHandler = Callable[[Any, Address], None]
+
+_PEER_TIMEOUT_S = 10.0
+_MAVLINK_EPOCH_UNIX_S = 1420070400  # signing timestamps count 10 us units from 2015-01-01
+
+
+class LinkUrlError(ValueError):
+    """A --mavlink URL that cannot be used."""
+
+
+@dataclass(frozen=True, slots=True)
+class LinkUrl:
+    mode: str  # "udpin" or "udpout"
+    host: str
+    port: int
+
+    @staticmethod
+    def parse(url: str) -> LinkUrl:
+        scheme, sep, rest = url.partition(":")
+        if not sep:
+            raise LinkUrlError(f"MAVLink URL {url!r}: expected udpin:HOST:PORT, udp:PORT or udpout:HOST:PORT")
+        scheme = {"udp": "udpin"}.get(scheme, scheme)
+        if scheme not in ("udpin", "udpout"):
+            raise LinkUrlError(f"MAVLink URL {url!r}: scheme {scheme!r} is not udpin, udp or udpout")
+        host, _, port_text = rest.rpartition(":")
+        if not host:
+            host = "0.0.0.0" if scheme == "udpin" else "127.0.0.1"
+        try:
+            port = int(port_text)
+        except ValueError:
+            raise LinkUrlError(f"MAVLink URL {url!r}: port {port_text!r} is not a number") from None
+        if not 0 < port < 65536:
+            raise LinkUrlError(f"MAVLink URL {url!r}: port {port} is out of range")
+        return LinkUrl(scheme, host, port)
+
+
+def parse_signing_key(text: str) -> bytes:
+    """A 32-byte MAVLink 2 signing key given as 64 hex digits."""
+    try:
+        key = bytes.fromhex(text.strip())
+    except ValueError:
+        raise ValueError("signing key must be hexadecimal (64 hex digits for 32 bytes)") from None
+    if len(key) != 32:
+        raise ValueError(f"signing key must be 32 bytes (64 hex digits), got {len(key)} bytes")
+    return key
+
+
+@dataclass
+class LinkStats:
+    received: int = 0
+    sent: int = 0
+    bad_frames: int = 0  # bad CRC, bad prefix, truncated
+    rejected_unsigned: int = 0
+    rejected_bad_signature: int = 0
+
+
+class MavlinkUdpLink(asyncio.DatagramProtocol):
+    """One UDP endpoint speaking MAVLink 2 as (``system_id``, ``component_id``).
+
+    Use as ``async with MavlinkUdpLink(url, ...) as link:``; ``handler(msg, addr)`` is called for
+    every valid message, in the event loop.
+    """
+
+    def __init__(
+        self,
+        url: str,
+        system_id: int,
+        component_id: int,
+        handler: MessageHandler,
+        *,
+        signing_key: bytes | None = None,
+        logger: logging.Logger | None = None,
+    ) -> None:
+        self.url = LinkUrl.parse(url)
+        self.mav = mavlink2.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
+        self.mav.robust_parsing = True
+        self.stats = LinkStats()
+        self._handler = handler
+        self._log = logger or logging.getLogger("simbridge.link")
+        self._transport: asyncio.DatagramTransport | None = None
+        self._fixed: Address | None = None
+        self._peers: dict[Address, float] = {}
+        self._signing = signing_key is not None
+        if signing_key is not None:
+            sig = self.mav.signing
+            sig.secret_key = signing_key
+            sig.link_id = 0
+            sig.sign_outgoing = True
+            sig.timestamp = int((time.time() - _MAVLINK_EPOCH_UNIX_S) * 1e5)
+            sig.allow_unsigned_callback = lambda _mav, _msgid: False
+
+    async def __aenter__(self) -> MavlinkUdpLink:
+        loop = asyncio.get_running_loop()
+        if self.url.mode == "udpin":
+            transport, _ = await loop.create_datagram_endpoint(
+                lambda: self, local_addr=(self.url.host, self.url.port)
+            )
+        else:
+            self._fixed = (self.url.host, self.url.port)
+            transport, _ = await loop.create_datagram_endpoint(lambda: self, local_addr=("0.0.0.0", 0))
+        self._transport = transport
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        if self._transport is not None:
+            self._transport.close()
+            self._transport = None
+
+    @property
+    def local_port(self) -> int:
+        if self._transport is None:
+            raise RuntimeError("link is not open")
+        return int(self._transport.get_extra_info("sockname")[1])
+
+    # ---------------------------------------------------------------- asyncio callbacks
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        self._transport = transport  # type: ignore[assignment]
+
+    def datagram_received(self, data: bytes, addr: Address) -> None:
+        try:
+            msgs = self.mav.parse_buffer(data) or []
+        except Exception as exc:  # pymavlink raises bare Exceptions on some malformed input
+            self.stats.bad_frames += 1
+            self._log.debug("malformed MAVLink from %s: %s", addr, exc)
+            return
+        for msg in msgs:
+            if msg.get_type() == "BAD_DATA":
+                self._count_bad(msg, addr)
+                continue
+            self.stats.received += 1
+            self._peers[addr] = time.monotonic()
+            try:
+                self._handler(msg, addr)
+            except Exception:
+                # a handler bug must never take the link (and the vehicle) down
+                self._log.exception("handler failed on %s from %s", msg.get_type(), addr)
+
+    def error_received(self, exc: Exception) -> None:
+        # ICMP port unreachable when a peer is gone; keep serving the others
+        self._log.debug("UDP error: %s", exc)
+
+    def _count_bad(self, msg: Any, addr: Address) -> None:
+        reason = str(getattr(msg, "reason", ""))
+        if "signature" in reason.lower():
+            # with a reject-all callback pymavlink counts every refusal in reject_count and the
+            # bad signatures among them in badsig_count; the rest were unsigned
+            sig = self.mav.signing
+            self.stats.rejected_bad_signature = sig.badsig_count
+            self.stats.rejected_unsigned = sig.reject_count - sig.badsig_count
+            self._log.warning("rejected unsigned or badly signed MAVLink frame from %s", addr)
+        else:
+            self.stats.bad_frames += 1
+            self._log.debug("bad MAVLink frame from %s: %s", addr, reason)
+
+    # ---------------------------------------------------------------- sending
+    def send(self, msg: Any) -> None:
+        """Pack ``msg`` (signed when a key is set) and send it to every live peer."""
+        if self._transport is None:
+            return
+        buf = msg.pack(self.mav)
+        self.mav.seq = (self.mav.seq + 1) % 256
+        now = time.monotonic()
+        dests = [a for a, seen in self._peers.items() if now - seen < _PEER_TIMEOUT_S]
+        if self._fixed is not None and self._fixed not in dests:
+            dests.append(self._fixed)
+        for addr in dests:
+            self._transport.sendto(buf, addr)
+        self.stats.sent += 1
+
+    @property
+    def peer_count(self) -> int:
+        now = time.monotonic()
+        return sum(1 for seen in self._peers.values() if now - seen < _PEER_TIMEOUT_S)

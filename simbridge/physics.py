@@ -1,0 +1,175 @@
+"""JSBSim's bundled F450 quadcopter, stepped at its own 120 Hz, with the world's ground under it.
+
+The F450 model's own flight-control system is bypassed: its stability augmentation is disengaged
+and our controller writes each ESC command directly (``fcs/cmd*_ext_nd``). Motor order everywhere
+in simbridge is JSBSim's engine order: 0 front-right, 1 aft-left, 2 front-left, 3 aft-right.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import jsbsim
+
+from simbridge.geo import GeoOrigin, Quat, Vec3, euler_to_quat, wrap_pi
+from simbridge.terrain import Terrain
+from simbridge.wind import WindModel
+
+FT_M = 0.3048
+LBF_N = 4.4482216152605
+GEAR_HEIGHT_M = 0.1524  # CG height above the ground when resting on the gear (F450 Gear.xml)
+MOTOR_COUNT = 4
+_ESC_PROPS = ("fcs/cmdFR_ext_nd", "fcs/cmdAL_ext_nd", "fcs/cmdFL_ext_nd", "fcs/cmdAR_ext_nd")
+
+
+@dataclass(frozen=True, slots=True)
+class VehicleState:
+    """Truth state of the airframe at simulated time ``t_s``."""
+
+    t_s: float
+    pos_ned_m: Vec3
+    vel_ned_m_s: Vec3
+    quat: Quat
+    euler_rad: Vec3  # roll, pitch, yaw
+    rates_frd_rad_s: Vec3
+    ground_height_m: float  # terrain height under the vehicle, up positive
+    on_ground: bool  # any landing-gear contact compressed
+    thrust_n: float  # sum over the four rotors
+
+    @property
+    def height_agl_m(self) -> float:
+        """Height of the CG above the ground directly under it."""
+        return -self.pos_ned_m[2] - self.ground_height_m
+
+
+@contextlib.contextmanager
+def _quiet_fds() -> Iterator[None]:
+    """JSBSim prints its banner and model warnings from C++ to fd 1/2; keep them off our stdout."""
+    saved = [os.dup(1), os.dup(2)]
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 1)
+        os.dup2(devnull, 2)
+        yield
+    finally:
+        os.dup2(saved[0], 1)
+        os.dup2(saved[1], 2)
+        for fd in (*saved, devnull):
+            os.close(fd)
+
+
+class F450Physics:
+    """The JSBSim F450 as a plant: throttles in, truth state out.
+
+    Args:
+        origin: geodetic position of NED (0, 0, 0).
+        terrain: the ground; its height under the vehicle is JSBSim's terrain elevation.
+        wind: optional wind model, advanced once per step.
+    """
+
+    DT_S = 1.0 / 120.0
+
+    def __init__(self, origin: GeoOrigin, terrain: Terrain, wind: WindModel | None = None) -> None:
+        self.origin = origin
+        self.terrain = terrain
+        self.wind = wind
+        with _quiet_fds():
+            fdm = jsbsim.FGFDMExec(None)
+            fdm.set_debug_level(0)
+            if not fdm.load_model("F450"):
+                raise RuntimeError("JSBSim could not load its bundled F450 model")
+        fdm.set_dt(self.DT_S)
+        self._fdm = fdm
+        pm = fdm.get_property_manager()
+
+        def node(name: str) -> "jsbsim.FGPropertyNode":
+            n = pm.get_node(name, True)
+            if n is None:
+                raise RuntimeError(f"JSBSim property {name!r} is missing from the F450 model")
+            return n
+
+        self._esc = [node(p) for p in _ESC_PROPS]
+        self._lat = node("position/lat-geod-deg")
+        self._lon = node("position/long-gc-deg")
+        self._alt = node("position/h-sl-meters")
+        self._vel = [node(f"velocities/v-{a}-fps") for a in ("north", "east", "down")]
+        self._euler = [node(f"attitude/{a}-rad") for a in ("phi", "theta", "psi")]
+        self._rates = [node(f"velocities/{a}-rad_sec") for a in ("p", "q", "r")]
+        self._wow = [node(f"gear/unit[{i}]/WOW") for i in range(3)]
+        self._thrust = [node(f"propulsion/engine[{i}]/thrust-lbs") for i in range(MOTOR_COUNT)]
+        self._terrain_ft = node("position/terrain-elevation-asl-ft")
+        self._wind = [node(f"atmosphere/wind-{a}-fps") for a in ("north", "east", "down")]
+        self._sim_time = node("simulation/sim-time-sec")
+        self._ground_height_m = 0.0
+        self._t0_s = 0.0
+        fdm["fcs/ScasEngage"] = 0.0
+        self.reset((0.0, 0.0, -GEAR_HEIGHT_M), 0.0)
+
+    def reset(self, pos_ned_m: Vec3, yaw_rad: float) -> None:
+        """Place the vehicle at rest at ``pos_ned_m`` with heading ``yaw_rad``, motors stopped.
+
+        A vehicle placed below ``GEAR_HEIGHT_M`` above the ground is lifted onto its gear.
+        """
+        n, e, d = pos_ned_m
+        ground = self.terrain.height_m(n, e)
+        d = min(d, -(ground + GEAR_HEIGHT_M))
+        lat, lon, alt = self.origin.to_geodetic(n, e, d)
+        fdm = self._fdm
+        self._ground_height_m = ground
+        fdm["ic/lat-geod-deg"] = lat
+        fdm["ic/long-gc-deg"] = lon
+        fdm["ic/h-sl-ft"] = alt / FT_M
+        fdm["ic/terrain-elevation-ft"] = (self.origin.alt_m + ground) / FT_M
+        fdm["ic/psi-true-deg"] = math.degrees(yaw_rad)
+        fdm["ic/theta-deg"] = 0.0
+        fdm["ic/phi-deg"] = 0.0
+        for k in ("ic/u-fps", "ic/v-fps", "ic/w-fps", "ic/p-rad_sec", "ic/q-rad_sec", "ic/r-rad_sec"):
+            fdm[k] = 0.0
+        for esc in self._esc:
+            esc.set_double_value(0.0)
+        with _quiet_fds():
+            fdm.run_ic()
+        fdm["propulsion/set-running"] = -1
+        self._t0_s = self._sim_time.get_double_value()
+
+    def step(self, throttles: tuple[float, float, float, float]) -> None:
+        """Advance one JSBSim step (``DT_S``) with ESC commands in [0, 1], JSBSim motor order."""
+        for esc, th in zip(self._esc, throttles, strict=True):
+            esc.set_double_value(min(1.0, max(0.0, th)))
+        if self.wind is not None:
+            w = self.wind.step(self.DT_S)
+            for node, v in zip(self._wind, w, strict=True):
+                node.set_double_value(v / FT_M)
+        pos = self.origin.to_ned(
+            self._lat.get_double_value(), self._lon.get_double_value(), self._alt.get_double_value()
+        )
+        ground = self.terrain.height_m(pos[0], pos[1])
+        if ground != self._ground_height_m:
+            self._ground_height_m = ground
+            self._terrain_ft.set_double_value((self.origin.alt_m + ground) / FT_M)
+        self._fdm.run()
+
+    def state(self) -> VehicleState:
+        """Read the truth state after the last step."""
+        pos = self.origin.to_ned(
+            self._lat.get_double_value(), self._lon.get_double_value(), self._alt.get_double_value()
+        )
+        roll, pitch, psi = (n.get_double_value() for n in self._euler)
+        yaw = wrap_pi(psi)
+        vn, ve, vd = (n.get_double_value() * FT_M for n in self._vel)
+        p, q, r = (n.get_double_value() for n in self._rates)
+        return VehicleState(
+            t_s=self._sim_time.get_double_value() - self._t0_s,
+            pos_ned_m=pos,
+            vel_ned_m_s=(vn, ve, vd),
+            quat=euler_to_quat(roll, pitch, yaw),
+            euler_rad=(roll, pitch, yaw),
+            rates_frd_rad_s=(p, q, r),
+            ground_height_m=self._ground_height_m,
+            on_ground=any(n.get_double_value() > 0.5 for n in self._wow),
+            thrust_n=sum(n.get_double_value() for n in self._thrust) * LBF_N,
+        )

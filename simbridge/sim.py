@@ -1,0 +1,168 @@
+"""The simulator process: vehicle, autopilot, MAVLink link and episode log, paced in real time
+times ``speed`` (lockstep with the 120 Hz JSBSim step)."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import signal
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from simbridge.autopilot.core import Autopilot
+from simbridge.autopilot.flavours import flavour_named
+from simbridge.autopilot.server import AutopilotServer
+from simbridge.geo import GeoOrigin
+from simbridge.episode_log import EpisodeLog
+from simbridge.link import MavlinkUdpLink
+from simbridge.physics import GEAR_HEIGHT_M
+from simbridge.scenarios import Scenario, load_scenario
+from simbridge.telemetry import Telemetry
+from simbridge.vehicle import Vehicle
+from simbridge.wind import WindConfig, WindModel
+
+_MAX_BATCH_STEPS = 6  # physics steps between two looks at the socket (50 ms simulated)
+_STATUSTEXT_CHUNK = 50
+
+
+@dataclass(frozen=True, slots=True)
+class SimConfig:
+    mavlink: str = "udpout:127.0.0.1:14550"
+    autopilot: str = "px4"
+    scenario: str = "flat"
+    seed: int = 0
+    speed: float = 1.0
+    start: str = "air"
+    episode_log: Path | None = None
+    signing_key: bytes | None = None
+    system_id: int = 1
+    origin: GeoOrigin = field(default_factory=GeoOrigin)
+    wind: WindConfig = field(default_factory=WindConfig)
+    duration_s: float | None = None  # stop after this much simulated time
+
+    def __post_init__(self) -> None:
+        if not self.speed > 0:
+            raise ValueError(f"--speed must be > 0, got {self.speed}")
+        if self.start not in ("air", "ground"):
+            raise ValueError(f"--start must be 'air' or 'ground', got {self.start!r}")
+        if not 1 <= self.system_id <= 255:
+            raise ValueError(f"system id must be 1..255, got {self.system_id}")
+
+
+class SimBridge:
+    """Build with a config, then ``await run()``; ``stop()`` ends it cleanly."""
+
+    def __init__(self, config: SimConfig, logger: logging.Logger | None = None) -> None:
+        self.config = config
+        self.log = logger or logging.getLogger("simbridge")
+        self.scenario: Scenario = load_scenario(config.scenario, config.seed)
+        rng = np.random.default_rng(config.seed)
+        wind = WindModel(config.wind, rng) if config.wind != WindConfig() else None
+        self.vehicle = Vehicle(config.origin, self.scenario.terrain, wind=wind)
+        sc = self.scenario
+        n, e = sc.launch_ne_m
+        ground = sc.terrain.height_m(n, e)
+        self.home_ned_m = (n, e, -ground)
+        if config.start == "air":
+            self.vehicle.reset((n, e, -(ground + sc.launch_height_m)), sc.launch_yaw_rad)
+        else:
+            self.vehicle.reset((n, e, -(ground + GEAR_HEIGHT_M)), sc.launch_yaw_rad)
+        self.episode = EpisodeLog(config.episode_log)
+        self.autopilot = Autopilot(
+            flavour_named(config.autopilot), self.vehicle, self.home_ned_m, self._on_event, self._on_text
+        )
+        self.telemetry = Telemetry(self.autopilot, config.origin)
+        self.link = MavlinkUdpLink(
+            config.mavlink, config.system_id, 1, self._on_message, signing_key=config.signing_key, logger=self.log
+        )
+        self.server = AutopilotServer(self.autopilot, self.telemetry, self.link.send, config.system_id, 1, self.log)
+        self._stop = asyncio.Event()
+        self.wall_elapsed_s = 0.0
+        self.episode.event(0.0, "start", {
+            "scenario": sc.name, "autopilot": config.autopilot, "seed": config.seed,
+            "start": config.start, "home_ned_m": list(self.home_ned_m),
+        })
+        if config.start == "air":
+            self.autopilot.spawn_in_air(self.vehicle.state)
+
+    # ------------------------------------------------------------------ callbacks
+    def _on_message(self, msg: Any, addr: tuple[str, int]) -> None:
+        self.server.handle(msg, addr)
+
+    def _on_event(self, name: str, fields: dict[str, Any]) -> None:
+        s = self.vehicle.state
+        if name == "touchdown":
+            grade = self.scenario.terrain.grade_touchdown(s.pos_ned_m[0], s.pos_ned_m[1], s.t_s)
+            fields = {**fields, "surface": grade.surface, "safe": grade.safe, "reasons": list(grade.reasons)}
+        self.episode.event(s.t_s, name, fields)
+        self.log.info("t=%.2f %s %s", s.t_s, name, fields)
+
+    def _on_text(self, severity: int, text: str) -> None:
+        self.log.info("STATUSTEXT[%d] %s", severity, text)
+        mav = self.link.mav
+        chunks = [text[i : i + _STATUSTEXT_CHUNK] for i in range(0, len(text), _STATUSTEXT_CHUNK)] or [""]
+        msg_id = 0 if len(chunks) == 1 else (hash(text) & 0xFFFF) or 1
+        for seq, chunk in enumerate(chunks):
+            self.link.send(mav.statustext_encode(severity, chunk.encode(), msg_id, seq))
+
+    # ------------------------------------------------------------------ running
+    def step(self) -> None:
+        """One physics step with the autopilot's decision and the streams that fall due."""
+        ap = self.autopilot
+        sp = ap.tick(self.vehicle.state)
+        s = self.vehicle.step(sp)
+        for msg in self.telemetry.due(s.t_s):
+            self.link.send(msg)
+        self.episode.state(s, ap.mode.name, ap.armed, ap.landed_state, 100 * self.vehicle.battery.remaining_fraction)
+
+    def stop(self) -> None:
+        self._stop.set()
+
+    async def run(self) -> None:
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            try:
+                loop.add_signal_handler(sig, self._stop.set)
+            except (NotImplementedError, RuntimeError):  # not the main thread
+                pass
+        cfg = self.config
+        dt = Vehicle.DT_S
+        async with self.link:
+            self.log.info(
+                "simbridge %s on %s: scenario %s, seed %d, speed %.1fx, start %s",
+                cfg.autopilot, cfg.mavlink, cfg.scenario, cfg.seed, cfg.speed, cfg.start,
+            )
+            wall0 = loop.time()
+            sim0 = self.vehicle.state.t_s
+            try:
+                while not self._stop.is_set():
+                    target = sim0 + (loop.time() - wall0) * cfg.speed
+                    steps = 0
+                    while self.vehicle.state.t_s + dt <= target + 1e-9 and steps < _MAX_BATCH_STEPS:
+                        self.step()
+                        steps += 1
+                    if cfg.duration_s is not None and self.vehicle.state.t_s >= cfg.duration_s:
+                        break
+                    if steps == _MAX_BATCH_STEPS:
+                        await asyncio.sleep(0)
+                    else:
+                        await asyncio.sleep(max(self.vehicle.state.t_s + dt - target, 0.0) / cfg.speed)
+            finally:
+                self.wall_elapsed_s = loop.time() - wall0
+                st = self.link.stats
+                self.episode.event(self.vehicle.state.t_s, "stop", {
+                    "wall_s": round(self.wall_elapsed_s, 3),
+                    "received": st.received, "sent": st.sent, "bad_frames": st.bad_frames,
+                    "rejected_unsigned": st.rejected_unsigned,
+                    "rejected_bad_signature": st.rejected_bad_signature,
+                    "ignored_foreign": self.server.ignored_foreign,
+                })
+                self.episode.close()
+                self.log.info(
+                    "simbridge stopped at t=%.1f s after %.1f s wall (%.1fx); link %s",
+                    self.vehicle.state.t_s, self.wall_elapsed_s,
+                    self.vehicle.state.t_s / max(self.wall_elapsed_s, 1e-9), st,
+                )
