@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import logging
 import sys
 from collections.abc import Sequence
@@ -21,7 +22,9 @@ def _floats(text: str, n: int, what: str) -> tuple[float, ...]:
     try:
         values = tuple(float(p) for p in parts)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{what}: expected {n} comma-separated numbers, got {text!r}") from None
+        raise argparse.ArgumentTypeError(
+            f"{what}: expected {n} comma-separated numbers, got {text!r}"
+        ) from None
     if len(values) != n:
         raise argparse.ArgumentTypeError(f"{what}: expected {n} comma-separated numbers, got {len(values)}")
     return values
@@ -32,21 +35,44 @@ def build_parser() -> argparse.ArgumentParser:
         prog="simbridge",
         description="JSBSim F450 quadcopter behind a PX4/ArduPilot MAVLink autopilot emulation.",
     )
-    p.add_argument("--mavlink", default="udpout:127.0.0.1:14550",
-                   help="MAVLink endpoint: udpout:HOST:PORT (send to), udpin:HOST:PORT or udp:PORT (listen)")
+    p.add_argument(
+        "--mavlink",
+        default="udpout:127.0.0.1:14550",
+        help="MAVLink endpoint: udpout:HOST:PORT (send to), udpin:HOST:PORT or udp:PORT (listen)",
+    )
     p.add_argument("--autopilot", choices=("px4", "ardupilot"), default="px4")
-    p.add_argument("--scenario", default="flat", help=f"world and launch pose; one of: {', '.join(sorted(SCENARIOS))}")
-    p.add_argument("--seed", type=int, default=0, help="seed for every random choice (same seed, same episode)")
+    p.add_argument(
+        "--scenario", default="flat", help=f"world and launch pose; one of: {', '.join(sorted(SCENARIOS))}"
+    )
+    p.add_argument(
+        "--seed", type=int, default=0, help="seed for every random choice (same seed, same episode)"
+    )
     p.add_argument("--speed", type=float, default=1.0, help="simulated seconds per wall second")
-    p.add_argument("--start", choices=("air", "ground"), default="air",
-                   help="air: armed and holding at the launch pose; ground: disarmed on the ground")
+    p.add_argument(
+        "--start",
+        choices=("air", "ground"),
+        default="air",
+        help="air: armed and holding at the launch pose; ground: disarmed on the ground",
+    )
     p.add_argument("--episode-log", type=Path, help="write JSON lines of state and events here")
-    p.add_argument("--signing-key", help="MAVLink 2 signing key, 64 hex digits; unsigned frames are then rejected")
+    p.add_argument(
+        "--signing-key", help="MAVLink 2 signing key, 64 hex digits; unsigned frames are then rejected"
+    )
     p.add_argument("--sysid", type=int, default=1, help="vehicle MAVLink system id")
-    p.add_argument("--home", type=lambda t: _floats(t, 3, "--home"), default=None,
-                   metavar="LAT,LON,ALT", help="geodetic position of the scenario origin (deg, deg, m)")
-    p.add_argument("--wind", type=lambda t: _floats(t, 2, "--wind"), default=(0.0, 0.0),
-                   metavar="N,E", help="steady wind toward north/east, m/s")
+    p.add_argument(
+        "--home",
+        type=lambda t: _floats(t, 3, "--home"),
+        default=None,
+        metavar="LAT,LON,ALT",
+        help="geodetic position of the scenario origin (deg, deg, m)",
+    )
+    p.add_argument(
+        "--wind",
+        type=lambda t: _floats(t, 2, "--wind"),
+        default=(0.0, 0.0),
+        metavar="N,E",
+        help="steady wind toward north/east, m/s",
+    )
     p.add_argument("--gusts", type=float, default=0.0, metavar="SIGMA", help="gust standard deviation, m/s")
     p.add_argument("--duration", type=float, default=None, help="stop after this many simulated seconds")
     p.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
@@ -66,14 +92,23 @@ def config_from_args(args: argparse.Namespace) -> SimConfig:
         except ValueError as exc:
             raise ValueError(f"--signing-key: {exc}") from None
     if args.scenario not in SCENARIOS:
-        raise ValueError(f"--scenario: unknown scenario {args.scenario!r}; known: {', '.join(sorted(SCENARIOS))}")
+        raise ValueError(
+            f"--scenario: unknown scenario {args.scenario!r}; known: {', '.join(sorted(SCENARIOS))}"
+        )
     origin = GeoOrigin(*args.home) if args.home else GeoOrigin()
     if args.gusts < 0:
         raise ValueError(f"--gusts must be >= 0, got {args.gusts}")
     return SimConfig(
-        mavlink=args.mavlink, autopilot=args.autopilot, scenario=args.scenario, seed=args.seed,
-        speed=args.speed, start=args.start, episode_log=args.episode_log, signing_key=key,
-        system_id=args.sysid, origin=origin,
+        mavlink=args.mavlink,
+        autopilot=args.autopilot,
+        scenario=args.scenario,
+        seed=args.seed,
+        speed=args.speed,
+        start=args.start,
+        episode_log=args.episode_log,
+        signing_key=key,
+        system_id=args.sysid,
+        origin=origin,
         wind=WindConfig(steady_ned_m_s=(args.wind[0], args.wind[1], 0.0), gust_sigma_m_s=args.gusts),
         duration_s=args.duration,
     )
@@ -88,10 +123,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as exc:
         parser.error(str(exc))
     bridge = SimBridge(config)
-    try:
+    with contextlib.suppress(KeyboardInterrupt):
         asyncio.run(bridge.run())
-    except KeyboardInterrupt:
-        pass
     return 0
 
 

@@ -147,7 +147,9 @@ class MulticopterController:
             vn, ve = vn * cap_xy / h, ve * cap_xy / h
         cap_up, cap_down = lim.max_speed_up_m_s, lim.max_speed_down_m_s
         if sp.pos_d_m is not None:
-            stop = math.sqrt(2 * self.BRAKE_FRACTION * lim.max_accel_z_m_s2 * abs(sp.pos_d_m - s.pos_ned_m[2]))
+            stop = math.sqrt(
+                2 * self.BRAKE_FRACTION * lim.max_accel_z_m_s2 * abs(sp.pos_d_m - s.pos_ned_m[2])
+            )
             cap_up, cap_down = min(cap_up, stop), min(cap_down, stop)
         vd = _clamp(vd, -cap_up, cap_down)
         # slew-limit the velocity setpoint (smooth starts and stops, like PX4's jerk-limited path)

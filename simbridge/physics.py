@@ -86,7 +86,7 @@ class F450Physics:
         self._fdm = fdm
         pm = fdm.get_property_manager()
 
-        def node(name: str) -> "jsbsim.FGPropertyNode":
+        def node(name: str) -> jsbsim.FGPropertyNode:
             n = pm.get_node(name, True)
             if n is None:
                 raise RuntimeError(f"JSBSim property {name!r} is missing from the F450 model")

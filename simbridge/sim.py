@@ -4,6 +4,7 @@ times ``speed`` (lockstep with the 120 Hz JSBSim step)."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import signal
 from dataclasses import dataclass, field
@@ -15,8 +16,8 @@ import numpy as np
 from simbridge.autopilot.core import Autopilot
 from simbridge.autopilot.flavours import flavour_named
 from simbridge.autopilot.server import AutopilotServer
-from simbridge.geo import GeoOrigin
 from simbridge.episode_log import EpisodeLog
+from simbridge.geo import GeoOrigin
 from simbridge.link import MavlinkUdpLink
 from simbridge.physics import GEAR_HEIGHT_M
 from simbridge.scenarios import Scenario, load_scenario
@@ -76,15 +77,29 @@ class SimBridge:
         )
         self.telemetry = Telemetry(self.autopilot, config.origin)
         self.link = MavlinkUdpLink(
-            config.mavlink, config.system_id, 1, self._on_message, signing_key=config.signing_key, logger=self.log
+            config.mavlink,
+            config.system_id,
+            1,
+            self._on_message,
+            signing_key=config.signing_key,
+            logger=self.log,
         )
-        self.server = AutopilotServer(self.autopilot, self.telemetry, self.link.send, config.system_id, 1, self.log)
+        self.server = AutopilotServer(
+            self.autopilot, self.telemetry, self.link.send, config.system_id, 1, self.log
+        )
         self._stop = asyncio.Event()
         self.wall_elapsed_s = 0.0
-        self.episode.event(0.0, "start", {
-            "scenario": sc.name, "autopilot": config.autopilot, "seed": config.seed,
-            "start": config.start, "home_ned_m": list(self.home_ned_m),
-        })
+        self.episode.event(
+            0.0,
+            "start",
+            {
+                "scenario": sc.name,
+                "autopilot": config.autopilot,
+                "seed": config.seed,
+                "start": config.start,
+                "home_ned_m": list(self.home_ned_m),
+            },
+        )
         if config.start == "air":
             self.autopilot.spawn_in_air(self.vehicle.state)
 
@@ -116,7 +131,9 @@ class SimBridge:
         s = self.vehicle.step(sp)
         for msg in self.telemetry.due(s.t_s):
             self.link.send(msg)
-        self.episode.state(s, ap.mode.name, ap.armed, ap.landed_state, 100 * self.vehicle.battery.remaining_fraction)
+        self.episode.state(
+            s, ap.mode.name, ap.armed, ap.landed_state, 100 * self.vehicle.battery.remaining_fraction
+        )
 
     def stop(self) -> None:
         self._stop.set()
@@ -124,16 +141,19 @@ class SimBridge:
     async def run(self) -> None:
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGINT, signal.SIGTERM):
-            try:
+            with contextlib.suppress(NotImplementedError, RuntimeError):  # not the main thread
                 loop.add_signal_handler(sig, self._stop.set)
-            except (NotImplementedError, RuntimeError):  # not the main thread
-                pass
         cfg = self.config
         dt = Vehicle.DT_S
         async with self.link:
             self.log.info(
                 "simbridge %s on %s: scenario %s, seed %d, speed %.1fx, start %s",
-                cfg.autopilot, cfg.mavlink, cfg.scenario, cfg.seed, cfg.speed, cfg.start,
+                cfg.autopilot,
+                cfg.mavlink,
+                cfg.scenario,
+                cfg.seed,
+                cfg.speed,
+                cfg.start,
             )
             wall0 = loop.time()
             sim0 = self.vehicle.state.t_s
@@ -153,16 +173,24 @@ class SimBridge:
             finally:
                 self.wall_elapsed_s = loop.time() - wall0
                 st = self.link.stats
-                self.episode.event(self.vehicle.state.t_s, "stop", {
-                    "wall_s": round(self.wall_elapsed_s, 3),
-                    "received": st.received, "sent": st.sent, "bad_frames": st.bad_frames,
-                    "rejected_unsigned": st.rejected_unsigned,
-                    "rejected_bad_signature": st.rejected_bad_signature,
-                    "ignored_foreign": self.server.ignored_foreign,
-                })
+                self.episode.event(
+                    self.vehicle.state.t_s,
+                    "stop",
+                    {
+                        "wall_s": round(self.wall_elapsed_s, 3),
+                        "received": st.received,
+                        "sent": st.sent,
+                        "bad_frames": st.bad_frames,
+                        "rejected_unsigned": st.rejected_unsigned,
+                        "rejected_bad_signature": st.rejected_bad_signature,
+                        "ignored_foreign": self.server.ignored_foreign,
+                    },
+                )
                 self.episode.close()
                 self.log.info(
                     "simbridge stopped at t=%.1f s after %.1f s wall (%.1fx); link %s",
-                    self.vehicle.state.t_s, self.wall_elapsed_s,
-                    self.vehicle.state.t_s / max(self.wall_elapsed_s, 1e-9), st,
+                    self.vehicle.state.t_s,
+                    self.wall_elapsed_s,
+                    self.vehicle.state.t_s / max(self.wall_elapsed_s, 1e-9),
+                    st,
                 )

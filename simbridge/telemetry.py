@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 from pymavlink.dialects.v20 import common as mavlink2
 
+from simbridge.autopilot.flavours import Nav
 from simbridge.geo import GeoOrigin
 
 if TYPE_CHECKING:
@@ -27,9 +28,19 @@ MAV_MODE_FLAG_GUIDED_ENABLED = 8
 MAV_MODE_FLAG_STABILIZE_ENABLED = 16
 MAV_MODE_FLAG_SAFETY_ARMED = 128
 _SENSORS = (
-    1 | 2 | 4 | 8 | 32  # gyro, accel, mag, baro, GPS
-    | 1024 | 2048 | 4096 | 8192 | 16384 | 32768  # rate, attitude, yaw, z, xy control, motors
-    | 0x100000 | 0x400000  # AHRS, laser position (rangefinder)
+    1
+    | 2
+    | 4
+    | 8
+    | 32  # gyro, accel, mag, baro, GPS
+    | 1024
+    | 2048
+    | 4096
+    | 8192
+    | 16384
+    | 32768  # rate, attitude, yaw, z, xy control, motors
+    | 0x100000
+    | 0x400000  # AHRS, laser position (rangefinder)
 )
 _MAX_RANGE_CM = 20000
 _MIN_RANGE_CM = 10
@@ -132,13 +143,13 @@ class Telemetry:
 
     def _geo(self) -> tuple[int, int, int]:
         lat, lon, alt = self.origin.to_geodetic(*self.ap.vehicle.state.pos_ned_m)
-        return int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000))
+        return round(lat * 1e7), round(lon * 1e7), round(alt * 1000)
 
     # ------------------------------------------------------------------ builders
     def heartbeat(self) -> Any:
         ap = self.ap
         base = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | MAV_MODE_FLAG_STABILIZE_ENABLED
-        if ap.mode.nav.value != "hold":
+        if ap.mode.nav is not Nav.HOLD:
             base |= MAV_MODE_FLAG_GUIDED_ENABLED | MAV_MODE_FLAG_AUTO_ENABLED
         if ap.armed:
             base |= MAV_MODE_FLAG_SAFETY_ARMED
@@ -150,9 +161,19 @@ class Telemetry:
     def sys_status(self) -> Any:
         b = self.ap.vehicle.battery
         return self._mav.sys_status_encode(
-            _SENSORS, _SENSORS, _SENSORS, 250,
-            int(b.voltage_v * 1000), int(b.current_a * 100), int(round(b.remaining_fraction * 100)),
-            0, 0, 0, 0, 0, 0,
+            _SENSORS,
+            _SENSORS,
+            _SENSORS,
+            250,
+            int(b.voltage_v * 1000),
+            int(b.current_a * 100),
+            round(b.remaining_fraction * 100),
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
         )
 
     def battery_status(self) -> Any:
@@ -161,8 +182,15 @@ class Telemetry:
         cell_mv = int(b.voltage_v * 1000 / cells)
         voltages = [cell_mv] * cells + [65535] * (10 - cells)
         return self._mav.battery_status_encode(
-            0, 0, 1, 32767, voltages, int(b.current_a * 100), int(b.consumed_mah), -1,
-            int(round(b.remaining_fraction * 100)),
+            0,
+            0,
+            1,
+            32767,
+            voltages,
+            int(b.current_a * 100),
+            int(b.consumed_mah),
+            -1,
+            round(b.remaining_fraction * 100),
         )
 
     def extended_sys_state(self) -> Any:
@@ -172,14 +200,25 @@ class Telemetry:
         hn, he, hd = self.ap.home_ned_m
         lat, lon, alt = self.origin.to_geodetic(hn, he, hd)
         return self._mav.home_position_encode(
-            int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000)),
-            hn, he, hd, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, int(self.ap.vehicle.state.t_s * 1e6),
+            round(lat * 1e7),
+            round(lon * 1e7),
+            round(alt * 1000),
+            hn,
+            he,
+            hd,
+            [1.0, 0.0, 0.0, 0.0],
+            0.0,
+            0.0,
+            0.0,
+            int(self.ap.vehicle.state.t_s * 1e6),
         )
 
     def attitude(self) -> Any:
         s = self.ap.vehicle.state
         r, p, y = s.euler_rad
-        return self._mav.attitude_encode(self.time_boot_ms, r, p, math.remainder(y, 2 * math.pi), *s.rates_frd_rad_s)
+        return self._mav.attitude_encode(
+            self.time_boot_ms, r, p, math.remainder(y, 2 * math.pi), *s.rates_frd_rad_s
+        )
 
     def attitude_quaternion(self) -> Any:
         s = self.ap.vehicle.state
@@ -194,19 +233,35 @@ class Telemetry:
         lat, lon, alt_mm = self._geo()
         home_alt_m = self.origin.alt_m - self.ap.home_ned_m[2]
         vn, ve, vd = s.vel_ned_m_s
-        hdg = int(round(math.degrees(s.euler_rad[2]) * 100)) % 36000
+        hdg = round(math.degrees(s.euler_rad[2]) * 100) % 36000
         return self._mav.global_position_int_encode(
-            self.time_boot_ms, lat, lon, alt_mm, int(round(alt_mm - home_alt_m * 1000)),
-            int(vn * 100), int(ve * 100), int(vd * 100), hdg,
+            self.time_boot_ms,
+            lat,
+            lon,
+            alt_mm,
+            round(alt_mm - home_alt_m * 1000),
+            int(vn * 100),
+            int(ve * 100),
+            int(vd * 100),
+            hdg,
         )
 
     def gps_raw_int(self) -> Any:
         s = self.ap.vehicle.state
         lat, lon, alt_mm = self._geo()
         vn, ve, _ = s.vel_ned_m_s
-        cog = int(round(math.degrees(math.atan2(ve, vn)) * 100)) % 36000
+        cog = round(math.degrees(math.atan2(ve, vn)) * 100) % 36000
         return self._mav.gps_raw_int_encode(
-            int(s.t_s * 1e6), 3, lat, lon, alt_mm, 80, 120, int(math.hypot(vn, ve) * 100), cog, 16,
+            int(s.t_s * 1e6),
+            3,
+            lat,
+            lon,
+            alt_mm,
+            80,
+            120,
+            int(math.hypot(vn, ve) * 100),
+            cog,
+            16,
         )
 
     def vfr_hud(self) -> Any:
@@ -215,14 +270,21 @@ class Telemetry:
         gs = math.hypot(vn, ve)
         hover_n = 4 * 19.7
         throttle = int(min(100, max(0, 100 * s.thrust_n / hover_n)))
-        heading = int(round(math.degrees(s.euler_rad[2]))) % 360
+        heading = round(math.degrees(s.euler_rad[2])) % 360
         return self._mav.vfr_hud_encode(gs, gs, heading, throttle, self.origin.alt_m - s.pos_ned_m[2], -vd)
 
     def distance_sensor(self) -> Any:
-        cm = int(round(rangefinder_m(self.ap) * 100))
+        cm = round(rangefinder_m(self.ap) * 100)
         cm = min(max(cm, _MIN_RANGE_CM), _MAX_RANGE_CM)
         return self._mav.distance_sensor_encode(
-            self.time_boot_ms, _MIN_RANGE_CM, _MAX_RANGE_CM, cm, 0, 0, M.MAV_SENSOR_ROTATION_PITCH_270, 0,
+            self.time_boot_ms,
+            _MIN_RANGE_CM,
+            _MAX_RANGE_CM,
+            cm,
+            0,
+            0,
+            M.MAV_SENSOR_ROTATION_PITCH_270,
+            0,
         )
 
     def system_time(self) -> Any:
@@ -244,5 +306,15 @@ class Telemetry:
             caps |= M.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
             version = (4 << 24) | (5 << 16) | (0 << 8) | 255  # ArduCopter 4.5.0 official
         return self._mav.autopilot_version_encode(
-            caps, version, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 0x5349_4D42_5249_4447,  # "SIMBRIDG"
+            caps,
+            version,
+            0,
+            0,
+            0,
+            [0] * 8,
+            [0] * 8,
+            [0] * 8,
+            0,
+            0,
+            0x5349_4D42_5249_4447,  # "SIMBRIDG"
         )

@@ -1,7 +1,13 @@
 """Autopilot emulation: PX4 and ArduPilot behaviour over one flight core."""
 
-from simbridge.autopilot.core import Autopilot, CommandOutcome, Nav
-from simbridge.autopilot.flavours import ArduPilotFlavour, Flavour, ModeSpec, Px4Flavour, flavour_named
+from simbridge.autopilot.core import Autopilot, CommandOutcome
+from simbridge.autopilot.flavours import (
+    ArduPilotFlavour,
+    Flavour,
+    ModeSpec,
+    Px4Flavour,
+    flavour_named,
+)
 
 __all__ = [
     "ArduPilotFlavour",

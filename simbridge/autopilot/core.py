@@ -416,7 +416,10 @@ class Autopilot:
         if not all(math.isfinite(v) for v in values):
             return "NaN or infinite value"
         hn, he, hd = self.home_ned_m
-        if sp.pos_ne_m is not None and math.hypot(sp.pos_ne_m[0] - hn, sp.pos_ne_m[1] - he) > self.tun.fence_radius_m:
+        if (
+            sp.pos_ne_m is not None
+            and math.hypot(sp.pos_ne_m[0] - hn, sp.pos_ne_m[1] - he) > self.tun.fence_radius_m
+        ):
             return f"outside geofence ({self.tun.fence_radius_m:.0f} m from home)"
         if sp.pos_d_m is not None and hd - sp.pos_d_m > self.tun.fence_alt_m:
             return f"above geofence ({self.tun.fence_alt_m:.0f} m over home)"

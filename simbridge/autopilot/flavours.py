@@ -7,6 +7,7 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass
+from typing import ClassVar
 
 from simbridge.control import ControlLimits
 
@@ -142,8 +143,14 @@ class Px4Flavour(Flavour):
 
     # COM_OBL_RC_ACT: 0 position, 1 altitude, 2 manual, 3 return, 4 land, 5 hold; without RC
     # sticks the manual-ish choices degrade to hold, as PX4 does.
-    _OBL_ACTIONS = {3: "AUTO.RTL", 4: "AUTO.LAND"}
-    _MANUAL_MAIN = {1: "MANUAL", 2: "ALTCTL", 5: "ACRO", 7: "STABILIZED", 8: "RATTITUDE"}
+    _OBL_ACTIONS: ClassVar[dict[int, str]] = {3: "AUTO.RTL", 4: "AUTO.LAND"}
+    _MANUAL_MAIN: ClassVar[dict[int, str]] = {
+        1: "MANUAL",
+        2: "ALTCTL",
+        5: "ACRO",
+        7: "STABILIZED",
+        8: "RATTITUDE",
+    }
 
     def decode_set_mode(self, base_mode: float, main: float, sub: float) -> ModeSpec | int:
         if not (int(base_mode) & 1):
@@ -208,7 +215,14 @@ class ArduPilotFlavour(Flavour):
     offboard_needs_stream = False
     param_bytewise = False
 
-    _NEEDS_RC = {0: "STABILIZE", 1: "ACRO", 2: "ALT_HOLD", 3: "AUTO", 13: "SPORT", 16: "POSHOLD"}
+    _NEEDS_RC: ClassVar[dict[int, str]] = {
+        0: "STABILIZE",
+        1: "ACRO",
+        2: "ALT_HOLD",
+        3: "AUTO",
+        13: "SPORT",
+        16: "POSHOLD",
+    }
 
     def decode_set_mode(self, base_mode: float, main: float, sub: float) -> ModeSpec | int:
         mode_number = int(main)

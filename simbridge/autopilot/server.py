@@ -32,7 +32,12 @@ MAV_FRAME_LOCAL_NED = 1
 MAV_FRAME_LOCAL_OFFSET_NED = 7
 MAV_FRAME_BODY_NED = 8
 MAV_FRAME_BODY_OFFSET_NED = 9
-_SUPPORTED_FRAMES = (MAV_FRAME_LOCAL_NED, MAV_FRAME_LOCAL_OFFSET_NED, MAV_FRAME_BODY_NED, MAV_FRAME_BODY_OFFSET_NED)
+_SUPPORTED_FRAMES = (
+    MAV_FRAME_LOCAL_NED,
+    MAV_FRAME_LOCAL_OFFSET_NED,
+    MAV_FRAME_BODY_NED,
+    MAV_FRAME_BODY_OFFSET_NED,
+)
 _IGNORE_X, _IGNORE_Y, _IGNORE_Z = 1, 2, 4
 _IGNORE_VX, _IGNORE_VY, _IGNORE_VZ = 8, 16, 32
 _IGNORE_YAW, _IGNORE_YAW_RATE = 1024, 2048
@@ -43,7 +48,9 @@ class SetpointError(ValueError):
     """A SET_POSITION_TARGET_LOCAL_NED that cannot be flown."""
 
 
-def decode_local_ned_target(msg: Any, pos_ned_m: tuple[float, float, float], yaw_rad: float) -> tuple[Setpoint, bool]:
+def decode_local_ned_target(
+    msg: Any, pos_ned_m: tuple[float, float, float], yaw_rad: float
+) -> tuple[Setpoint, bool]:
     """SET_POSITION_TARGET_LOCAL_NED -> (world-frame setpoint, velocity-only?).
 
     Raises:
@@ -126,9 +133,7 @@ class AutopilotServer:
 
     def _ack(self, msg: Any, command: int, result: int) -> None:
         self._send(
-            self._mav.command_ack_encode(
-                command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()
-            )
+            self._mav.command_ack_encode(command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent())
         )
 
     # ------------------------------------------------------------------ commands
@@ -137,10 +142,15 @@ class AutopilotServer:
             return
         cmd = int(msg.command)
         p = [msg.param1, msg.param2, msg.param3, msg.param4]
-        p5, p6, p7 = (msg.x, msg.y, msg.z) if msg.get_type() == "COMMAND_INT" else (msg.param5, msg.param6, msg.param7)
+        p5, p6, p7 = (
+            (msg.x, msg.y, msg.z) if msg.get_type() == "COMMAND_INT" else (msg.param5, msg.param6, msg.param7)
+        )
         outcome = self._dispatch(cmd, p, float(p5), float(p6), float(p7))
         self._ack(msg, cmd, outcome.result)
-        if outcome.result == MAV_RESULT_ACCEPTED and cmd in (M.MAV_CMD_REQUEST_MESSAGE, M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
+        if outcome.result == MAV_RESULT_ACCEPTED and cmd in (
+            M.MAV_CMD_REQUEST_MESSAGE,
+            M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
+        ):
             msg_id = int(p[0]) if cmd == M.MAV_CMD_REQUEST_MESSAGE else M.MAVLINK_MSG_ID_AUTOPILOT_VERSION
             self._send(self.tm.build(msg_id))
 
@@ -225,8 +235,11 @@ class AutopilotServer:
 
     def _param_value(self, name: str) -> Any:
         return self._mav.param_value_encode(
-            name.encode(), self._encode_param(name), self._param_types[name],
-            len(self._param_index), self._param_index[name],
+            name.encode(),
+            self._encode_param(name),
+            self._param_types[name],
+            len(self._param_index),
+            self._param_index[name],
         )
 
     def _on_param_list(self, msg: Any) -> None:
