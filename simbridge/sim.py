@@ -128,7 +128,7 @@ class SimBridge:
         """One physics step with the autopilot's decision and the streams that fall due."""
         ap = self.autopilot
         sp = ap.tick(self.vehicle.state)
-        s = self.vehicle.step(sp)
+        s = self.vehicle.step(sp, ap.armed)
         for msg in self.telemetry.due(s.t_s):
             self.link.send(msg)
         self.episode.state(

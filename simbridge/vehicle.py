@@ -14,6 +14,9 @@ from simbridge.terrain import Terrain
 from simbridge.wind import WindModel
 
 
+IDLE_THROTTLE = 0.12  # armed spin-up on the ground: well below hover (about 0.42)
+
+
 class Vehicle:
     """One F450 with its controller; ``step`` advances ``DT_S`` of simulated time."""
 
@@ -39,13 +42,14 @@ class Vehicle:
         self.controller.reset()
         self.state = self.physics.state()
 
-    def step(self, setpoint: Setpoint | None) -> VehicleState:
-        """Fly ``setpoint`` for one step; ``None`` stops the motors."""
+    def step(self, setpoint: Setpoint | None, armed: bool = True) -> VehicleState:
+        """Fly ``setpoint`` for one step; ``None`` runs the motors at idle (armed) or stops them."""
         if setpoint is None:
             if self.motors_on:
                 self.controller.reset()
             self.motors_on = False
-            self.physics.step((0.0, 0.0, 0.0, 0.0))
+            idle = IDLE_THROTTLE if armed else 0.0
+            self.physics.step((idle, idle, idle, idle))
         else:
             self.motors_on = True
             self.physics.step(self.controller.update(self.state, setpoint, self.DT_S))

@@ -24,7 +24,7 @@ from simbridge.autopilot.flavours import (
 )
 from simbridge.control import Setpoint
 from simbridge.geo import Vec3
-from simbridge.physics import VehicleState
+from simbridge.physics import GEAR_HEIGHT_M, VehicleState
 from simbridge.vehicle import Vehicle
 
 # STATUSTEXT severities
@@ -38,7 +38,8 @@ TextSink = Callable[[int, str], None]
 
 _OFFBOARD_STREAM_MIN_S = 1.0  # PX4: setpoints must have streamed about 1 s ...
 _OFFBOARD_STREAM_MAX_GAP_S = 0.5  # ... above 2 Hz before OFFBOARD is accepted
-_LANDED_CONFIRM_S = 0.4
+_LANDED_CONFIRM_S = 0.3
+_CONTACT_MARGIN_M = 0.15  # the gear springs bounce the CG ~7 cm above rest on a 0.7 m/s touchdown
 _TAKEOFF_REACHED_M = 0.3
 
 
@@ -227,7 +228,7 @@ class Autopilot:
 
     # ------------------------------------------------------------------ per-step
     def tick(self, s: VehicleState) -> Setpoint | None:
-        """Decide what to fly for the next step. ``None`` means motors off."""
+        """Decide what to fly for the next step. ``None``: motors idle if armed, else stopped."""
         self._t_s = s.t_s
         self._update_land_detector(s)
         if not self.armed:
@@ -257,8 +258,7 @@ class Autopilot:
             if s.t_s - since >= limit:
                 self._disarm("landed" if self._has_flown else "auto-disarm: no takeoff")
                 return None
-            # idle on the ground: ask for a gentle descent so thrust stays below weight
-            return Setpoint(pos_ne_m=None, pos_d_m=None, vel_ned_m_s=(0.0, 0.0, 0.5))
+            return None  # armed on the ground: motors at idle
         nav = self.mode.nav
         if nav is Nav.TAKEOFF:
             return self._fly_takeoff(s)
@@ -350,14 +350,16 @@ class Autopilot:
 
     # ------------------------------------------------------------------ land detector
     def _update_land_detector(self, s: VehicleState) -> None:
+        # contact by geometry (the gear's springs bounce their weight-on-wheels flags)
+        near_ground = s.on_ground or s.height_agl_m < GEAR_HEIGHT_M + _CONTACT_MARGIN_M
         if self.landed:
-            if not s.on_ground and s.height_agl_m > 0.4:
+            if not near_ground and s.height_agl_m > GEAR_HEIGHT_M + 0.25:
                 self.landed = False
                 self._has_flown = True
                 self._landed_since = None
                 self.landed_state = LANDED_IN_AIR if self.mode.nav is not Nav.TAKEOFF else LANDED_TAKEOFF
             return
-        if s.on_ground and abs(s.vel_ned_m_s[2]) < 0.3 and not self._wants_climb(s):
+        if near_ground and abs(s.vel_ned_m_s[2]) < 0.5 and not self._wants_climb(s):
             if self._landed_since is None:
                 self._landed_since = s.t_s
             elif s.t_s - self._landed_since >= _LANDED_CONFIRM_S:
@@ -384,7 +386,7 @@ class Autopilot:
     def _set_mode(self, spec: ModeSpec, s: VehicleState, announce: bool = True) -> None:
         changed = spec != self.mode
         self.mode = spec
-        self._hold = Setpoint.hold(s.pos_ned_m, s.euler_rad[2])
+        self._hold = Setpoint.hold(self._stopping_point(s), s.euler_rad[2])
         if spec.nav is not Nav.TAKEOFF:
             self._takeoff_target_d = None
         if spec.nav is Nav.RTL:
@@ -398,6 +400,17 @@ class Autopilot:
             self._emit_event("mode", {"mode": spec.name})
             if announce:
                 self._emit_text(SEV_INFO, f"Mode {spec.name}")
+
+    def _stopping_point(self, s: VehicleState) -> Vec3:
+        """Where the vehicle comes to rest braking at the horizontal acceleration limit."""
+        vn, ve, _ = s.vel_ned_m_s
+        speed = math.hypot(vn, ve)
+        if speed < 0.05:
+            return s.pos_ned_m
+        brake = 0.5 * self.tun.limits.max_accel_xy_m_s2
+        k = speed / (2 * brake)  # distance v^2 / 2a along the unit velocity
+        n, e, d = s.pos_ned_m
+        return (n + vn * k, e + ve * k, d)
 
     def _stream_ok(self) -> bool:
         t = self._t_s

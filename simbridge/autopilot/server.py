@@ -19,6 +19,7 @@ from simbridge.autopilot.flavours import (
     MAV_PARAM_TYPE_REAL32,
     MAV_RESULT_ACCEPTED,
     MAV_RESULT_DENIED,
+    MAV_RESULT_FAILED,
     MAV_RESULT_UNSUPPORTED,
     ModeSpec,
 )
@@ -145,7 +146,12 @@ class AutopilotServer:
         p5, p6, p7 = (
             (msg.x, msg.y, msg.z) if msg.get_type() == "COMMAND_INT" else (msg.param5, msg.param6, msg.param7)
         )
-        outcome = self._dispatch(cmd, p, float(p5), float(p6), float(p7))
+        try:
+            outcome = self._dispatch(cmd, p, float(p5), float(p6), float(p7))
+        except Exception:
+            # a bug here must still answer: the sender retries otherwise, and the vehicle flies on
+            self._log.exception("command %d failed", cmd)
+            outcome = CommandOutcome(MAV_RESULT_FAILED)
         self._ack(msg, cmd, outcome.result)
         if outcome.result == MAV_RESULT_ACCEPTED and cmd in (
             M.MAV_CMD_REQUEST_MESSAGE,
@@ -159,7 +165,7 @@ class AutopilotServer:
         if cmd == M.MAV_CMD_COMPONENT_ARM_DISARM:
             if p[0] not in (0.0, 1.0):
                 return CommandOutcome(MAV_RESULT_DENIED)
-            return ap.arm(p[0] == 1.0, force=int(p[1]) == _FORCE_ARM_MAGIC)
+            return ap.arm(p[0] == 1.0, force=p[1] == _FORCE_ARM_MAGIC)
         if cmd == M.MAV_CMD_DO_SET_MODE:
             return self._set_mode(p[0], p[1], p[2])
         if cmd == M.MAV_CMD_NAV_TAKEOFF:

@@ -1,0 +1,89 @@
+"""Shared fixtures: simbridge as a real process on a loopback UDP port, and a pymavlink client."""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import subprocess
+import sys
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+
+os.environ.setdefault("MAVLINK20", "1")
+
+from tests.mavclient import MavClient  # noqa: E402
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+class SimProcess:
+    """A running ``simbridge`` process and the paths it writes."""
+
+    def __init__(self, proc: subprocess.Popen[bytes], port: int, episode_log: Path, stderr_path: Path) -> None:
+        self.proc = proc
+        self.port = port
+        self.episode_log = episode_log
+        self.stderr_path = stderr_path
+
+    def events(self, name: str | None = None) -> list[dict[str, object]]:
+        if not self.episode_log.exists():
+            return []
+        rows = [json.loads(line) for line in self.episode_log.read_text().splitlines() if line.strip()]
+        return [r for r in rows if name is None or r.get("event") == name]
+
+    def stop(self) -> int:
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        return int(self.proc.returncode)
+
+
+@pytest.fixture
+def start_sim(tmp_path: Path) -> Iterator[Callable[..., SimProcess]]:
+    """Start simbridge sending to a fresh loopback port; stopped (SIGTERM) after the test."""
+    started: list[SimProcess] = []
+
+    def start(*args: str, port: int | None = None) -> SimProcess:
+        port = port or free_udp_port()
+        log = tmp_path / f"episode-{len(started)}.jsonl"
+        err = tmp_path / f"simbridge-{len(started)}.stderr"
+        cmd = [
+            sys.executable, "-m", "simbridge",
+            "--mavlink", f"udpout:127.0.0.1:{port}",
+            "--episode-log", str(log),
+            *args,
+        ]  # fmt: skip
+        with err.open("wb") as err_fh:  # the child keeps its own copy of the descriptor
+            proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=err_fh)
+        sim = SimProcess(proc, port, log, err)
+        started.append(sim)
+        return sim
+
+    yield start
+    for sim in started:
+        sim.stop()
+
+
+@pytest.fixture
+def client_for() -> Iterator[Callable[..., MavClient]]:
+    clients: list[MavClient] = []
+
+    def make(port: int, **kwargs: object) -> MavClient:
+        c = MavClient(port, **kwargs)  # type: ignore[arg-type]
+        clients.append(c)
+        return c
+
+    yield make
+    for c in clients:
+        c.close()

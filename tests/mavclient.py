@@ -1,0 +1,97 @@
+"""A small blocking pymavlink ground-station client for tests (its own process side of the wire)."""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from typing import Any
+
+os.environ.setdefault("MAVLINK20", "1")
+
+from pymavlink import mavutil  # noqa: E402
+
+MAV_RESULT_ACCEPTED = 0
+PX4_MAIN = {"POSCTL": (3, 0), "AUTO.TAKEOFF": (4, 2), "AUTO.LOITER": (4, 3), "AUTO.RTL": (4, 5),
+            "AUTO.LAND": (4, 6), "OFFBOARD": (6, 0)}  # fmt: skip
+AP_MODES = {"GUIDED": 4, "LOITER": 5, "RTL": 6, "LAND": 9, "BRAKE": 17}
+
+
+class MavClient:
+    """Listens on a loopback UDP port that simbridge sends to (``udpin``)."""
+
+    def __init__(self, port: int, source_system: int = 255, source_component: int = 190,
+                 signing_key: bytes | None = None) -> None:  # fmt: skip
+        self.conn = mavutil.mavlink_connection(
+            f"udpin:127.0.0.1:{port}", source_system=source_system, source_component=source_component
+        )
+        if signing_key is not None:
+            self.conn.setup_signing(signing_key, sign_outgoing=True)
+        self.mav = self.conn.mav
+
+    def close(self) -> None:
+        self.conn.close()
+
+    def wait_heartbeat(self, timeout_s: float = 30.0) -> Any:
+        hb = self.conn.wait_heartbeat(timeout=timeout_s)
+        if hb is None:
+            raise TimeoutError("no HEARTBEAT from simbridge")
+        return hb
+
+    def recv(self, msg_type: str | list[str], timeout_s: float = 10.0, cond: Any = None) -> Any:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            m = self.conn.recv_match(type=msg_type, blocking=True, timeout=max(0.05, deadline - time.monotonic()))
+            if m is not None and (cond is None or cond(m)):
+                return m
+        raise TimeoutError(f"no {msg_type} within {timeout_s} s")
+
+    def command(self, command: int, *params: float, timeout_s: float = 5.0, target_system: int = 1,
+                target_component: int = 1) -> int:  # fmt: skip
+        """COMMAND_LONG; returns the COMMAND_ACK result."""
+        p = list(params) + [0.0] * (7 - len(params))
+        self.mav.command_long_send(target_system, target_component, command, 0, *p)
+        ack = self.recv("COMMAND_ACK", timeout_s, cond=lambda m: m.command == command)
+        return int(ack.result)
+
+    def set_mode_px4(self, name: str) -> int:
+        main, sub = PX4_MAIN[name]
+        return self.command(mavutil.mavlink.MAV_CMD_DO_SET_MODE, 1, main, sub)
+
+    def set_mode_ap(self, name: str) -> int:
+        return self.command(mavutil.mavlink.MAV_CMD_DO_SET_MODE, 1, AP_MODES[name])
+
+    def arm(self, arm: bool = True) -> int:
+        return self.command(mavutil.mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0 if arm else 0.0)
+
+    def send_position(self, n: float, e: float, d: float, yaw: float | None = None) -> None:
+        mask = 2552 if yaw is not None else 3576
+        self.mav.set_position_target_local_ned_send(
+            0, 1, 1, 1, mask, n, e, d, 0, 0, 0, 0, 0, 0, yaw or 0.0, 0.0
+        )
+
+    def position(self, timeout_s: float = 5.0) -> Any:
+        return self.recv("LOCAL_POSITION_NED", timeout_s)
+
+    def wait_position(self, n: float, e: float, d: float, tol_m: float, timeout_s: float,
+                      stream: bool = False) -> Any:  # fmt: skip
+        """Wait until LOCAL_POSITION_NED is within ``tol_m`` of the point (streaming it if asked)."""
+        deadline = time.monotonic() + timeout_s
+        last_sent = 0.0
+        while time.monotonic() < deadline:
+            if stream and time.monotonic() - last_sent > 0.1:
+                self.send_position(n, e, d)
+                last_sent = time.monotonic()
+            m = self.recv("LOCAL_POSITION_NED", 2.0)
+            if math.dist((m.x, m.y, m.z), (n, e, d)) < tol_m:
+                return m
+        raise TimeoutError(f"vehicle did not reach {(n, e, d)} within {timeout_s} s")
+
+    def heartbeat(self, timeout_s: float = 5.0) -> Any:
+        return self.recv("HEARTBEAT", timeout_s, cond=lambda m: m.get_srcComponent() == 1)
+
+    def wait_disarmed(self, timeout_s: float) -> Any:
+        return self.recv(
+            "HEARTBEAT", timeout_s,
+            cond=lambda m: m.get_srcComponent() == 1 and not m.base_mode & 128,
+        )  # fmt: skip
