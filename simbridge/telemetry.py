@@ -132,7 +132,9 @@ class Telemetry:
         for msg_id, due in self._next_due_s.items():
             if t_s >= due:
                 interval = self._interval_s[msg_id]
-                self._next_due_s[msg_id] = max(due + interval, t_s)
+                nxt = due + interval
+                # after a stall (or a fresh stream) restart the cadence from now, never burst
+                self._next_due_s[msg_id] = nxt if nxt > t_s else t_s + interval
                 out.append(self._builders[msg_id]())
         return out
 

@@ -13,7 +13,6 @@ from simbridge.physics import MOTOR_COUNT, F450Physics, VehicleState
 from simbridge.terrain import Terrain
 from simbridge.wind import WindModel
 
-
 IDLE_THROTTLE = 0.12  # armed spin-up on the ground: well below hover (about 0.42)
 
 

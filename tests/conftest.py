@@ -14,7 +14,7 @@ import pytest
 
 os.environ.setdefault("MAVLINK20", "1")
 
-from tests.mavclient import MavClient  # noqa: E402
+from tests.mavclient import MavClient
 
 
 def free_udp_port() -> int:
@@ -26,7 +26,9 @@ def free_udp_port() -> int:
 class SimProcess:
     """A running ``simbridge`` process and the paths it writes."""
 
-    def __init__(self, proc: subprocess.Popen[bytes], port: int, episode_log: Path, stderr_path: Path) -> None:
+    def __init__(
+        self, proc: subprocess.Popen[bytes], port: int, episode_log: Path, stderr_path: Path
+    ) -> None:
         self.proc = proc
         self.port = port
         self.episode_log = episode_log

@@ -9,7 +9,7 @@ from typing import Any
 
 os.environ.setdefault("MAVLINK20", "1")
 
-from pymavlink import mavutil  # noqa: E402
+from pymavlink import mavutil
 
 MAV_RESULT_ACCEPTED = 0
 PX4_MAIN = {"POSCTL": (3, 0), "AUTO.TAKEOFF": (4, 2), "AUTO.LOITER": (4, 3), "AUTO.RTL": (4, 5),
@@ -28,6 +28,7 @@ class MavClient:
         if signing_key is not None:
             self.conn.setup_signing(signing_key, sign_outgoing=True)
         self.mav = self.conn.mav
+        self.texts: list[Any] = []  # every STATUSTEXT seen, in order
 
     def close(self) -> None:
         self.conn.close()
@@ -39,10 +40,15 @@ class MavClient:
         return hb
 
     def recv(self, msg_type: str | list[str], timeout_s: float = 10.0, cond: Any = None) -> Any:
+        types = [msg_type] if isinstance(msg_type, str) else msg_type
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
-            m = self.conn.recv_match(type=msg_type, blocking=True, timeout=max(0.05, deadline - time.monotonic()))
-            if m is not None and (cond is None or cond(m)):
+            m = self.conn.recv_match(blocking=True, timeout=max(0.05, deadline - time.monotonic()))
+            if m is None:
+                continue
+            if m.get_type() == "STATUSTEXT":
+                self.texts.append(m)
+            if m.get_type() in types and (cond is None or cond(m)):
                 return m
         raise TimeoutError(f"no {msg_type} within {timeout_s} s")
 
@@ -95,3 +101,44 @@ class MavClient:
             "HEARTBEAT", timeout_s,
             cond=lambda m: m.get_srcComponent() == 1 and not m.base_mode & 128,
         )  # fmt: skip
+
+    # ---------------------------------------------------------------- extra helpers
+    def stream_position(self, n: float, e: float, d: float, wall_s: float, period_s: float = 0.02) -> None:
+        """Send the same position setpoint every ``period_s`` of wall time for ``wall_s``."""
+        end = time.monotonic() + wall_s
+        while time.monotonic() < end:
+            self.send_position(n, e, d)
+            self.conn.recv_match(blocking=True, timeout=period_s)
+            time.sleep(0)
+
+    def drain(self, wall_s: float) -> None:
+        """Read (and drop, keeping STATUSTEXTs) whatever arrives for ``wall_s``."""
+        end = time.monotonic() + wall_s
+        while time.monotonic() < end:
+            m = self.conn.recv_match(blocking=True, timeout=max(0.01, end - time.monotonic()))
+            if m is not None and m.get_type() == "STATUSTEXT":
+                self.texts.append(m)
+
+    def statustext(self, contains: str, timeout_s: float = 10.0) -> Any:
+        """The first STATUSTEXT containing ``contains``, already seen or still to come."""
+        for m in self.texts:
+            if contains in m.text:
+                return m
+        return self.recv("STATUSTEXT", timeout_s, cond=lambda m: contains in m.text)
+
+    def param_read(self, name: str, timeout_s: float = 5.0) -> Any:
+        self.mav.param_request_read_send(1, 1, name.encode(), -1)
+        return self.recv("PARAM_VALUE", timeout_s, cond=lambda m: m.param_id == name)
+
+    def param_set(self, name: str, value: float, ptype: int, timeout_s: float = 5.0) -> Any:
+        self.mav.param_set_send(1, 1, name.encode(), value, ptype)
+        return self.recv("PARAM_VALUE", timeout_s, cond=lambda m: m.param_id == name)
+
+    def takeoff_px4(self, climb_m: float) -> None:
+        """Arm on the ground and climb ``climb_m`` (via MIS_TAKEOFF_ALT), waiting until there."""
+        self.param_set("MIS_TAKEOFF_ALT", climb_m, mavutil.mavlink.MAV_PARAM_TYPE_REAL32)
+        assert self.arm() == MAV_RESULT_ACCEPTED
+        nan = float("nan")
+        result = self.command(mavutil.mavlink.MAV_CMD_NAV_TAKEOFF, nan, nan, nan, nan, nan, nan, nan)
+        assert result == MAV_RESULT_ACCEPTED
+        self.wait_position(0.0, 0.0, -climb_m, tol_m=0.3, timeout_s=30)

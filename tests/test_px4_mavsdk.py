@@ -17,7 +17,9 @@ from tests.conftest import SimProcess
 pytestmark = pytest.mark.slow
 
 
-async def _wait_for(gen_factory: Callable[[], object], cond: Callable[[object], bool], timeout_s: float) -> object:
+async def _wait_for(
+    gen_factory: Callable[[], object], cond: Callable[[object], bool], timeout_s: float
+) -> object:
     async def scan() -> object:
         async for value in gen_factory():  # type: ignore[attr-defined]
             if cond(value):

@@ -1,0 +1,102 @@
+"""PX4 offboard rules over real UDP: stream-before-switch, loss failsafe (hold or land), auto-disarm."""
+
+from __future__ import annotations
+
+import math
+import struct
+from collections.abc import Callable
+
+import pytest
+from pymavlink import mavutil
+
+from tests.conftest import SimProcess
+from tests.mavclient import MAV_RESULT_ACCEPTED, MavClient
+
+pytestmark = pytest.mark.slow
+MAV = mavutil.mavlink
+TEMPORARILY_REJECTED = 1
+PX4_LOITER = (4 << 16) | (3 << 24)
+PX4_LAND = (4 << 16) | (6 << 24)
+PX4_OFFBOARD = 6 << 16
+
+
+def test_offboard_refused_without_setpoint_stream(
+    start_sim: Callable[..., SimProcess], client_for: Callable[..., MavClient]
+) -> None:
+    sim = start_sim("--start", "air", "--speed", "4")
+    c = client_for(sim.port)
+    c.wait_heartbeat()
+    assert c.set_mode_px4("OFFBOARD") == TEMPORARILY_REJECTED
+    c.statustext("no setpoint stream")
+    c.send_position(0.0, 0.0, -100.0)  # one setpoint is not a stream
+    assert c.set_mode_px4("OFFBOARD") == TEMPORARILY_REJECTED
+    c.stream_position(0.0, 0.0, -100.0, wall_s=0.6)  # 2.4 s simulated at 20 Hz of simulated time
+    c.send_position(0.0, 0.0, -100.0)
+    assert c.set_mode_px4("OFFBOARD") == MAV_RESULT_ACCEPTED
+    assert c.heartbeat().custom_mode == PX4_OFFBOARD
+
+
+def _enter_offboard(c: MavClient, n: float, e: float, d: float) -> None:
+    c.stream_position(n, e, d, wall_s=0.6)
+    c.send_position(n, e, d)
+    assert c.set_mode_px4("OFFBOARD") == MAV_RESULT_ACCEPTED
+
+
+def test_offboard_loss_failsafe_holds_by_default(
+    start_sim: Callable[..., SimProcess], client_for: Callable[..., MavClient]
+) -> None:
+    sim = start_sim("--start", "air", "--speed", "4")
+    c = client_for(sim.port)
+    c.wait_heartbeat()
+    _enter_offboard(c, 5.0, 0.0, -100.0)
+    c.wait_position(5.0, 0.0, -100.0, tol_m=0.3, timeout_s=20, stream=True)
+    # stop streaming: after COM_OF_LOSS_T (1 s) the vehicle holds and says so
+    text = c.statustext("Failsafe", timeout_s=10)
+    assert "offboard" in text.text.lower()
+    hb = c.heartbeat()
+    assert hb.custom_mode == PX4_LOITER
+    assert hb.system_status == MAV_STATE_CRITICAL
+    for _ in range(20):  # about 4 s simulated of position samples: still holding
+        p = c.position()
+        assert math.dist((p.x, p.y, p.z), (5.0, 0.0, -100.0)) < 0.6
+    failsafes = sim.events("failsafe")
+    assert failsafes and failsafes[0]["action"] == "AUTO.LOITER"
+
+
+MAV_STATE_CRITICAL = 5
+
+
+def test_offboard_loss_failsafe_lands_when_configured(
+    start_sim: Callable[..., SimProcess], client_for: Callable[..., MavClient]
+) -> None:
+    sim = start_sim("--start", "ground", "--speed", "4")
+    c = client_for(sim.port)
+    c.wait_heartbeat()
+    # COM_OBL_RC_ACT is INT32: PX4 carries it bytewise inside the float field
+    as_float = struct.unpack("<f", struct.pack("<i", 4))[0]
+    echo = c.param_set("COM_OBL_RC_ACT", as_float, MAV.MAV_PARAM_TYPE_INT32)
+    assert struct.unpack("<i", struct.pack("<f", echo.param_value))[0] == 4
+    assert echo.param_type == MAV.MAV_PARAM_TYPE_INT32
+    c.takeoff_px4(6.0)
+    _enter_offboard(c, 0.0, 0.0, -6.0)
+    c.statustext("Failsafe", timeout_s=10)
+    assert c.heartbeat().custom_mode == PX4_LAND
+    c.wait_disarmed(timeout_s=30)
+    assert len(sim.events("touchdown")) == 1
+    assert sim.events("failsafe")[0]["action"] == "AUTO.LAND"
+
+
+def test_auto_disarm_when_armed_on_ground_without_takeoff(
+    start_sim: Callable[..., SimProcess], client_for: Callable[..., MavClient]
+) -> None:
+    sim = start_sim("--start", "ground", "--speed", "10")
+    c = client_for(sim.port)
+    c.wait_heartbeat()
+    assert c.arm() == MAV_RESULT_ACCEPTED
+    assert c.heartbeat().base_mode & MAV.MAV_MODE_FLAG_SAFETY_ARMED
+    c.wait_disarmed(timeout_s=10)  # COM_DISARM_PRFLT = 10 s simulated
+    armed = sim.events("armed")[0]["t_s"]
+    disarmed = sim.events("disarmed")
+    assert disarmed[0]["reason"] == "auto-disarm: no takeoff"
+    assert 9.9 <= float(disarmed[0]["t_s"]) - float(armed) <= 10.5  # type: ignore[arg-type]
+    assert not sim.events("touchdown")
