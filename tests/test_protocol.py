@@ -3,6 +3,7 @@ messages, the rangefinder and RTL, for both autopilot flavours."""
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable
 
@@ -121,7 +122,7 @@ def test_request_message_and_set_interval(
         c.command(MAV.MAV_CMD_SET_MESSAGE_INTERVAL, MAV.MAVLINK_MSG_ID_ATTITUDE, 1e6) == MAV_RESULT_ACCEPTED
     )
     stamps = [c.recv("ATTITUDE", timeout_s=3.0).time_boot_ms for _ in range(4)]
-    gaps = [b - a for a, b in zip(stamps, stamps[1:], strict=False)]
+    gaps = [b - a for a, b in itertools.pairwise(stamps)]
     assert all(990 <= g <= 1010 for g in gaps), gaps
     ping_time = 123456
     c.mav.ping_send(ping_time, 7, 0, 0)

@@ -60,7 +60,8 @@ def test_offboard_loss_failsafe_holds_by_default(
         p = c.position()
         assert math.dist((p.x, p.y, p.z), (5.0, 0.0, -100.0)) < 0.6
     failsafes = sim.events("failsafe")
-    assert failsafes and failsafes[0]["action"] == "AUTO.LOITER"
+    assert failsafes
+    assert failsafes[0]["action"] == "AUTO.LOITER"
 
 
 MAV_STATE_CRITICAL = 5
