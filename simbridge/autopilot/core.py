@@ -96,7 +96,7 @@ class Autopilot:
         self._external_is_velocity = False
         self._external_at_s = -math.inf
         self._stream_start_s = -math.inf
-        self._last_fence_text_s = -math.inf
+        self._last_reject = ("", -math.inf)
 
     # ------------------------------------------------------------------ spawn
     def spawn_in_air(self, state: VehicleState) -> None:
@@ -217,10 +217,11 @@ class Autopilot:
         return ACCEPTED
 
     def reject_setpoint(self, problem: str) -> None:
-        """A setpoint the MAVLink layer could not decode: say so, at most once a second."""
-        s = self.vehicle.state
-        if s.t_s - self._last_fence_text_s > 1.0:
-            self._last_fence_text_s = s.t_s
+        """A setpoint that cannot be flown: say so (the same problem at most once a second)."""
+        t = self.vehicle.state.t_s
+        last_problem, last_t = self._last_reject
+        if problem != last_problem or t - last_t > 1.0:
+            self._last_reject = (problem, t)
             self._emit_text(SEV_WARNING, f"Setpoint rejected: {problem}")
 
     def text_warning(self, text: str) -> None:
