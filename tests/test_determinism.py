@@ -56,8 +56,10 @@ def test_different_seed_gives_different_gusts() -> None:
 
 def _episode_states(tmp_path: Path, name: str, seed: int) -> list[str]:
     log = tmp_path / f"{name}.jsonl"
-    cmd = [sys.executable, "-m", "simbridge", "--mavlink", "udpout:127.0.0.1:9", "--seed", str(seed),
-           "--gusts", "1.5", "--wind", "3,0", "--speed", "40", "--duration", "20", "--episode-log", str(log)]  # fmt: skip
+    cmd = [
+        sys.executable, "-m", "simbridge", "--mavlink", "udpout:127.0.0.1:9", "--seed", str(seed),
+        "--gusts", "1.5", "--wind", "3,0", "--speed", "40", "--duration", "20", "--episode-log", str(log),
+    ]  # fmt: skip
     subprocess.run(cmd, check=True, timeout=60, capture_output=True)
     return [line for line in log.read_text().splitlines() if '"event": "state"' in line]
 
