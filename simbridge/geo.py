@@ -6,6 +6,7 @@ Euler angles follow the aerospace ZYX convention (yaw, then pitch, then roll).
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -30,11 +31,7 @@ class GeoOrigin:
 
     @property
     def _radii_m(self) -> tuple[float, float]:
-        lat = math.radians(self.lat_deg)
-        s2 = math.sin(lat) ** 2
-        r_n = WGS84_A_M / math.sqrt(1.0 - WGS84_E2 * s2)  # prime vertical
-        r_m = r_n * (1.0 - WGS84_E2) / (1.0 - WGS84_E2 * s2)  # meridian
-        return r_m + self.alt_m, (r_n + self.alt_m) * math.cos(lat)
+        return _tangent_plane_radii_m(self.lat_deg, self.alt_m)
 
     def to_ned(self, lat_deg: float, lon_deg: float, alt_m: float) -> Vec3:
         """Geodetic (deg, deg, m above the ellipsoid) -> local NED metres."""
@@ -53,6 +50,16 @@ class GeoOrigin:
             self.lon_deg + math.degrees(east_m / r_east),
             self.alt_m - down_m,
         )
+
+
+@functools.lru_cache(maxsize=8)
+def _tangent_plane_radii_m(lat_deg: float, alt_m: float) -> tuple[float, float]:
+    """Metres per radian of latitude and of longitude at a latitude and height (WGS-84)."""
+    lat = math.radians(lat_deg)
+    s2 = math.sin(lat) ** 2
+    r_n = WGS84_A_M / math.sqrt(1.0 - WGS84_E2 * s2)  # prime vertical
+    r_m = r_n * (1.0 - WGS84_E2) / (1.0 - WGS84_E2 * s2)  # meridian
+    return r_m + alt_m, (r_n + alt_m) * math.cos(lat)
 
 
 def euler_to_quat(roll_rad: float, pitch_rad: float, yaw_rad: float) -> Quat:

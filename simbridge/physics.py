@@ -106,6 +106,7 @@ class F450Physics:
         self._sim_time = node("simulation/sim-time-sec")
         self._ground_height_m = 0.0
         self._t0_s = 0.0
+        self._last_pos: Vec3 = (0.0, 0.0, 0.0)
         fdm["fcs/ScasEngage"] = 0.0
         self.reset((0.0, 0.0, -GEAR_HEIGHT_M), 0.0)
 
@@ -135,6 +136,7 @@ class F450Physics:
             fdm.run_ic()
         fdm["propulsion/set-running"] = -1
         self._t0_s = self._sim_time.get_double_value()
+        self._last_pos = (n, e, d)
 
     def step(self, throttles: tuple[float, float, float, float]) -> None:
         """Advance one JSBSim step (``DT_S``) with ESC commands in [0, 1], JSBSim motor order."""
@@ -144,9 +146,7 @@ class F450Physics:
             w = self.wind.step(self.DT_S)
             for node, v in zip(self._wind, w, strict=True):
                 node.set_double_value(v / FT_M)
-        pos = self.origin.to_ned(
-            self._lat.get_double_value(), self._lon.get_double_value(), self._alt.get_double_value()
-        )
+        pos = self._last_pos  # the ground under the vehicle at the start of the step
         ground = self.terrain.height_m(pos[0], pos[1])
         if ground != self._ground_height_m:
             self._ground_height_m = ground
@@ -162,6 +162,7 @@ class F450Physics:
         yaw = wrap_pi(psi)
         vn, ve, vd = (n.get_double_value() * FT_M for n in self._vel)
         p, q, r = (n.get_double_value() for n in self._rates)
+        self._last_pos = pos
         return VehicleState(
             t_s=self._sim_time.get_double_value() - self._t0_s,
             pos_ned_m=pos,

@@ -1,0 +1,150 @@
+"""Real-time factor of simbridge: physics + control + autopilot + MAVLink, on one core.
+
+Prints medians over several runs of:
+  1. bare JSBSim F450 stepping (baseline, in this process),
+  2. JSBSim + our multicopter controller (in this process),
+  3. the full simbridge process (--speed very high) pinned to one core, streaming all telemetry to a
+     live pymavlink client that decodes every frame and sends GUIDED position targets at 20 Hz.
+Ratios are against the baseline measured in the same run.
+
+Usage: python benchmarks/bench_simbridge_rtf.py [--runs 5] [--sim-seconds 120]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+os.environ.setdefault("MAVLINK20", "1")
+
+from pymavlink import mavutil
+
+from simbridge.control import Setpoint
+from simbridge.geo import GeoOrigin
+from simbridge.physics import F450Physics
+from simbridge.terrain import FlatTerrain
+from simbridge.vehicle import Vehicle
+
+SIM_CORE, CLIENT_CORE = 0, 1
+
+
+def _pin(core: int) -> None:
+    if hasattr(os, "sched_setaffinity") and core < (os.cpu_count() or 1):
+        os.sched_setaffinity(0, {core})
+
+
+def bench_physics(sim_s: float) -> float:
+    p = F450Physics(GeoOrigin(), FlatTerrain())
+    p.reset((0.0, 0.0, -100.0), 0.0)
+    steps = round(sim_s / p.DT_S)
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        p.step((0.42, 0.42, 0.42, 0.42))
+        p.state()
+    return sim_s / (time.perf_counter() - t0)
+
+
+def bench_control(sim_s: float) -> float:
+    v = Vehicle(GeoOrigin(), FlatTerrain())
+    v.reset((0.0, 0.0, -100.0), 0.0)
+    targets = [Setpoint.hold((30.0, 0.0, -100.0)), Setpoint.hold((0.0, 0.0, -100.0))]
+    steps = round(sim_s / v.DT_S)
+    t0 = time.perf_counter()
+    for i in range(steps):
+        v.step(targets[(i // 2400) % 2])  # a new target every 20 s simulated
+    return sim_s / (time.perf_counter() - t0)
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def bench_process(sim_s: float) -> tuple[float, int]:
+    """Returns (real-time factor, frames the client decoded)."""
+    port = _free_port()
+    with tempfile.TemporaryDirectory() as tmp:
+        log = Path(tmp) / "episode.jsonl"
+        conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=255, source_component=190)
+        cmd = [
+            sys.executable, "-m", "simbridge", "--autopilot", "ardupilot", "--speed", "100000",
+            "--duration", str(sim_s), "--mavlink", f"udpout:127.0.0.1:{port}", "--episode-log", str(log),
+            "--log-level", "WARNING",
+        ]  # fmt: skip
+        proc = subprocess.Popen(cmd, preexec_fn=lambda: _pin(SIM_CORE))
+        decoded = 0
+        stop = threading.Event()
+
+        def drive() -> None:
+            nonlocal decoded
+            conn.wait_heartbeat(timeout=30)
+            conn.mav.command_long_send(1, 1, 176, 0, 1, 4, 0, 0, 0, 0, 0)  # GUIDED
+            last, k = 0.0, 0
+            while not stop.is_set():
+                if conn.recv_match(blocking=True, timeout=0.01) is not None:
+                    decoded += 1
+                if time.monotonic() - last > 0.05:
+                    last, k = time.monotonic(), k + 1
+                    n = 30.0 if (k // 40) % 2 else 0.0
+                    conn.mav.set_position_target_local_ned_send(
+                        0, 1, 1, 1, 3576, n, 0, -100, 0, 0, 0, 0, 0, 0, 0, 0
+                    )
+
+        _pin(CLIENT_CORE)
+        t = threading.Thread(target=drive, daemon=True)
+        t.start()
+        proc.wait(timeout=600)
+        stop.set()
+        t.join(timeout=5)
+        conn.close()
+        stop_event = next(json.loads(x) for x in log.read_text().splitlines() if '"event": "stop"' in x)
+        return float(stop_event["t_s"]) / float(stop_event["wall_s"]), decoded
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--runs", type=int, default=5)
+    ap.add_argument("--sim-seconds", type=float, default=120.0)
+    args = ap.parse_args()
+    results: dict[str, list[float]] = {"physics": [], "control": [], "process": []}
+    frames = []
+    for i in range(args.runs):
+        _pin(SIM_CORE)
+        results["physics"].append(bench_physics(args.sim_seconds))
+        results["control"].append(bench_control(args.sim_seconds))
+        rtf, n = bench_process(args.sim_seconds)
+        results["process"].append(rtf)
+        frames.append(n)
+        print(
+            f"run {i + 1}/{args.runs}: physics {results['physics'][-1]:7.1f}x  "
+            f"+control {results['control'][-1]:6.1f}x  full process {rtf:6.1f}x  ({n} frames decoded)",
+            flush=True,
+        )
+    med = {k: statistics.median(v) for k, v in results.items()}
+    base = med["physics"]
+    print(f"\nmedian of {args.runs} runs, {args.sim_seconds:.0f} s simulated each, one core:")
+    rows = (
+        ("bare JSBSim F450 (baseline)", med["physics"]),
+        ("JSBSim + controller", med["control"]),
+        ("simbridge process (+autopilot, MAVLink)", med["process"]),
+    )
+    for label, value in rows:
+        print(f"  {label:<42} {value:7.1f}x real time  ratio {value / base:.2f}")
+    print(f"  goal >= 50x for the full process: {'met' if med['process'] >= 50 else 'NOT met'}")
+    print(f"  client decoded a median of {statistics.median(frames):.0f} MAVLink frames per run")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
