@@ -150,3 +150,23 @@ def test_decoder_rejects_partial_masks() -> None:
     assert not is_velocity
     assert sp.pos_ne_m == pytest.approx((1.0, 12.0))  # 10 m forward while facing east
     assert sp.pos_d_m == pytest.approx(-50.0)
+
+
+def test_decoder_velocity_and_position_yaw_masks() -> None:
+    from simbridge.autopilot.server import decode_local_ned_target
+
+    mav = mavlink2.MAVLink(None)
+    velocity = mav.set_position_target_local_ned_encode(
+        0, 1, 1, 1, 3527, 0, 0, 0, 1.0, -2.0, 0.5, 0, 0, 0, 0, 0
+    )
+    sp, is_velocity = decode_local_ned_target(velocity, (5.0, 5.0, -20.0), 0.0)
+    assert is_velocity
+    assert sp.pos_ne_m is None
+    assert sp.pos_d_m is None
+    assert sp.vel_ned_m_s == (1.0, -2.0, 0.5)
+    pos_yaw = mav.set_position_target_local_ned_encode(0, 1, 1, 1, 2552, 3, 4, -10, 0, 0, 0, 0, 0, 0, 1.2, 0)
+    sp, is_velocity = decode_local_ned_target(pos_yaw, (0.0, 0.0, 0.0), 0.0)
+    assert not is_velocity
+    assert sp.pos_ne_m == (3.0, 4.0)
+    assert sp.yaw_rad == pytest.approx(1.2)
+    assert sp.yaw_rate_rad_s is None
