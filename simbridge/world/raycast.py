@@ -141,8 +141,16 @@ def cast_rays(
                 if z > hb:
                     blk = 1 << sh
                     bsize = blk * res
-                    tbn = (n0 + ((bi + 1) * bsize if step_n > 0 else bi * bsize) - on) * inv_dn if has_n else _BIG
-                    tbe = (e0 + ((bj + 1) * bsize if step_e > 0 else bj * bsize) - oe) * inv_de if has_e else _BIG
+                    tbn = (
+                        (n0 + ((bi + 1) * bsize if step_n > 0 else bi * bsize) - on) * inv_dn
+                        if has_n
+                        else _BIG
+                    )
+                    tbe = (
+                        (e0 + ((bj + 1) * bsize if step_e > 0 else bj * bsize) - oe) * inv_de
+                        if has_e
+                        else _BIG
+                    )
                     tb = min(tbn, tbe)
                     if tb >= t1:
                         if ou + t1 * du > hb:
