@@ -133,10 +133,11 @@ class Actors:
     # ------------------------------------------------------------------ grid stamping
     def unstamp(self, grid: WorldGrid) -> None:
         """Restore the cells the last stamp covered (last stamped first)."""
-        for (i0, i1, j0, j1), mask, h, c, m in reversed(self._stamped):
+        for (i0, i1, j0, j1), mask, h, c, m, r in reversed(self._stamped):
             grid.height[i0:i1, j0:j1][mask] = h
             grid.cls[i0:i1, j0:j1][mask] = c
             grid.mat[i0:i1, j0:j1][mask] = m
+            grid.region[i0:i1, j0:j1][mask] = r
         self._stamped = []
 
     def stamp(self, grid: WorldGrid) -> list[ActorPose]:
@@ -157,7 +158,9 @@ class Actors:
                 grid.height[i0:i1, j0:j1][mask].copy(),
                 grid.cls[i0:i1, j0:j1][mask].copy(),
                 grid.mat[i0:i1, j0:j1][mask].copy(),
+                grid.region[i0:i1, j0:j1][mask].copy(),
             )
             self._stamped.append((win, mask, *saved))
-            grid.paint(win, mask, a.base_height_m + height, a.kind, mat, None, "set")
+            # actors carry their paint colour as a negative region id: -(colour + 1)
+            grid.paint(win, mask, a.base_height_m + height, a.kind, mat, -(a.colour + 1), "set")
         return poses

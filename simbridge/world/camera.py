@@ -1,0 +1,426 @@
+"""The downward camera: a pinhole rendered by ray casting the world grid.
+
+Camera frame (OpenCV): x right, y down, z along the optical axis. The camera looks straight down
+the body +z axis with the image top toward the vehicle's nose, so the camera-to-body rotation is
+
+    x_cam -> +y_body (right),  y_cam -> -x_body (image down = aft),  z_cam -> +z_body (down)
+
+(``CAMERA_TO_BODY`` below, columns = camera axes in body FRD). Pixel centres are at
+``(u + 0.5, v + 0.5)``; the principal point is the image centre; ``fx = fy = (W / 2) / tan(hfov / 2)``.
+
+Depth maps hold the z-depth along the optical axis in metres (NaN where the ray found nothing).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numba import njit
+
+from simbridge.geo import Quat
+from simbridge.world.model import Material, WorldGrid
+from simbridge.world.raycast import HIT_MISS, HIT_TOP, HIT_WALL_N, Pyramid, cast_rays
+
+CAMERA_TO_BODY = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+_RAYS_BODY: dict[tuple[int, int, float], tuple[np.ndarray, np.ndarray]] = {}
+MAX_RANGE_M = 600.0
+
+
+@dataclass(frozen=True, slots=True)
+class CameraModel:
+    width_px: int = 960
+    height_px: int = 540
+    hfov_deg: float = 90.0
+
+    def __post_init__(self) -> None:
+        if not (16 <= self.width_px <= 8192 and 16 <= self.height_px <= 8192):
+            raise ValueError(f"camera size {self.width_px}x{self.height_px} out of range 16..8192")
+        if not 10.0 <= self.hfov_deg <= 150.0:
+            raise ValueError(f"camera hfov_deg must be in [10, 150], got {self.hfov_deg}")
+
+    @property
+    def focal_px(self) -> float:
+        return (self.width_px / 2) / math.tan(math.radians(self.hfov_deg) / 2)
+
+    @property
+    def principal_px(self) -> tuple[float, float]:
+        return (self.width_px / 2, self.height_px / 2)
+
+    def intrinsics(self) -> np.ndarray:
+        f = self.focal_px
+        cx, cy = self.principal_px
+        return np.array([[f, 0.0, cx], [0.0, f, cy], [0.0, 0.0, 1.0]])
+
+    def unit_rays_body(self) -> np.ndarray:
+        """(H*W, 3) unit pixel rays in body FRD, row-major over pixels (cached per model)."""
+        key = (self.width_px, self.height_px, self.hfov_deg)
+        cached = _RAYS_BODY.get(key)
+        if cached is None:
+            rays = self.rays_cam()
+            norms = np.linalg.norm(rays, axis=1)
+            cached = (np.ascontiguousarray((rays / norms[:, None]) @ CAMERA_TO_BODY.T), norms)
+            _RAYS_BODY[key] = cached
+        return cached[0]
+
+    def ray_norms(self) -> np.ndarray:
+        """|(x, y, 1)| per pixel: z-depth = range / norm."""
+        self.unit_rays_body()
+        return _RAYS_BODY[(self.width_px, self.height_px, self.hfov_deg)][1]
+
+    def rays_cam(self) -> np.ndarray:
+        """(H*W, 3) unnormalised rays (x, y, 1) in the camera frame, row-major over pixels."""
+        f = self.focal_px
+        cx, cy = self.principal_px
+        u = (np.arange(self.width_px) + 0.5 - cx) / f
+        v = (np.arange(self.height_px) + 0.5 - cy) / f
+        uu, vv = np.meshgrid(u, v)
+        return np.stack([uu, vv, np.ones_like(uu)], axis=-1).reshape(-1, 3)
+
+
+def quat_matrix(q: Quat) -> np.ndarray:
+    """Rotation matrix (body FRD -> NED) of a unit quaternion (w, x, y, z)."""
+    w, x, y, z = q
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def body_to_neu(dirs_body: np.ndarray, q: Quat) -> np.ndarray:
+    """Unit body FRD directions -> unit (north, east, up) directions (one 3x3 product)."""
+    m = quat_matrix(q) * np.array([[1.0], [1.0], [-1.0]])  # NED rows -> NEU rows
+    return np.ascontiguousarray(dirs_body @ m.T)
+
+
+# ---------------------------------------------------------------------------- palettes (RGB 0..1)
+_MAT_RGB = np.zeros((32, 3), np.float32)
+for _m, _rgb in {
+    Material.NONE: (0.5, 0.5, 0.5),
+    Material.GRAVEL: (0.62, 0.59, 0.53),
+    Material.CONCRETE: (0.70, 0.69, 0.66),
+    Material.TAR: (0.20, 0.20, 0.21),
+    Material.MEMBRANE: (0.86, 0.86, 0.84),
+    Material.TILES: (0.62, 0.30, 0.22),
+    Material.ASPHALT: (0.27, 0.27, 0.28),
+    Material.LANE_MARKING: (0.93, 0.93, 0.88),
+    Material.PAVING: (0.66, 0.64, 0.60),
+    Material.ZEBRA: (0.94, 0.94, 0.92),
+    Material.GRASS: (0.33, 0.52, 0.22),
+    Material.FOLIAGE: (0.16, 0.36, 0.14),
+    Material.WATER: (0.12, 0.25, 0.36),
+    Material.WOOD: (0.48, 0.35, 0.22),
+    Material.METAL: (0.74, 0.76, 0.78),
+    Material.SOLAR: (0.10, 0.14, 0.30),
+    Material.RUBBLE: (0.50, 0.45, 0.38),
+    Material.BRICK: (0.55, 0.30, 0.24),
+    Material.SOIL: (0.47, 0.40, 0.30),
+    Material.CAR_PAINT: (0.6, 0.6, 0.6),
+    Material.CLOTH: (0.5, 0.3, 0.3),
+    Material.PAINT_TEXT: (0.95, 0.85, 0.20),
+}.items():
+    _MAT_RGB[int(_m)] = _rgb
+_ACTOR_RGB = np.array(
+    [(0.85, 0.85, 0.87), (0.08, 0.08, 0.09), (0.62, 0.08, 0.07), (0.10, 0.22, 0.55), (0.55, 0.56, 0.58),
+     (0.90, 0.75, 0.10), (0.15, 0.40, 0.20), (0.75, 0.40, 0.10)],
+    np.float32,
+)  # fmt: skip
+_FACADE_RGB = np.array(
+    [(0.72, 0.70, 0.66), (0.60, 0.36, 0.28), (0.52, 0.55, 0.58), (0.80, 0.76, 0.66), (0.42, 0.44, 0.48)],
+    np.float32,
+)  # fmt: skip
+
+
+@njit(cache=True, inline="always")
+def _hash2(a: int, b: int, salt: int) -> float:
+    """Deterministic value in [0, 1) for an integer lattice point."""
+    h = (a * 374761393 + b * 668265263 + salt * 2147483647) & 0xFFFFFFFF
+    h = ((h ^ (h >> 13)) * 1274126177) & 0xFFFFFFFF
+    h = h ^ (h >> 16)
+    return (h & 0xFFFFFF) / 16777216.0
+
+
+@njit(cache=True, inline="always")
+def _value_noise(x: float, y: float, salt: int) -> float:
+    """Smooth value noise in [0, 1) at lattice spacing 1."""
+    ix = math.floor(x)
+    iy = math.floor(y)
+    fx = x - ix
+    fy = y - iy
+    fx = fx * fx * (3 - 2 * fx)
+    fy = fy * fy * (3 - 2 * fy)
+    a = _hash2(ix, iy, salt)
+    b = _hash2(ix + 1, iy, salt)
+    c = _hash2(ix, iy + 1, salt)
+    d = _hash2(ix + 1, iy + 1, salt)
+    return (a * (1 - fx) + b * fx) * (1 - fy) + (c * (1 - fx) + d * fx) * fy
+
+
+@njit(cache=True)
+def _texture(mat: int, pn: float, pe: float, r: float, g: float, b: float) -> tuple[float, float, float]:
+    """Procedural albedo of a material at world point (north, east), from its base colour."""
+    k = 1.0
+    if mat == 1:  # gravel: grains of 4 cm, varied tone
+        k = 0.78 + 0.44 * _hash2(math.floor(pn * 25), math.floor(pe * 25), 1)
+        k *= 0.9 + 0.2 * _value_noise(pn * 0.4, pe * 0.4, 2)
+    elif mat == 2:  # concrete: slabs with joints and stains
+        k = (
+            0.9
+            + 0.15 * _value_noise(pn * 0.3, pe * 0.3, 3)
+            + 0.05 * _hash2(math.floor(pn * 20), math.floor(pe * 20), 4)
+        )
+        if (pn % 3.0) < 0.06 or (pe % 3.0) < 0.06:
+            k *= 0.75
+    elif mat == 3:  # tar
+        k = (
+            0.85
+            + 0.3 * _value_noise(pn * 0.8, pe * 0.8, 5)
+            + 0.1 * _hash2(math.floor(pn * 30), math.floor(pe * 30), 6)
+        )
+    elif mat == 4:  # membrane: seams every 1.5 m
+        k = 0.95 + 0.05 * _value_noise(pn * 0.5, pe * 0.5, 7)
+        if (pe % 1.5) < 0.04:
+            k *= 0.85
+    elif mat == 5:  # tiles
+        row = math.floor(pn / 0.3)
+        off = 0.15 if row % 2 == 0 else 0.0
+        k = 0.82 + 0.3 * _hash2(row, math.floor((pe + off) / 0.3), 8)
+        if (pn % 0.3) < 0.04 or ((pe + off) % 0.3) < 0.03:
+            k *= 0.6
+    elif mat == 6:  # asphalt
+        k = (
+            0.85
+            + 0.25 * _hash2(math.floor(pn * 20), math.floor(pe * 20), 9)
+            + 0.15 * _value_noise(pn * 0.2, pe * 0.2, 10)
+        )
+    elif mat == 8:  # paving stones 0.5 m
+        k = 0.88 + 0.2 * _hash2(math.floor(pn * 2), math.floor(pe * 2), 11)
+        if (pn % 0.5) < 0.03 or (pe % 0.5) < 0.03:
+            k *= 0.7
+    elif mat == 10:  # grass
+        k = (
+            0.75
+            + 0.35 * _value_noise(pn * 0.7, pe * 0.7, 12)
+            + 0.15 * _hash2(math.floor(pn * 15), math.floor(pe * 15), 13)
+        )
+    elif mat == 11:  # foliage: clumps
+        k = 0.6 + 0.7 * _value_noise(pn * 1.5, pe * 1.5, 14)
+    elif mat == 12:  # water: ripples
+        k = 0.85 + 0.3 * _value_noise(pn * 1.2 + pe * 0.3, pe * 0.9, 15)
+    elif mat == 13:  # wood planks 0.2 m
+        k = 0.8 + 0.3 * _hash2(math.floor(pe / 0.2), math.floor(pn / 2.0), 16)
+        if (pe % 0.2) < 0.02:
+            k *= 0.6
+    elif mat == 14:  # metal: brushed panels
+        k = 0.9 + 0.12 * _hash2(math.floor(pn * 2), math.floor(pe * 2), 17)
+    elif mat == 15:  # solar cells
+        if (pn % 1.0) < 0.05 or (pe % 1.7) < 0.05:
+            k = 2.4
+        else:
+            k = 0.9 + 0.2 * _hash2(math.floor(pn * 6), math.floor(pe * 6), 18)
+    elif mat == 16:  # rubble
+        k = 0.55 + 0.8 * _hash2(math.floor(pn * 6), math.floor(pe * 6), 19)
+    elif mat == 18:  # soil
+        k = 0.8 + 0.35 * _value_noise(pn * 0.5, pe * 0.5, 20)
+    return (r * k, g * k, b * k)
+
+
+@njit(cache=True)
+def shade(
+    ts: np.ndarray, ii: np.ndarray, jj: np.ndarray, kinds: np.ndarray, steps: np.ndarray, dirs: np.ndarray,
+    origin: np.ndarray, height: np.ndarray, mat: np.ndarray, region: np.ndarray, shadow: np.ndarray,
+    res: float, n0: float, e0: float, sun: np.ndarray, mat_rgb: np.ndarray, actor_rgb: np.ndarray,
+    facade_rgb: np.ndarray,
+) -> np.ndarray:  # fmt: skip
+    """Colour every ray's hit: albedo x (ambient + sun x lit), RGB float32 in [0, 1+]."""
+    n = ts.shape[0]
+    rows, cols = height.shape
+    out = np.empty((n, 3), np.float32)
+    ambient = 0.38
+    for k in range(n):
+        dn, de, du = dirs[k, 0], dirs[k, 1], dirs[k, 2]
+        t = ts[k]
+        kind = kinds[k]
+        if kind == HIT_MISS:
+            if du < -1e-6:  # open ground beyond the modelled area
+                t = origin[2] / -du
+                pn = origin[0] + t * dn
+                pe = origin[1] + t * de
+                r, g, b = _texture(18, pn, pe, mat_rgb[18, 0], mat_rgb[18, 1], mat_rgb[18, 2])
+                lit = ambient + 0.8 * max(sun[2], 0.0)
+                out[k, 0], out[k, 1], out[k, 2] = r * lit, g * lit, b * lit
+            else:  # sky
+                out[k, 0], out[k, 1], out[k, 2] = 0.62, 0.72, 0.85
+            continue
+        i = ii[k]
+        j = jj[k]
+        pn = origin[0] + t * dn
+        pe = origin[1] + t * de
+        pu = origin[2] + t * du
+        reg = region[i, j]
+        m = mat[i, j]
+        if kind == HIT_TOP:
+            if reg < 0 and (m == 19 or m == 20):  # actor: its own paint
+                a = (-reg - 1) % actor_rgb.shape[0]
+                r, g, b = actor_rgb[a, 0], actor_rgb[a, 1], actor_rgb[a, 2]
+            else:
+                r, g, b = _texture(m, pn, pe, mat_rgb[m, 0], mat_rgb[m, 1], mat_rgb[m, 2])
+            # normal from the height gradient (domes, trees, pitched roofs)
+            i0 = max(i - 1, 0)
+            i1 = min(i + 1, rows - 1)
+            j0 = max(j - 1, 0)
+            j1 = min(j + 1, cols - 1)
+            gn = (height[i1, j] - height[i0, j]) / ((i1 - i0) * res + 1e-9)
+            ge = (height[i, j1] - height[i, j0]) / ((j1 - j0) * res + 1e-9)
+            if abs(gn) > 3.0 or abs(ge) > 3.0:  # an edge, not a slope
+                gn = 0.0
+                ge = 0.0
+            nn, ne_, nu = -gn, -ge, 1.0
+            norm = math.sqrt(nn * nn + ne_ * ne_ + nu * nu)
+            cos_sun = (nn * sun[0] + ne_ * sun[1] + nu * sun[2]) / norm
+            lit = 0.0 if shadow[i, j] else max(cos_sun, 0.0)
+        else:
+            # facade: a tint per building, floors every 3 m, windows every 1.6 m
+            fc = (reg if reg > 0 else i // 7 + j // 11) % facade_rgb.shape[0]
+            r, g, b = facade_rgb[fc, 0], facade_rgb[fc, 1], facade_rgb[fc, 2]
+            along = pe if kind == HIT_WALL_N else pn
+            if reg > 0 and (pu % 3.0) > 1.0 and (pu % 3.0) < 2.4 and (along % 1.6) > 0.4:
+                r, g, b = 0.16, 0.2, 0.26  # glass
+            st = steps[k]
+            if kind == HIT_WALL_N:
+                cos_sun = -st * sun[0]
+            else:
+                cos_sun = -st * sun[1]
+            lit = max(cos_sun, 0.0)
+        light = ambient + 0.85 * lit
+        out[k, 0] = r * light
+        out[k, 1] = g * light
+        out[k, 2] = b * light
+    return out
+
+
+@njit(cache=True)
+def shadow_rays_dirs(n: int, sun: np.ndarray) -> np.ndarray:
+    out = np.empty((n, 3))
+    for k in range(n):
+        out[k, 0], out[k, 1], out[k, 2] = sun[0], sun[1], sun[2]
+    return out
+
+
+def compute_shadow_map(grid: WorldGrid, pyramid: Pyramid, sun_neu: tuple[float, float, float]) -> np.ndarray:
+    """Boolean (rows, cols): the top of each cell is in the shadow of something toward the sun."""
+    rows, cols = grid.shape
+    sun = np.asarray(sun_neu, dtype=np.float64)
+    shadow = np.zeros((rows, cols), bool)
+    chunk = 512
+    for i0 in range(0, rows, chunk):
+        i1 = min(i0 + chunk, rows)
+        n, e = grid.cell_centres(i0, i1, 0, cols)
+        h = grid.height[i0:i1] + 0.05
+        origins = np.stack([n.ravel(), e.ravel(), h.ravel().astype(np.float64)], axis=1)
+        dirs = np.broadcast_to(sun, origins.shape).copy()
+        # start each shadow ray just past its own cell so it does not hit itself
+        origins += dirs * (grid.res * 0.75)
+        ts, _, _, kinds, _ = cast_rays(
+            grid.height, pyramid.flat, pyramid.offset, pyramid.ncols, pyramid.h_max,
+            grid.res, grid.n0, grid.e0, origins, dirs, MAX_RANGE_M,
+        )  # fmt: skip
+        shadow[i0:i1] = (kinds != HIT_MISS).reshape(i1 - i0, cols)
+    return shadow
+
+
+@dataclass(frozen=True, slots=True)
+class Frame:
+    """One rendered camera frame."""
+
+    rgb: np.ndarray  # (H, W, 3) uint8
+    depth_m: np.ndarray  # (H, W) float32 z-depth along the optical axis, NaN for sky
+    hit_class: np.ndarray  # (H, W) uint8 SurfaceClass of the surface each pixel sees (255: sky)
+
+
+def render(
+    grid: WorldGrid,
+    pyramid: Pyramid,
+    shadow: np.ndarray,
+    camera: CameraModel,
+    pos_ned_m: tuple[float, float, float],
+    quat: Quat,
+    sun_neu: tuple[float, float, float],
+    weather: str = "clear",
+    rng: np.random.Generator | None = None,
+) -> Frame:
+    """Render the camera at a pose (position NED, attitude body->NED)."""
+    ray_len = camera.ray_norms()
+    dirs = body_to_neu(camera.unit_rays_body(), quat)
+    origin = np.array([[pos_ned_m[0], pos_ned_m[1], -pos_ned_m[2]]])
+    ts, ii, jj, kinds, steps = cast_rays(
+        grid.height, pyramid.flat, pyramid.offset, pyramid.ncols, pyramid.h_max,
+        grid.res, grid.n0, grid.e0, origin, dirs, MAX_RANGE_M,
+    )  # fmt: skip
+    sun = np.asarray(sun_neu, dtype=np.float64)
+    rgb = shade(
+        ts, ii, jj, kinds, steps, dirs, origin[0], grid.height, grid.mat, grid.region, shadow,
+        grid.res, grid.n0, grid.e0, sun, _MAT_RGB, _ACTOR_RGB, _FACADE_RGB,
+    )  # fmt: skip
+    h, w = camera.height_px, camera.width_px
+    depth = (ts / ray_len).astype(np.float32)
+    miss = kinds == HIT_MISS
+    ground_t = np.where(dirs[:, 2] < -1e-6, origin[0, 2] / np.maximum(-dirs[:, 2], 1e-6), np.nan)
+    depth[miss] = (ground_t[miss] / ray_len[miss]).astype(np.float32)
+    cls = np.where(miss, 1, grid.cls[np.clip(ii, 0, None), np.clip(jj, 0, None)]).astype(np.uint8)
+    cls[miss & ~np.isfinite(ground_t)] = 255
+    img = rgb.reshape(h, w, 3)
+    depth_img = depth.reshape(h, w)
+    rng = rng if rng is not None else np.random.default_rng(0)
+    img = apply_weather(img, depth_img, weather, rng)
+    img = img * _vignette(h, w) + np.float32(0.008) * rng.standard_normal(img.shape, dtype=np.float32)
+    out = np.clip(img * 255.0, 0, 255).astype(np.uint8)
+    return Frame(rgb=out, depth_m=depth_img, hit_class=cls.reshape(h, w))
+
+
+_VIGNETTE: dict[tuple[int, int], np.ndarray] = {}
+
+
+def _vignette(h: int, w: int) -> np.ndarray:
+    if (h, w) not in _VIGNETTE:
+        y, x = np.mgrid[0:h, 0:w].astype(np.float32)
+        r2 = ((x - w / 2) / (w / 2)) ** 2 + ((y - h / 2) / (h / 2)) ** 2
+        _VIGNETTE[(h, w)] = (1.0 - 0.12 * r2)[..., None].astype(np.float32)
+    return _VIGNETTE[(h, w)]
+
+
+WEATHERS = ("clear", "fog", "rain")
+
+
+def apply_weather(img: np.ndarray, depth_m: np.ndarray, weather: str, rng: np.random.Generator) -> np.ndarray:
+    """Fog: haze growing with distance. Rain: wet darkening, contrast loss, streaks."""
+    if weather == "clear":
+        return img
+    d = np.nan_to_num(depth_m, nan=MAX_RANGE_M)[..., None]
+    if weather == "fog":
+        visibility_m = 220.0
+        transmit = np.exp(-3.0 * d / visibility_m).astype(np.float32)
+        fog = np.array([0.78, 0.80, 0.82], np.float32)
+        return img * transmit + fog * (1.0 - transmit)
+    if weather == "rain":
+        grey = img.mean(axis=2, keepdims=True)
+        wet = img * 0.72 + 0.1 * (img - grey)  # darker, a little more saturated
+        transmit = np.exp(-d / 900.0).astype(np.float32)
+        hazed = wet * transmit + np.float32(0.45) * (1.0 - transmit)
+        flat = 0.8 * hazed + 0.2 * hazed.mean()  # contrast loss
+        h, w = img.shape[:2]
+        streaks = np.zeros((h, w), np.float32)
+        count = int(h * w / 900)
+        x0 = rng.integers(0, w, count)
+        y0 = rng.integers(0, h, count)
+        length = rng.integers(8, 30, count)
+        for x, y, ln in zip(x0.tolist(), y0.tolist(), length.tolist(), strict=True):
+            cv2.line(streaks, (x, y), (x + ln // 6, y + ln), 1.0, 1)
+        streaks = cv2.GaussianBlur(streaks, (3, 3), 0)[..., None]
+        return (flat * (1 - 0.35 * streaks) + 0.85 * 0.35 * streaks).astype(np.float32)
+    raise ValueError(f"unknown weather {weather!r}; expected one of {', '.join(WEATHERS)}")
