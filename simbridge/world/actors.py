@@ -70,9 +70,8 @@ class Actors:
         self.t_s = 0.0
         # warm the roads up so the first frame already has traffic
         self._prefill()
-        self._stamped: list[
-            tuple[tuple[int, int, int, int], np.ndarray, np.ndarray, np.ndarray, np.ndarray]
-        ] = []
+        # per stamped actor: window, mask, then the saved height, class, material and region
+        self._stamped: list[tuple[tuple[int, int, int, int], np.ndarray, *tuple[np.ndarray, ...]]] = []
 
     def _prefill(self) -> None:
         for k, ln in enumerate(self._lanes):
@@ -154,7 +153,7 @@ class Actors:
                 continue
             win, mask, _, _ = got
             i0, i1, j0, j1 = win
-            saved = (
+            saved: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] = (
                 grid.height[i0:i1, j0:j1][mask].copy(),
                 grid.cls[i0:i1, j0:j1][mask].copy(),
                 grid.mat[i0:i1, j0:j1][mask].copy(),

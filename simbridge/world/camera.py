@@ -326,7 +326,7 @@ def compute_shadow_map(grid: WorldGrid, pyramid: Pyramid, sun_neu: tuple[float, 
         dirs = np.broadcast_to(sun, origins.shape).copy()
         # start each shadow ray just past its own cell so it does not hit itself
         origins += dirs * (grid.res * 0.75)
-        ts, _, _, kinds, _ = cast_rays(
+        _, _, _, kinds, _ = cast_rays(
             grid.height, pyramid.flat, pyramid.offset, pyramid.ncols, pyramid.h_max,
             grid.res, grid.n0, grid.e0, origins, dirs, MAX_RANGE_M,
         )  # fmt: skip
@@ -406,7 +406,7 @@ def apply_weather(img: np.ndarray, depth_m: np.ndarray, weather: str, rng: np.ra
         visibility_m = 220.0
         transmit = np.exp(-3.0 * d / visibility_m).astype(np.float32)
         fog = np.array([0.78, 0.80, 0.82], np.float32)
-        return img * transmit + fog * (1.0 - transmit)
+        return np.asarray(img * transmit + fog * (1.0 - transmit), np.float32)
     if weather == "rain":
         grey = img.mean(axis=2, keepdims=True)
         wet = img * 0.72 + 0.1 * (img - grey)  # darker, a little more saturated
@@ -414,13 +414,13 @@ def apply_weather(img: np.ndarray, depth_m: np.ndarray, weather: str, rng: np.ra
         hazed = wet * transmit + np.float32(0.45) * (1.0 - transmit)
         flat = 0.8 * hazed + 0.2 * hazed.mean()  # contrast loss
         h, w = img.shape[:2]
-        streaks = np.zeros((h, w), np.float32)
+        streaks: np.ndarray = np.zeros((h, w), np.float32)
         count = int(h * w / 900)
         x0 = rng.integers(0, w, count)
         y0 = rng.integers(0, h, count)
         length = rng.integers(8, 30, count)
         for x, y, ln in zip(x0.tolist(), y0.tolist(), length.tolist(), strict=True):
             cv2.line(streaks, (x, y), (x + ln // 6, y + ln), 1.0, 1)
-        streaks = cv2.GaussianBlur(streaks, (3, 3), 0)[..., None]
-        return (flat * (1 - 0.35 * streaks) + 0.85 * 0.35 * streaks).astype(np.float32)
+        blurred = np.asarray(cv2.GaussianBlur(streaks, (3, 3), 0), np.float32)[..., None]
+        return np.asarray(flat * (1 - 0.35 * blurred) + 0.85 * 0.35 * blurred, np.float32)
     raise ValueError(f"unknown weather {weather!r}; expected one of {', '.join(WEATHERS)}")
