@@ -312,26 +312,71 @@ def shadow_rays_dirs(n: int, sun: np.ndarray) -> np.ndarray:
     return out
 
 
-def compute_shadow_map(grid: WorldGrid, pyramid: Pyramid, sun_neu: tuple[float, float, float]) -> np.ndarray:
-    """Boolean (rows, cols): the top of each cell is in the shadow of something toward the sun."""
-    rows, cols = grid.shape
-    sun = np.asarray(sun_neu, dtype=np.float64)
-    shadow = np.zeros((rows, cols), bool)
-    chunk = 512
-    for i0 in range(0, rows, chunk):
-        i1 = min(i0 + chunk, rows)
-        n, e = grid.cell_centres(i0, i1, 0, cols)
-        h = grid.height[i0:i1] + 0.05
-        origins = np.stack([n.ravel(), e.ravel(), h.ravel().astype(np.float64)], axis=1)
-        dirs = np.broadcast_to(sun, origins.shape).copy()
-        # start each shadow ray just past its own cell so it does not hit itself
-        origins += dirs * (grid.res * 0.75)
+class ShadowMap:
+    """Which cell tops lie in the shadow of something toward the sun, computed tile by tile on demand.
+
+    A shadow ray leaves each cell top toward the sun; a cell is shadowed when the ray hits anything.
+    Tiles of ``TILE`` x ``TILE`` cells are computed the first time a camera sees them, so a large
+    city costs only what is looked at. Moving actors add their own shadows (``stamp``/``unstamp``).
+    """
+
+    TILE = 256
+
+    def __init__(self, grid: WorldGrid, pyramid: Pyramid, sun_neu: tuple[float, float, float]) -> None:
+        self.grid = grid
+        self.pyramid = pyramid
+        self.sun = np.asarray(sun_neu, dtype=np.float64)
+        rows, cols = grid.shape
+        self.shadow = np.zeros((rows, cols), np.bool_)
+        self._done = np.zeros(
+            ((rows + self.TILE - 1) // self.TILE, (cols + self.TILE - 1) // self.TILE), bool
+        )
+        self._stamped: list[tuple[tuple[int, int, int, int], np.ndarray, np.ndarray]] = []
+
+    def ensure(self, ii: np.ndarray, jj: np.ndarray) -> None:
+        """Compute the tiles containing cells ``(ii, jj)`` (negative indices ignored)."""
+        ok = ii >= 0
+        if not ok.any():
+            return
+        tiles = np.unique((ii[ok] // self.TILE).astype(np.int64) * self._done.shape[1] + jj[ok] // self.TILE)
+        for t in tiles.tolist():
+            ti, tj = divmod(int(t), self._done.shape[1])
+            if not self._done[ti, tj]:
+                self._compute_tile(ti, tj)
+
+    def ensure_all(self) -> None:
+        for ti in range(self._done.shape[0]):
+            for tj in range(self._done.shape[1]):
+                if not self._done[ti, tj]:
+                    self._compute_tile(ti, tj)
+
+    def _compute_tile(self, ti: int, tj: int) -> None:
+        grid, pyr = self.grid, self.pyramid
+        rows, cols = grid.shape
+        i0, i1 = ti * self.TILE, min((ti + 1) * self.TILE, rows)
+        j0, j1 = tj * self.TILE, min((tj + 1) * self.TILE, cols)
+        n, e = grid.cell_centres(i0, i1, j0, j1)
+        h = grid.height[i0:i1, j0:j1].astype(np.float64) + 0.05
+        origins = np.stack([n.ravel(), e.ravel(), h.ravel()], axis=1)
+        dirs = np.ascontiguousarray(np.broadcast_to(self.sun, origins.shape))
+        origins += dirs * (grid.res * 0.75)  # leave the cell's own top behind
         _, _, _, kinds, _ = cast_rays(
-            grid.height, pyramid.flat, pyramid.offset, pyramid.ncols, pyramid.h_max,
+            grid.height, pyr.flat, pyr.offset, pyr.ncols, pyr.h_max,
             grid.res, grid.n0, grid.e0, origins, dirs, MAX_RANGE_M,
         )  # fmt: skip
-        shadow[i0:i1] = (kinds != HIT_MISS).reshape(i1 - i0, cols)
-    return shadow
+        self.shadow[i0:i1, j0:j1] = (kinds != HIT_MISS).reshape(i1 - i0, j1 - j0)
+        self._done[ti, tj] = True
+
+    def stamp(self, window: tuple[int, int, int, int], mask: np.ndarray) -> None:
+        """Darken cells under ``mask`` (an actor's shadow) until the next ``unstamp``."""
+        i0, i1, j0, j1 = window
+        self._stamped.append((window, mask, self.shadow[i0:i1, j0:j1][mask].copy()))
+        self.shadow[i0:i1, j0:j1][mask] = True
+
+    def unstamp(self) -> None:
+        for (i0, i1, j0, j1), mask, saved in reversed(self._stamped):
+            self.shadow[i0:i1, j0:j1][mask] = saved
+        self._stamped = []
 
 
 @dataclass(frozen=True, slots=True)
@@ -346,7 +391,7 @@ class Frame:
 def render(
     grid: WorldGrid,
     pyramid: Pyramid,
-    shadow: np.ndarray,
+    shadow: ShadowMap,
     camera: CameraModel,
     pos_ned_m: tuple[float, float, float],
     quat: Quat,
@@ -363,8 +408,9 @@ def render(
         grid.res, grid.n0, grid.e0, origin, dirs, MAX_RANGE_M,
     )  # fmt: skip
     sun = np.asarray(sun_neu, dtype=np.float64)
+    shadow.ensure(ii, jj)
     rgb = shade(
-        ts, ii, jj, kinds, steps, dirs, origin[0], grid.height, grid.mat, grid.region, shadow,
+        ts, ii, jj, kinds, steps, dirs, origin[0], grid.height, grid.mat, grid.region, shadow.shadow,
         grid.res, grid.n0, grid.e0, sun, _MAT_RGB, _ACTOR_RGB, _FACADE_RGB,
     )  # fmt: skip
     h, w = camera.height_px, camera.width_px

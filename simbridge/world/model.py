@@ -187,6 +187,12 @@ class WorldGrid:
         e = self.e0 + (np.arange(j0, j1) + 0.5) * self.res
         return np.meshgrid(n, e, indexing="ij")
 
+    def window(
+        self, n_min: float, n_max: float, e_min: float, e_max: float
+    ) -> tuple[int, int, int, int] | None:
+        """Cell index window (i0, i1, j0, j1) covering a north/east box, clipped; None if empty."""
+        return self._window(n_min, n_max, e_min, e_max)
+
     def _window(
         self, n_min: float, n_max: float, e_min: float, e_max: float
     ) -> tuple[int, int, int, int] | None:

@@ -51,16 +51,27 @@ class Pyramid:
         l1 = max_pool(height, PYRAMID_BLOCKS[0])
         l2 = max_pool(l1, PYRAMID_BLOCKS[1] // PYRAMID_BLOCKS[0])
         l3 = max_pool(l2, PYRAMID_BLOCKS[2] // PYRAMID_BLOCKS[1])
-        self.levels = (l1, l2, l3)
-        self.flat = np.concatenate([lv.ravel() for lv in self.levels]).astype(np.float32)
-        sizes = [lv.size for lv in self.levels]
+        self.flat = np.concatenate([lv.ravel() for lv in (l1, l2, l3)]).astype(np.float32)
+        sizes = [lv.size for lv in (l1, l2, l3)]
         self.offset = np.array([0, sizes[0], sizes[0] + sizes[1]], dtype=np.int64)
-        self.ncols = np.array([lv.shape[1] for lv in self.levels], dtype=np.int64)
+        self.ncols = np.array([lv.shape[1] for lv in (l1, l2, l3)], dtype=np.int64)
+        # views into ``flat``: writing a level writes the array the march reads
+        self.levels = tuple(
+            self.flat[o : o + lv.size].reshape(lv.shape)
+            for o, lv in zip(self.offset, (l1, l2, l3), strict=True)
+        )
         self.h_max = float(l3.max())
 
-    def refresh(self, height: np.ndarray) -> None:
-        """Recompute after the grid changed (moving actors)."""
-        self.__init__(height)  # type: ignore[misc]
+    def raise_window(self, i0: int, i1: int, j0: int, j1: int, top_m: float) -> None:
+        """Make every block overlapping cells ``[i0, i1) x [j0, j1)`` at least ``top_m`` high.
+
+        The pyramid only has to bound the grid from above, so moving actors raise it where they
+        are stamped and never lower it: the march stays exact, only a little less quick.
+        """
+        for level, shift in zip(self.levels, _SHIFTS, strict=True):
+            blk = level[i0 >> shift : ((i1 - 1) >> shift) + 1, j0 >> shift : ((j1 - 1) >> shift) + 1]
+            np.maximum(blk, top_m, out=blk)
+        self.h_max = max(self.h_max, top_m)
 
 
 @njit(cache=True, fastmath=True)
