@@ -12,7 +12,7 @@ from pathlib import Path
 
 from simbridge.geo import GeoOrigin
 from simbridge.link import LinkUrl, LinkUrlError, parse_signing_key
-from simbridge.scenarios import SCENARIOS
+from simbridge.scenarios import scenario_names
 from simbridge.sim import SimBridge, SimConfig
 from simbridge.wind import WindConfig
 
@@ -30,10 +30,24 @@ def _floats(text: str, n: int, what: str) -> tuple[float, ...]:
     return values
 
 
+def _launch(text: str) -> tuple[float, ...]:
+    parts = text.split(",")
+    if len(parts) not in (2, 3):
+        raise argparse.ArgumentTypeError(f"--launch: expected N,E or N,E,HEIGHT, got {text!r}")
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--launch: expected numbers, got {text!r}") from None
+    if len(values) == 3 and not 5.0 <= values[2] <= 300.0:
+        raise argparse.ArgumentTypeError(f"--launch: height must be 5..300 m above ground, got {values[2]}")
+    return values
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="simbridge",
-        description="JSBSim F450 quadcopter behind a PX4/ArduPilot MAVLink autopilot emulation.",
+        description="JSBSim F450 quadcopter behind a PX4/ArduPilot MAVLink autopilot emulation. "
+        "`simbridge render --help` renders one sensor frame to files.",
     )
     p.add_argument(
         "--mavlink",
@@ -42,7 +56,21 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--autopilot", choices=("px4", "ardupilot"), default="px4")
     p.add_argument(
-        "--scenario", default="flat", help=f"world and launch pose; one of: {', '.join(sorted(SCENARIOS))}"
+        "--scenario",
+        default="flat",
+        help="world and launch pose: flat, scenario1, scenario2, city, or a path to a .toml scenario file",
+    )
+    p.add_argument("--weather", choices=("clear", "fog", "rain"), default="clear", help="camera weather")
+    p.add_argument(
+        "--sensors",
+        metavar="HOST:PORT",
+        help="serve camera/LiDAR/rangefinder frames on this TCP endpoint (docs/sensor-stream.md)",
+    )
+    p.add_argument(
+        "--launch",
+        type=_launch,
+        metavar="N,E[,HEIGHT]",
+        help="launch point (metres from the scenario origin) and height above ground",
     )
     p.add_argument(
         "--seed", type=int, default=0, help="seed for every random choice (same seed, same episode)"
@@ -91,10 +119,18 @@ def config_from_args(args: argparse.Namespace) -> SimConfig:
             key = parse_signing_key(args.signing_key)
         except ValueError as exc:
             raise ValueError(f"--signing-key: {exc}") from None
-    if args.scenario not in SCENARIOS:
-        raise ValueError(
-            f"--scenario: unknown scenario {args.scenario!r}; known: {', '.join(sorted(SCENARIOS))}"
-        )
+    known = scenario_names()
+    if args.scenario not in known and not args.scenario.endswith(".toml"):
+        names = ", ".join(known)
+        raise ValueError(f"--scenario: unknown scenario {args.scenario!r}; known: {names} or a .toml path")
+    sensors = None
+    if args.sensors:
+        from simbridge.sensorstream import parse_endpoint
+
+        try:
+            sensors = parse_endpoint(args.sensors)
+        except ValueError as exc:
+            raise ValueError(f"--sensors: {exc}") from None
     origin = GeoOrigin(*args.home) if args.home else GeoOrigin()
     if args.gusts < 0:
         raise ValueError(f"--gusts must be >= 0, got {args.gusts}")
@@ -111,10 +147,18 @@ def config_from_args(args: argparse.Namespace) -> SimConfig:
         origin=origin,
         wind=WindConfig(steady_ned_m_s=(args.wind[0], args.wind[1], 0.0), gust_sigma_m_s=args.gusts),
         duration_s=args.duration,
+        weather=args.weather,
+        sensors=sensors,
+        launch=args.launch,
     )
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["render"]:
+        from simbridge.render_cli import main as render_main
+
+        return render_main(argv[1:])
     parser = build_parser()
     args = parser.parse_args(argv)
     logging.basicConfig(level=args.log_level, stream=sys.stderr, format="%(levelname)s %(name)s: %(message)s")

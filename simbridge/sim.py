@@ -43,6 +43,9 @@ class SimConfig:
     origin: GeoOrigin = field(default_factory=GeoOrigin)
     wind: WindConfig = field(default_factory=WindConfig)
     duration_s: float | None = None  # stop after this much simulated time
+    weather: str = "clear"
+    sensors: tuple[str, int] | None = None  # serve sensor frames on this TCP endpoint
+    launch: tuple[float, ...] | None = None  # (north, east[, height above ground]) override
 
     def __post_init__(self) -> None:
         if not self.speed > 0:
@@ -51,6 +54,8 @@ class SimConfig:
             raise ValueError(f"--start must be 'air' or 'ground', got {self.start!r}")
         if not 1 <= self.system_id <= 255:
             raise ValueError(f"system id must be 1..255, got {self.system_id}")
+        if self.weather not in ("clear", "fog", "rain"):
+            raise ValueError(f"--weather must be clear, fog or rain, got {self.weather!r}")
 
 
 class SimBridge:
@@ -59,7 +64,7 @@ class SimBridge:
     def __init__(self, config: SimConfig, logger: logging.Logger | None = None) -> None:
         self.config = config
         self.log = logger or logging.getLogger("simbridge")
-        self.scenario: Scenario = load_scenario(config.scenario, config.seed)
+        self.scenario: Scenario = load_scenario(config.scenario, config.seed, config.launch)
         rng = np.random.default_rng(config.seed)
         wind = WindModel(config.wind, rng) if config.wind != WindConfig() else None
         self.vehicle = Vehicle(config.origin, self.scenario.terrain, wind=wind)
@@ -88,6 +93,7 @@ class SimBridge:
             self.autopilot, self.telemetry, self.link.send, config.system_id, 1, self.log
         )
         self._stop = asyncio.Event()
+        self._sensor_rng = np.random.default_rng(config.seed + 1)
         self.wall_elapsed_s = 0.0
         self.episode.event(
             0.0,
@@ -144,53 +150,111 @@ class SimBridge:
             with contextlib.suppress(NotImplementedError, RuntimeError):  # not the main thread
                 loop.add_signal_handler(sig, self._stop.set)
         cfg = self.config
-        dt = Vehicle.DT_S
-        async with self.link:
-            self.log.info(
-                "simbridge %s on %s: scenario %s, seed %d, speed %.1fx, start %s",
-                cfg.autopilot,
-                cfg.mavlink,
-                cfg.scenario,
-                cfg.seed,
-                cfg.speed,
-                cfg.start,
+        async with contextlib.AsyncExitStack() as stack:
+            await stack.enter_async_context(self.link)
+            if cfg.sensors is not None:
+                await stack.enter_async_context(self._sensor_server(*cfg.sensors))
+            await self._loop(loop)
+
+    def _sensor_server(self, host: str, port: int) -> contextlib.AbstractAsyncContextManager[object]:
+        from simbridge.sensorstream import SensorStreamServer
+        from simbridge.world.live import LiveWorld
+
+        terrain = self.scenario.terrain
+        if not isinstance(terrain, LiveWorld):
+            raise ValueError(
+                f"--sensors needs a world with a camera; scenario {self.scenario.name!r} has none"
             )
-            wall0 = loop.time()
-            sim0 = self.vehicle.state.t_s
-            try:
-                while not self._stop.is_set():
-                    target = sim0 + (loop.time() - wall0) * cfg.speed
-                    steps = 0
-                    while self.vehicle.state.t_s + dt <= target + 1e-9 and steps < _MAX_BATCH_STEPS:
-                        self.step()
-                        steps += 1
-                    if cfg.duration_s is not None and self.vehicle.state.t_s >= cfg.duration_s:
-                        break
-                    if steps == _MAX_BATCH_STEPS:
-                        await asyncio.sleep(0)
-                    else:
-                        await asyncio.sleep(max(self.vehicle.state.t_s + dt - target, 0.0) / cfg.speed)
-            finally:
-                self.wall_elapsed_s = loop.time() - wall0
-                st = self.link.stats
-                self.episode.event(
-                    self.vehicle.state.t_s,
-                    "stop",
-                    {
-                        "wall_s": round(self.wall_elapsed_s, 3),
-                        "received": st.received,
-                        "sent": st.sent,
-                        "bad_frames": st.bad_frames,
-                        "rejected_unsigned": st.rejected_unsigned,
-                        "rejected_bad_signature": st.rejected_bad_signature,
-                        "ignored_foreign": self.server.ignored_foreign,
-                    },
-                )
-                self.episode.close()
-                self.log.info(
-                    "simbridge stopped at t=%.1f s after %.1f s wall (%.1fx); link %s",
-                    self.vehicle.state.t_s,
-                    self.wall_elapsed_s,
-                    self.vehicle.state.t_s / max(self.wall_elapsed_s, 1e-9),
-                    st,
-                )
+        cam, lidar = terrain.camera, terrain.lidar
+        info = {
+            "simulator": "simbridge", "scenario": self.scenario.name, "weather": self.config.weather,
+            "camera": {"width": cam.width_px, "height": cam.height_px, "hfov_deg": cam.hfov_deg,
+                       "to_body": "x_cam=+y_body, y_cam=-x_body, z_cam=+z_body"},
+            "lidar": {
+                "channels": lidar.channels, "points_per_ring": lidar.points_per_ring, "range_m": lidar.range_m,
+            },
+        }  # fmt: skip
+        return SensorStreamServer(host, port, self._capture, info)
+
+    async def _capture(self, want: set[str]) -> Any:
+        """Render what ``want`` asks for at the vehicle's pose now (in a worker thread)."""
+        from simbridge.sensorstream import SensorFrame
+        from simbridge.world.live import LiveWorld
+
+        world = self.scenario.terrain
+        assert isinstance(world, LiveWorld)
+        s = self.vehicle.state
+        rng = self._sensor_rng
+        weather = self.config.weather
+
+        def render() -> Any:
+            frame = (
+                world.camera_frame(s.pos_ned_m, s.quat, s.t_s, weather, rng)
+                if {"image", "depth"} & want
+                else None
+            )
+            points = world.lidar_sweep(s.pos_ned_m, s.quat, s.t_s, rng) if "lidar" in want else None
+            cam = world.camera
+            cx, cy = cam.principal_px
+            return SensorFrame(
+                t_s=s.t_s, time_boot_ms=int(s.t_s * 1000), pos_ned_m=s.pos_ned_m, quat_wxyz=s.quat,
+                rangefinder_m=world.rangefinder_m(s.pos_ned_m, s.quat),
+                image_rgb=frame.rgb if frame is not None and "image" in want else None,
+                depth_m=frame.depth_m if frame is not None and "depth" in want else None,
+                lidar_frd=points, fx=cam.focal_px, fy=cam.focal_px, cx=cx, cy=cy,
+                width=cam.width_px, height=cam.height_px, weather=weather,
+            )  # fmt: skip
+
+        return await asyncio.get_running_loop().run_in_executor(None, render)
+
+    async def _loop(self, loop: asyncio.AbstractEventLoop) -> None:
+        cfg = self.config
+        dt = Vehicle.DT_S
+        self.log.info(
+            "simbridge %s on %s: scenario %s, seed %d, speed %.1fx, start %s",
+            cfg.autopilot,
+            cfg.mavlink,
+            cfg.scenario,
+            cfg.seed,
+            cfg.speed,
+            cfg.start,
+        )
+        wall0 = loop.time()
+        sim0 = self.vehicle.state.t_s
+        try:
+            while not self._stop.is_set():
+                target = sim0 + (loop.time() - wall0) * cfg.speed
+                steps = 0
+                while self.vehicle.state.t_s + dt <= target + 1e-9 and steps < _MAX_BATCH_STEPS:
+                    self.step()
+                    steps += 1
+                if cfg.duration_s is not None and self.vehicle.state.t_s >= cfg.duration_s:
+                    break
+                if steps == _MAX_BATCH_STEPS:
+                    await asyncio.sleep(0)
+                else:
+                    await asyncio.sleep(max(self.vehicle.state.t_s + dt - target, 0.0) / cfg.speed)
+        finally:
+            self.wall_elapsed_s = loop.time() - wall0
+            st = self.link.stats
+            self.episode.event(
+                self.vehicle.state.t_s,
+                "stop",
+                {
+                    "wall_s": round(self.wall_elapsed_s, 3),
+                    "received": st.received,
+                    "sent": st.sent,
+                    "bad_frames": st.bad_frames,
+                    "rejected_unsigned": st.rejected_unsigned,
+                    "rejected_bad_signature": st.rejected_bad_signature,
+                    "ignored_foreign": self.server.ignored_foreign,
+                },
+            )
+            self.episode.close()
+            self.log.info(
+                "simbridge stopped at t=%.1f s after %.1f s wall (%.1fx); link %s",
+                self.vehicle.state.t_s,
+                self.wall_elapsed_s,
+                self.vehicle.state.t_s / max(self.wall_elapsed_s, 1e-9),
+                st,
+            )

@@ -64,11 +64,9 @@ DEFAULT_INTERVALS_S: dict[int, float] = {
 
 
 def rangefinder_m(autopilot: Autopilot) -> float:
-    """Downward rangefinder reading: distance along body +z to the ground under the vehicle."""
+    """Downward rangefinder reading: distance along body +z to the first surface of the world."""
     s = autopilot.vehicle.state
-    roll, pitch, _ = s.euler_rad
-    tilt_cos = max(math.cos(roll) * math.cos(pitch), 0.2)
-    return max(s.height_agl_m, 0.0) / tilt_cos
+    return autopilot.vehicle.physics.terrain.rangefinder_m(s.pos_ned_m, s.quat, _MAX_RANGE_CM / 100)
 
 
 class Telemetry:

@@ -7,8 +7,11 @@ world; the city model implements the same protocol.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Protocol
+
+from simbridge.geo import Quat, rotate_body_to_ned
 
 
 @dataclass(frozen=True, slots=True)
@@ -31,6 +34,10 @@ class Terrain(Protocol):
         """Ground-truth surface class and safety verdict for a touchdown at (north, east)."""
         ...
 
+    def rangefinder_m(self, pos_ned_m: tuple[float, float, float], quat: Quat, max_m: float = 200.0) -> float:
+        """Distance along the body +z axis (downward rangefinder) to the first surface."""
+        ...
+
 
 @dataclass(frozen=True, slots=True)
 class FlatTerrain:
@@ -43,3 +50,10 @@ class FlatTerrain:
 
     def grade_touchdown(self, north_m: float, east_m: float, t_s: float) -> TouchdownGrade:
         return TouchdownGrade(surface="open_ground", safe=True, reasons=())
+
+    def rangefinder_m(self, pos_ned_m: tuple[float, float, float], quat: Quat, max_m: float = 200.0) -> float:
+        down = rotate_body_to_ned(quat, (0.0, 0.0, 1.0))[2]
+        height = -pos_ned_m[2] - self.ground_height_m
+        if down <= 1e-6 or height <= 0:
+            return max_m if height > 0 else 0.0
+        return min(height / down, max_m) if not math.isnan(height) else max_m

@@ -230,7 +230,7 @@ def _texture(mat: int, pn: float, pe: float, r: float, g: float, b: float) -> tu
     return (r * k, g * k, b * k)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def shade(
     ts: np.ndarray, ii: np.ndarray, jj: np.ndarray, kinds: np.ndarray, steps: np.ndarray, dirs: np.ndarray,
     origin: np.ndarray, height: np.ndarray, mat: np.ndarray, region: np.ndarray, shadow: np.ndarray,

@@ -74,7 +74,7 @@ class Pyramid:
         self.h_max = max(self.h_max, top_m)
 
 
-@njit(cache=True, fastmath=True)
+@njit(cache=True, fastmath=True, nogil=True)
 def cast_rays(
     height: np.ndarray, pyr: np.ndarray, pyr_offset: np.ndarray, pyr_ncols: np.ndarray, h_max: float,
     res: float, n0: float, e0: float, origins: np.ndarray, dirs: np.ndarray, t_max: float,
