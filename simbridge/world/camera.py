@@ -93,9 +93,22 @@ def quat_matrix(q: Quat) -> np.ndarray:
 
 
 def body_to_neu(dirs_body: np.ndarray, q: Quat) -> np.ndarray:
-    """Unit body FRD directions -> unit (north, east, up) directions (one 3x3 product)."""
+    """Unit body FRD directions -> unit (north, east, up) directions."""
     m = quat_matrix(q) * np.array([[1.0], [1.0], [-1.0]])  # NED rows -> NEU rows
-    return np.ascontiguousarray(dirs_body @ m.T)
+    return _rotate(np.ascontiguousarray(dirs_body, dtype=np.float64), m)
+
+
+@njit(cache=True, nogil=True)
+def _rotate(v: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """Rows of ``v`` times ``m`` transposed. (numpy's matmul with a 3-wide inner dimension goes
+    through BLAS threads and is ~100x slower than this loop on a pinned core.)"""
+    out = np.empty_like(v)
+    for k in range(v.shape[0]):
+        x, y, z = v[k, 0], v[k, 1], v[k, 2]
+        out[k, 0] = m[0, 0] * x + m[0, 1] * y + m[0, 2] * z
+        out[k, 1] = m[1, 0] * x + m[1, 1] * y + m[1, 2] * z
+        out[k, 2] = m[2, 0] * x + m[2, 1] * y + m[2, 2] * z
+    return out
 
 
 # ---------------------------------------------------------------------------- palettes (RGB 0..1)
@@ -312,6 +325,59 @@ def shadow_rays_dirs(n: int, sun: np.ndarray) -> np.ndarray:
     return out
 
 
+@njit(cache=True, nogil=True)
+def _tiles_needed(ii: np.ndarray, jj: np.ndarray, done: np.ndarray, tile: int) -> np.ndarray:
+    need = np.zeros(done.shape, np.bool_)
+    for k in range(ii.shape[0]):
+        if ii[k] >= 0:
+            ti = ii[k] // tile
+            tj = jj[k] // tile
+            if not done[ti, tj]:
+                need[ti, tj] = True
+    return need
+
+
+@njit(cache=True, nogil=True)
+def _finish(
+    rgb: np.ndarray, ts: np.ndarray, ii: np.ndarray, jj: np.ndarray, kinds: np.ndarray, dirs: np.ndarray,
+    ray_len: np.ndarray, cam_up: float, cls_grid: np.ndarray, depth: np.ndarray, cls: np.ndarray,
+) -> None:  # fmt: skip
+    """Per pixel: z-depth along the optical axis and the class seen (255 for sky)."""
+    for k in range(ts.shape[0]):
+        if kinds[k] == HIT_MISS:
+            du = dirs[k, 2]
+            if du < -1e-6:  # open ground beyond the modelled area
+                depth[k] = (cam_up / -du) / ray_len[k]
+                cls[k] = 1
+            else:
+                depth[k] = np.nan
+                cls[k] = 255
+        else:
+            depth[k] = ts[k] / ray_len[k]
+            cls[k] = cls_grid[ii[k], jj[k]]
+
+
+@njit(cache=True, nogil=True)
+def _to_uint8(img: np.ndarray, vignette: np.ndarray, seed: int, sigma: float) -> np.ndarray:
+    """Vignetting, sensor noise (seeded, approximately Gaussian) and quantisation to uint8."""
+    h, w, c = img.shape
+    out = np.empty((h, w, c), np.uint8)
+    state = np.uint64(seed) * np.uint64(6364136223846793005) + np.uint64(1442695040888963407)
+    for y in range(h):
+        for x in range(w):
+            v = vignette[y, x, 0]
+            for ch in range(c):
+                # sum of two 16-bit uniforms from an LCG: triangular noise with the given sigma
+                state = state * np.uint64(6364136223846793005) + np.uint64(1442695040888963407)
+                r = (
+                    float((state >> np.uint64(33)) & np.uint64(0xFFFF))
+                    + float((state >> np.uint64(49)) & np.uint64(0x7FFF)) * 2.0
+                ) / 65535.0
+                val = (img[y, x, ch] * v + sigma * 2.45 * (r - 1.0)) * 255.0
+                out[y, x, ch] = 0 if val < 0.0 else 255 if val > 255.0 else np.uint8(val)
+    return out
+
+
 class ShadowMap:
     """Which cell tops lie in the shadow of something toward the sun, computed tile by tile on demand.
 
@@ -335,14 +401,8 @@ class ShadowMap:
 
     def ensure(self, ii: np.ndarray, jj: np.ndarray) -> None:
         """Compute the tiles containing cells ``(ii, jj)`` (negative indices ignored)."""
-        ok = ii >= 0
-        if not ok.any():
-            return
-        tiles = np.unique((ii[ok] // self.TILE).astype(np.int64) * self._done.shape[1] + jj[ok] // self.TILE)
-        for t in tiles.tolist():
-            ti, tj = divmod(int(t), self._done.shape[1])
-            if not self._done[ti, tj]:
-                self._compute_tile(ti, tj)
+        for ti, tj in zip(*np.nonzero(_tiles_needed(ii, jj, self._done, self.TILE)), strict=True):
+            self._compute_tile(int(ti), int(tj))
 
     def ensure_all(self) -> None:
         for ti in range(self._done.shape[0]):
@@ -414,18 +474,16 @@ def render(
         grid.res, grid.n0, grid.e0, sun, _MAT_RGB, _ACTOR_RGB, _FACADE_RGB,
     )  # fmt: skip
     h, w = camera.height_px, camera.width_px
-    depth = (ts / ray_len).astype(np.float32)
-    miss = kinds == HIT_MISS
-    ground_t = np.where(dirs[:, 2] < -1e-6, origin[0, 2] / np.maximum(-dirs[:, 2], 1e-6), np.nan)
-    depth[miss] = (ground_t[miss] / ray_len[miss]).astype(np.float32)
-    cls = np.where(miss, 1, grid.cls[np.clip(ii, 0, None), np.clip(jj, 0, None)]).astype(np.uint8)
-    cls[miss & ~np.isfinite(ground_t)] = 255
+    depth = np.empty(ts.shape[0], np.float32)
+    cls = np.empty(ts.shape[0], np.uint8)
+    _finish(rgb, ts, ii, jj, kinds, dirs, ray_len, float(origin[0, 2]), grid.cls, depth, cls)
     img = rgb.reshape(h, w, 3)
     depth_img = depth.reshape(h, w)
     rng = rng if rng is not None else np.random.default_rng(0)
     img = apply_weather(img, depth_img, weather, rng)
-    img = img * _vignette(h, w) + np.float32(0.008) * rng.standard_normal(img.shape, dtype=np.float32)
-    out = np.clip(img * 255.0, 0, 255).astype(np.uint8)
+    out = _to_uint8(
+        np.ascontiguousarray(img, np.float32), _vignette(h, w), int(rng.integers(1, 2**62)), 0.008
+    )
     return Frame(rgb=out, depth_m=depth_img, hit_class=cls.reshape(h, w))
 
 

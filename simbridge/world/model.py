@@ -215,12 +215,14 @@ class WorldGrid:
         it, and each cell's coordinates along the rectangle's length (u) and width (v) axes.
         """
         cn, ce = centre_ne
-        half = 0.5 * math.hypot(length_m, width_m)
-        win = self._window(cn - half, cn + half, ce - half, ce + half)
+        c, s = math.cos(yaw_rad), math.sin(yaw_rad)
+        # the tight axis-aligned box of the rotated rectangle (a long strip must not scan a square)
+        half_n = abs(c) * length_m / 2 + abs(s) * width_m / 2
+        half_e = abs(s) * length_m / 2 + abs(c) * width_m / 2
+        win = self._window(cn - half_n, cn + half_n, ce - half_e, ce + half_e)
         if win is None:
             return None
         n, e = self.cell_centres(*win)
-        c, s = math.cos(yaw_rad), math.sin(yaw_rad)
         u = (n - cn) * c + (e - ce) * s
         v = -(n - cn) * s + (e - ce) * c
         mask = (np.abs(u) <= length_m / 2) & (np.abs(v) <= width_m / 2)
@@ -239,22 +241,25 @@ class WorldGrid:
         """Write into the cells under ``mask``.
 
         ``mode``: ``set`` (height = value), ``add`` (height += value: clutter on a roof),
-        ``max`` (height = max(height, value): trees, domes over ground).
+        ``max`` (height = max(height, value): trees, domes; class, material and region change only
+        where the new surface ends up on top).
         """
         i0, i1, j0, j1 = window
-        if not mask.any():
-            return
+        if mode not in ("set", "add", "max"):
+            raise WorldError(f"unknown paint mode {mode!r}")
         if heights is not None:
             h = self.height[i0:i1, j0:j1]
             val = np.broadcast_to(np.asarray(heights, np.float32), mask.shape)
-            if mode == "set":
-                h[mask] = val[mask]
-            elif mode == "add":
+            if mode == "max":
+                mask = mask & (val >= h)  # only where the new surface is on top: relabel those alone
+            if not mask.any():
+                return
+            if mode == "add":
                 h[mask] += val[mask]
-            elif mode == "max":
-                h[mask] = np.maximum(h[mask], val[mask])
             else:
-                raise WorldError(f"unknown paint mode {mode!r}")
+                h[mask] = val[mask]
+        elif not mask.any():
+            return
         if cls is not None:
             self.cls[i0:i1, j0:j1][mask] = int(cls)
         if mat is not None:
