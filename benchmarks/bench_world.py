@@ -37,7 +37,9 @@ def _time(fn: object, reps: int) -> float:
     return statistics.median(samples) * 1e3
 
 
-def bench(live: LiveWorld, poses: list[tuple[float, float, float, float]], reps: int) -> tuple[float, float, float]:
+def bench(
+    live: LiveWorld, poses: list[tuple[float, float, float, float]], reps: int
+) -> tuple[float, float, float]:
     rng = np.random.default_rng(0)
     cam, lid, rf = [], [], []
     for n, e, alt, yaw in poses:
@@ -79,7 +81,10 @@ def main() -> int:
         rows.append(("city 1.2 km (seed 0)", bench(live, city_poses, args.reps), live.grid.memory_bytes()))
         print(f"city: generated in {gen_s:.1f} s", flush=True)
     print(f"\nmedians of {args.reps} repetitions x 3 poses, one core; 960x540 camera, 100x512 LiDAR rays")
-    print(f"{'world':<30} {'camera ms':>10} {'ratio':>6} {'LiDAR ms':>9} {'ratio':>6} {'range us':>9} {'grid MiB':>9}")
+    print(
+        f"{'world':<30} {'camera ms':>10} {'ratio':>6} {'LiDAR ms':>9} {'ratio':>6} "
+        f"{'range us':>9} {'grid MiB':>9}"
+    )
     for label, (cam, lid, rf), mem in rows:
         print(
             f"{label:<30} {cam:10.1f} {cam / base[0]:6.2f} {lid:9.1f} {lid / base[1]:6.2f} {rf:9.1f} "

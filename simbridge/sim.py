@@ -171,7 +171,9 @@ class SimBridge:
             "camera": {"width": cam.width_px, "height": cam.height_px, "hfov_deg": cam.hfov_deg,
                        "to_body": "x_cam=+y_body, y_cam=-x_body, z_cam=+z_body"},
             "lidar": {
-                "channels": lidar.channels, "points_per_ring": lidar.points_per_ring, "range_m": lidar.range_m,
+                "channels": lidar.channels,
+                "points_per_ring": lidar.points_per_ring,
+                "range_m": lidar.range_m,
             },
         }  # fmt: skip
         return SensorStreamServer(host, port, self._capture, info)
