@@ -421,7 +421,7 @@ class ShadowMap:
         dirs = np.ascontiguousarray(np.broadcast_to(self.sun, origins.shape))
         origins += dirs * (grid.res * 0.75)  # leave the cell's own top behind
         _, _, _, kinds, _ = cast_rays(
-            grid.height, pyr.flat, pyr.offset, pyr.ncols, pyr.h_max,
+            grid.height, pyr.maps, pyr.h_max,
             grid.res, grid.n0, grid.e0, origins, dirs, MAX_RANGE_M,
         )  # fmt: skip
         self.shadow[i0:i1, j0:j1] = (kinds != HIT_MISS).reshape(i1 - i0, j1 - j0)
@@ -464,7 +464,7 @@ def render(
     dirs = body_to_neu(camera.unit_rays_body(), quat)
     origin = np.array([[pos_ned_m[0], pos_ned_m[1], -pos_ned_m[2]]])
     ts, ii, jj, kinds, steps = cast_rays(
-        grid.height, pyramid.flat, pyramid.offset, pyramid.ncols, pyramid.h_max,
+        grid.height, pyramid.maps, pyramid.h_max,
         grid.res, grid.n0, grid.e0, origin, dirs, MAX_RANGE_M,
     )  # fmt: skip
     sun = np.asarray(sun_neu, dtype=np.float64)

@@ -69,7 +69,7 @@ def sweep(
     dirs = body_to_neu(rays, quat)
     origin = np.array([[pos_ned_m[0], pos_ned_m[1], -pos_ned_m[2]]])
     ts, ii, jj, kinds, _ = cast_rays(
-        grid.height, pyramid.flat, pyramid.offset, pyramid.ncols, pyramid.h_max,
+        grid.height, pyramid.maps, pyramid.h_max,
         grid.res, grid.n0, grid.e0, origin, dirs, model.range_m,
     )  # fmt: skip
     keep = (kinds != HIT_MISS) & (rng.random(ts.shape[0]) >= model.dropout)
@@ -89,7 +89,7 @@ def rangefinder_m(
     dirs = body_to_neu(np.array([[0.0, 0.0, 1.0]]), quat)
     origin = np.array([[pos_ned_m[0], pos_ned_m[1], -pos_ned_m[2]]])
     ts, _, _, kinds, _ = cast_rays(
-        grid.height, pyramid.flat, pyramid.offset, pyramid.ncols, pyramid.h_max,
+        grid.height, pyramid.maps, pyramid.h_max,
         grid.res, grid.n0, grid.e0, origin, dirs, max_m,
     )  # fmt: skip
     if kinds[0] == HIT_MISS:

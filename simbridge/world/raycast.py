@@ -5,9 +5,12 @@ the scenario origin (up positive). Cell ``(i, j)`` spans north ``[n0 + i res, n0
 and east ``[e0 + j res, e0 + (j+1) res)``. A ray is ``p(t) = o + t d`` in (north, east, up)
 metres with ``|d| = 1``.
 
-The march descends a max-height pyramid (blocks of 4, 16 and 64 cells): a block whose tallest cell
-stays below the ray for the ray's whole crossing is skipped at once; otherwise the ray steps one
-fine cell at a time (2-D DDA). A ray hits a cell's *top* where it descends through the cell's height
+Empty space is skipped with centred max maps: on coarse cells of ``COARSE`` fine cells (0.8 m at
+0.2 m resolution), level ``k`` holds the tallest fine cell within ``2**k`` coarse cells in every
+direction. Wherever the ray is, if it stays above level ``k``'s value while moving ``2**k`` coarse
+cells horizontally, it moves that far at once (in any direction: a sphere-tracing step with a
+Chebyshev ball). When no level allows a jump the ray steps fine cells (2-D DDA) for one coarse cell
+of travel and tries again. A ray hits a cell's *top* where it descends through the cell's height
 inside the cell, or a *wall* where it enters a cell below that cell's height.
 
 Hit kinds: 0 top, 1 wall crossed along north, 2 wall crossed along east, -1 miss.
@@ -15,12 +18,15 @@ Hit kinds: 0 top, 1 wall crossed along north, 2 wall crossed along east, -1 miss
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
 HIT_TOP, HIT_WALL_N, HIT_WALL_E, HIT_MISS = 0, 1, 2, -1
-PYRAMID_BLOCKS = (4, 16, 64)
-_SHIFTS = (2, 4, 6)  # log2 of the block sizes: block indices are shifts, never divisions
+COARSE_SHIFT = 2  # coarse cells are 4 x 4 fine cells
+COARSE = 1 << COARSE_SHIFT
+LEVELS = 6  # jump radii of 1, 2, 4, ... 32 coarse cells (0.8 m ... 25.6 m at 0.2 m resolution)
 _BIG = 1e30
 
 
@@ -39,45 +45,47 @@ def max_pool(height: np.ndarray, block: int) -> np.ndarray:
     return out
 
 
-class Pyramid:
-    """The max-height levels the march uses, flattened into one array.
+def _dilate(a: np.ndarray, s: int) -> np.ndarray:
+    """Max over offsets in {-s, 0, +s} along both axes (edges padded with the edge value)."""
+    p = np.pad(a, ((s, s), (0, 0)), mode="edge")
+    a = np.maximum(np.maximum(p[: -2 * s], p[s:-s]), p[2 * s :])
+    p = np.pad(a, ((0, 0), (s, s)), mode="edge")
+    return np.asarray(np.maximum(np.maximum(p[:, : -2 * s], p[:, s:-s]), p[:, 2 * s :]))
 
-    ``flat[offset[l] + bi * ncols[l] + bj]`` is the tallest cell of block ``(bi, bj)`` at level
-    ``l`` (blocks of ``PYRAMID_BLOCKS[l]`` cells); one array and two small tables keep the march's
-    inner loop free of per-level branches.
-    """
+
+class Pyramid:
+    """The max maps the march jumps with: ``maps[k, bi, bj]`` is the tallest cell within
+    ``2**k`` coarse cells (Chebyshev) of coarse cell ``(bi, bj)``."""
 
     def __init__(self, height: np.ndarray) -> None:
-        l1 = max_pool(height, PYRAMID_BLOCKS[0])
-        l2 = max_pool(l1, PYRAMID_BLOCKS[1] // PYRAMID_BLOCKS[0])
-        l3 = max_pool(l2, PYRAMID_BLOCKS[2] // PYRAMID_BLOCKS[1])
-        self.flat = np.concatenate([lv.ravel() for lv in (l1, l2, l3)]).astype(np.float32)
-        sizes = [lv.size for lv in (l1, l2, l3)]
-        self.offset = np.array([0, sizes[0], sizes[0] + sizes[1]], dtype=np.int64)
-        self.ncols = np.array([lv.shape[1] for lv in (l1, l2, l3)], dtype=np.int64)
-        # views into ``flat``: writing a level writes the array the march reads
-        self.levels = tuple(
-            self.flat[o : o + lv.size].reshape(lv.shape)
-            for o, lv in zip(self.offset, (l1, l2, l3), strict=True)
-        )
-        self.h_max = float(l3.max())
+        base = max_pool(height, COARSE)
+        self.coarse = base
+        levels = [_dilate(base, 1)]
+        for k in range(1, LEVELS):
+            levels.append(_dilate(levels[-1], 1 << (k - 1)))
+        self.maps = np.ascontiguousarray(np.stack(levels).astype(np.float32))
+        self.h_max = float(base.max())
 
     def raise_window(self, i0: int, i1: int, j0: int, j1: int, top_m: float) -> None:
-        """Make every block overlapping cells ``[i0, i1) x [j0, j1)`` at least ``top_m`` high.
+        """Make the maps cover something ``top_m`` high on fine cells ``[i0, i1) x [j0, j1)``.
 
-        The pyramid only has to bound the grid from above, so moving actors raise it where they
-        are stamped and never lower it: the march stays exact, only a little less quick.
+        The maps only have to bound the grid from above, so moving actors raise them where they
+        are stamped and never lower them: the march stays exact, only a little less quick.
         """
-        for level, shift in zip(self.levels, _SHIFTS, strict=True):
-            blk = level[i0 >> shift : ((i1 - 1) >> shift) + 1, j0 >> shift : ((j1 - 1) >> shift) + 1]
+        rows, cols = self.maps.shape[1:]
+        b_i0, b_i1 = i0 >> COARSE_SHIFT, ((i1 - 1) >> COARSE_SHIFT) + 1
+        b_j0, b_j1 = j0 >> COARSE_SHIFT, ((j1 - 1) >> COARSE_SHIFT) + 1
+        for k in range(LEVELS):
+            r = 1 << k
+            blk = self.maps[k, max(b_i0 - r, 0) : min(b_i1 + r, rows), max(b_j0 - r, 0) : min(b_j1 + r, cols)]
             np.maximum(blk, top_m, out=blk)
         self.h_max = max(self.h_max, top_m)
 
 
 @njit(cache=True, fastmath=True, nogil=True)
 def cast_rays(
-    height: np.ndarray, pyr: np.ndarray, pyr_offset: np.ndarray, pyr_ncols: np.ndarray, h_max: float,
-    res: float, n0: float, e0: float, origins: np.ndarray, dirs: np.ndarray, t_max: float,
+    height: np.ndarray, maps: np.ndarray, h_max: float, res: float, n0: float, e0: float,
+    origins: np.ndarray, dirs: np.ndarray, t_max: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
     """Cast rays; ``dirs`` is (N, 3) unit (north, east, up); ``origins`` is (N, 3), or (1, 3) for all.
 
@@ -89,6 +97,7 @@ def cast_rays(
     """
     n = dirs.shape[0]
     rows, cols = height.shape
+    brows, bcols = maps.shape[1], maps.shape[2]
     one_origin = origins.shape[0] == 1
     ts = np.full(n, t_max, dtype=np.float32)
     ii = np.full(n, -1, dtype=np.int32)
@@ -97,6 +106,7 @@ def cast_rays(
     steps = np.zeros(n, dtype=np.int8)
     size_n = rows * res
     size_e = cols * res
+    coarse_m = COARSE * res
     for k in range(n):
         r = 0 if one_origin else k
         on = origins[r, 0]
@@ -129,6 +139,7 @@ def cast_rays(
                 t1 = min(t1, tb)
         if not inside or t0 >= t1:
             continue
+        hd = math.sqrt(dn * dn + de * de)  # horizontal speed per unit t
         step_n = 1 if dn > 0.0 else -1
         step_e = 1 if de > 0.0 else -1
         has_n = abs(dn) > 1e-12
@@ -137,55 +148,36 @@ def cast_rays(
         inv_de = 1.0 / de if has_e else 0.0
         t = t0
         last_axis = -1
-        i = min(max(int((on + t * dn - n0) / res), 0), rows - 1)
-        j = min(max(int((oe + t * de - e0) / res), 0), cols - 1)
-        lvl = 2  # pyramid level to try next; -1: fine stepping inside one level-0 block
-        b0i = i >> _SHIFTS[0]
-        b0j = j >> _SHIFTS[0]
+        jumping = hd > 1e-6
+        fine_left = 0.0  # t at which to stop fine stepping and try jumping again
+        i = 0
+        j = 0
+        placed = False
         while t < t1:
             z = ou + t * du
-            if lvl >= 0:
-                sh = 2 + 2 * lvl  # _SHIFTS[lvl]
-                bi = i >> sh
-                bj = j >> sh
-                hb = pyr[pyr_offset[lvl] + bi * pyr_ncols[lvl] + bj]
-                if z > hb:
-                    blk = 1 << sh
-                    bsize = blk * res
-                    tbn = (
-                        (n0 + ((bi + 1) * bsize if step_n > 0 else bi * bsize) - on) * inv_dn
-                        if has_n
-                        else _BIG
-                    )
-                    tbe = (
-                        (e0 + ((bj + 1) * bsize if step_e > 0 else bj * bsize) - oe) * inv_de
-                        if has_e
-                        else _BIG
-                    )
-                    tb = min(tbn, tbe)
-                    if tb >= t1:
-                        if ou + t1 * du > hb:
-                            break  # stays above everything until it leaves: miss
-                    elif ou + tb * du > hb:
-                        # the whole crossing of this block stays above its tallest cell: skip it
-                        t = tb
-                        if tbn < tbe:
-                            last_axis = 0
-                            i = (bi + 1) * blk if step_n > 0 else bi * blk - 1
-                            j = min(max(int((oe + t * de - e0) / res), bj * blk), bj * blk + blk - 1)
-                        else:
-                            last_axis = 1
-                            j = (bj + 1) * blk if step_e > 0 else bj * blk - 1
-                            i = min(max(int((on + t * dn - n0) / res), bi * blk), bi * blk + blk - 1)
-                        if i < 0 or i >= rows or j < 0 or j >= cols:
-                            break
-                        lvl = 2 if lvl >= 1 else 1
-                        continue
-                lvl -= 1
-                if lvl < 0:
-                    b0i = i >> _SHIFTS[0]
-                    b0j = j >> _SHIFTS[0]
-                continue
+            if jumping:
+                pn = on + t * dn - n0
+                pe = oe + t * de - e0
+                bi = min(max(int(pn / coarse_m), 0), brows - 1)
+                bj = min(max(int(pe / coarse_m), 0), bcols - 1)
+                jumped = False
+                for lvl in range(LEVELS - 1, -1, -1):
+                    reach = (1 << lvl) * coarse_m  # horizontal metres the jump covers
+                    dt = reach / hd
+                    if maps[lvl, bi, bj] < min(z, z + dt * du):
+                        t += dt
+                        jumped = True
+                        placed = False
+                        last_axis = -1
+                        break
+                if jumped:
+                    continue
+                jumping = False
+                fine_left = t + coarse_m / hd
+            if not placed:
+                i = min(max(int((on + t * dn - n0) / res), 0), rows - 1)
+                j = min(max(int((oe + t * de - e0) / res), 0), cols - 1)
+                placed = True
             # ---- fine step through cell (i, j)
             h = height[i, j]
             if z <= h:
@@ -199,7 +191,7 @@ def cast_rays(
                     kinds[k] = HIT_WALL_E
                     steps[k] = step_e
                 else:
-                    kinds[k] = HIT_TOP  # started inside a structure
+                    kinds[k] = HIT_TOP  # landed on (or started in) this cell from above
                 break
             tn = (n0 + ((i + 1) * res if step_n > 0 else i * res) - on) * inv_dn if has_n else _BIG
             te = (e0 + ((j + 1) * res if step_e > 0 else j * res) - oe) * inv_de if has_e else _BIG
@@ -221,6 +213,7 @@ def cast_rays(
                 last_axis = 1
             if i < 0 or i >= rows or j < 0 or j >= cols:
                 break
-            if (i >> _SHIFTS[0]) != b0i or (j >> _SHIFTS[0]) != b0j:
-                lvl = 0  # entered another 4 x 4 block: try skipping again
+            if hd > 1e-6 and t >= fine_left:
+                jumping = True
+                # stay on the exact boundary we just crossed: (i, j) stays valid for a top test
     return ts, ii, jj, kinds, steps
