@@ -149,6 +149,7 @@ def cast_rays(
         t = t0
         last_axis = -1
         jumping = hd > 1e-6
+        top_lvl = LEVELS - 1  # largest jump worth trying: one above the last that worked
         fine_left = 0.0  # t at which to stop fine stepping and try jumping again
         i = 0
         j = 0
@@ -161,7 +162,7 @@ def cast_rays(
                 bi = min(max(int(pn / coarse_m), 0), brows - 1)
                 bj = min(max(int(pe / coarse_m), 0), bcols - 1)
                 jumped = False
-                for lvl in range(LEVELS - 1, -1, -1):
+                for lvl in range(top_lvl, -1, -1):
                     reach = (1 << lvl) * coarse_m  # horizontal metres the jump covers
                     dt = reach / hd
                     if maps[lvl, bi, bj] < min(z, z + dt * du):
@@ -169,10 +170,12 @@ def cast_rays(
                         jumped = True
                         placed = False
                         last_axis = -1
+                        top_lvl = min(lvl + 1, LEVELS - 1)
                         break
                 if jumped:
                     continue
                 jumping = False
+                top_lvl = 1
                 fine_left = t + coarse_m / hd
             if not placed:
                 i = min(max(int((on + t * dn - n0) / res), 0), rows - 1)
