@@ -102,6 +102,7 @@ class MavlinkUdpLink(asyncio.DatagramProtocol):
         self._transport: asyncio.DatagramTransport | None = None
         self._fixed: Address | None = None
         self._peers: dict[Address, float] = {}
+        self._routes: dict[tuple[int, int], Address] = {}  # (system, component) -> where it spoke from
         self._signing = signing_key is not None
         if signing_key is not None:
             sig = self.mav.signing
@@ -154,6 +155,7 @@ class MavlinkUdpLink(asyncio.DatagramProtocol):
                 continue
             self.stats.received += 1
             self._peers[addr] = time.monotonic()
+            self._routes[(msg.get_srcSystem(), msg.get_srcComponent())] = addr
             try:
                 self._handler(msg, addr)
             except Exception:
@@ -191,6 +193,28 @@ class MavlinkUdpLink(asyncio.DatagramProtocol):
         for addr in dests:
             self._transport.sendto(buf, addr)
         self.stats.sent += 1
+
+    def send_to(self, msg: Any, system: int, component: int) -> None:
+        """Send to the address ``(system, component)`` last spoke from; to every peer when unknown
+        (component 0 addresses every component of the system: sent to each of its addresses)."""
+        if self._transport is None:
+            return
+        if component == 0:
+            dests = {a for (s, _), a in self._routes.items() if s == system}
+        else:
+            addr = self._routes.get((system, component))
+            dests = {addr} if addr is not None else set()
+        if not dests:
+            self.send(msg)
+            return
+        buf = msg.pack(self.mav)
+        self.mav.seq = (self.mav.seq + 1) % 256
+        for addr in dests:
+            self._transport.sendto(buf, addr)
+        self.stats.sent += 1
+
+    def route(self, system: int, component: int) -> Address | None:
+        return self._routes.get((system, component))
 
     @property
     def peer_count(self) -> int:

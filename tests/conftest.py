@@ -89,3 +89,59 @@ def client_for() -> Iterator[Callable[..., MavClient]]:
     yield make
     for c in clients:
         c.close()
+
+
+def free_tcp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+class Rig:
+    """simbridge + companion as real processes wired over loopback UDP and the sensor socket."""
+
+    def __init__(self, sim: SimProcess, companion: subprocess.Popen[bytes], port: int, log: Path) -> None:
+        self.sim = sim
+        self.companion = companion
+        self.port = port
+        self.companion_log = log
+
+    def alarm(self, *args: str, timeout_s: float = 10.0) -> subprocess.CompletedProcess[str]:
+        cmd = [sys.executable, "trigger_alarm.py", "--mavlink", f"udpout:127.0.0.1:{self.port}",
+               "--timeout", str(timeout_s), *args]  # fmt: skip
+        return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s + 30)
+
+    def log_text(self) -> str:
+        return self.companion_log.read_text() if self.companion_log.exists() else ""
+
+
+@pytest.fixture
+def start_rig(start_sim: Callable[..., SimProcess], tmp_path: Path) -> Iterator[Callable[..., Rig]]:
+    """simbridge (``sim_args``) sending to a companion (``companion_args``) on a fresh port."""
+    procs: list[subprocess.Popen[bytes]] = []
+
+    def start(
+        sim_args: list[str], companion_args: list[str] | None = None, env: dict[str, str] | None = None
+    ) -> Rig:
+        port = free_udp_port()
+        sensors = free_tcp_port()
+        sim = start_sim(*sim_args, "--sensors", f"127.0.0.1:{sensors}", port=port)
+        log = tmp_path / f"companion-{len(procs)}.log"
+        cmd = [sys.executable, "-m", "companion", "--mavlink", f"udp:{port}", "--sensors",
+               f"127.0.0.1:{sensors}", *(companion_args or [])]  # fmt: skip
+        with log.open("wb") as fh:
+            proc = subprocess.Popen(
+                cmd, stdout=fh, stderr=subprocess.STDOUT, env={**os.environ, **(env or {})}
+            )
+        procs.append(proc)
+        return Rig(sim, proc, port, log)
+
+    yield start
+    for p in procs:
+        if p.poll() is None:
+            p.terminate()
+            try:
+                p.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()

@@ -81,9 +81,7 @@ def test_off_centre_building_shows_its_wall() -> None:
     cam = CameraModel()
     origin = np.array([[0.0, 0.0, 100.0]])
     dirs = np.ascontiguousarray(cam.unit_rays_body() @ np.diag([1.0, 1.0, -1.0]))  # level, facing north
-    _, _, _, kinds, steps = cast_rays(
-        g.height, p.maps, p.h_max, g.res, g.n0, g.e0, origin, dirs, 600.0
-    )
+    _, _, _, kinds, steps = cast_rays(g.height, p.maps, p.h_max, g.res, g.n0, g.e0, origin, dirs, 600.0)
     walls = kinds == 2  # crossed an east boundary: the west-facing wall
     assert walls.sum() > 500
     assert np.all(steps[walls] == 1)
@@ -150,9 +148,7 @@ def test_ray_cast_matches_brute_force() -> None:
     dirs[:, 2] = -np.abs(dirs[:, 2]) - 0.2
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     origin = np.array([[3.0, -4.0, 60.0]])
-    ts, _, _, kinds, _ = cast_rays(
-        g.height, p.maps, p.h_max, g.res, g.n0, g.e0, origin, dirs, 300.0
-    )
+    ts, _, _, kinds, _ = cast_rays(g.height, p.maps, p.h_max, g.res, g.n0, g.e0, origin, dirs, 300.0)
     for k in range(len(dirs)):
         expected = 300.0
         for s in np.arange(0.0, 300.0, 0.005):

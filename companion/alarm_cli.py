@@ -1,0 +1,107 @@
+"""``trigger_alarm.py`` / ``trigger-alarm``: send an alarm to the companion and print its answer.
+
+Exit status: 0 when the companion accepted the alarm (a new recovery, or merged into the running
+one), 1 when it refused it, 2 on a usage error, 3 when no acknowledgement came back in time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import sys
+from collections.abc import Sequence
+from typing import Any
+
+from companion.alarms import ALARM_TEXT_PREFIX, MAV_CMD_USER_1, Criticality, ReasonCode
+from simbridge.link import LinkUrl, LinkUrlError, MavlinkUdpLink, parse_signing_key
+
+RESULTS = {
+    0: "accepted: recovery started",
+    5: "accepted: merged into the running recovery",
+    1: "refused for now (no fresh telemetry or no sensors yet)",
+    2: "refused (denied)",
+    3: "refused (unsupported)",
+    4: "refused (failed)",
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="trigger_alarm.py", description=__doc__.splitlines()[0] if __doc__ else None
+    )
+    p.add_argument("--mavlink", default="udpout:127.0.0.1:14550", help="where the companion listens")
+    p.add_argument("--reason", required=True, help="free-text reason, e.g. 'GPS spoofing detected'")
+    p.add_argument("--criticality", default="high", choices=("low", "high", "critical"))
+    p.add_argument("--code", default="other", choices=[c.name.lower() for c in ReasonCode])
+    p.add_argument("--signing-key", help="MAVLink 2 signing key, 64 hex digits")
+    p.add_argument("--target-system", type=int, default=1, help="the vehicle's system id")
+    p.add_argument("--target-component", type=int, default=191, help="the companion's component id")
+    p.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the acknowledgement")
+    return p
+
+
+async def send_alarm(args: argparse.Namespace, key: bytes | None) -> int | None:
+    acks: asyncio.Queue[Any] = asyncio.Queue()
+
+    def on_message(msg: Any, addr: tuple[str, int]) -> None:
+        companion = (args.target_system, args.target_component)
+        from_companion = (msg.get_srcSystem(), msg.get_srcComponent()) == companion
+        if msg.get_type() == "COMMAND_ACK" and msg.command == MAV_CMD_USER_1 and from_companion:
+            acks.put_nowait(msg)
+
+    crit = Criticality.parse(args.criticality)
+    code = ReasonCode[args.code.upper()]
+    async with MavlinkUdpLink(args.mavlink, 255, 25, on_message, signing_key=key) as link:
+        text = (ALARM_TEXT_PREFIX + args.reason)[:50]
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + args.timeout
+        attempt = 0
+        while loop.time() < deadline:
+            link.send(link.mav.statustext_encode(4, text.encode(), 0, 0))
+            link.send(
+                link.mav.command_long_encode(
+                    args.target_system,
+                    args.target_component,
+                    MAV_CMD_USER_1,
+                    attempt,
+                    float(code),
+                    float(crit),
+                    0,
+                    0,
+                    0,
+                    0,
+                    0,
+                )
+            )
+            attempt += 1
+            try:
+                async with asyncio.timeout(min(1.0, max(deadline - loop.time(), 0.01))):
+                    ack = await acks.get()
+                    return int(ack.result)
+            except TimeoutError:
+                continue
+    return None
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        LinkUrl.parse(args.mavlink)
+        key = parse_signing_key(args.signing_key) if args.signing_key else None
+    except (LinkUrlError, ValueError) as exc:
+        parser.error(str(exc))
+    result = asyncio.run(send_alarm(args, key))
+    if result is None:
+        print(
+            f"no acknowledgement from the companion at {args.mavlink} within {args.timeout:.0f} s "
+            "(is it running? is the signing key right?)",
+            file=sys.stderr,
+        )
+        return 3
+    print(f"alarm '{args.reason}' ({args.criticality}): {RESULTS.get(result, f'MAV_RESULT {result}')}")
+    return 0 if result in (0, 5) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

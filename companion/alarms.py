@@ -1,0 +1,62 @@
+"""Alarms: what makes the companion land the vehicle.
+
+Over MAVLink an alarm is a COMMAND_LONG ``MAV_CMD_USER_1`` (31010) addressed to the companion
+(the vehicle's system id, component 191): param1 the reason code, param2 the criticality
+(0 low, 1 high, 2 critical). The free-text reason travels just before it as a STATUSTEXT from the
+same sender, starting "ALARM: ". The companion also raises alarms itself from autopilot signals it
+watches (battery critical, failsafe STATUSTEXT, GPS fix lost).
+"""
+
+from __future__ import annotations
+
+import enum
+import time
+from dataclasses import dataclass
+
+MAV_CMD_USER_1 = 31010
+ALARM_TEXT_PREFIX = "ALARM: "
+
+
+class Criticality(enum.IntEnum):
+    LOW = 0
+    HIGH = 1
+    CRITICAL = 2
+
+    @staticmethod
+    def parse(text: str) -> Criticality:
+        try:
+            return Criticality[text.upper()]
+        except KeyError:
+            raise ValueError(f"criticality must be low, high or critical, got {text!r}") from None
+
+
+class ReasonCode(enum.IntEnum):
+    OTHER = 0
+    GPS_SPOOFING = 1
+    SENSOR_FAILURE = 2
+    LOW_BATTERY = 3
+    WEATHER = 4
+    FAILSAFE = 5
+    GPS_LOST = 6
+
+
+@dataclass(frozen=True, slots=True)
+class Alarm:
+    code: ReasonCode
+    criticality: Criticality
+    reason: str
+    source: tuple[int, int]  # (system, component) of whoever raised it; (0, 0) for our own watchers
+    received_monotonic: float
+
+    @staticmethod
+    def from_command(param1: float, param2: float, text: str, source: tuple[int, int]) -> Alarm:
+        """Decode a USER_1 command; ValueError with the problem if the params are not an alarm."""
+        if not (param1 == param1 and param2 == param2):  # NaN
+            raise ValueError("alarm params must be numbers")
+        try:
+            code = ReasonCode(int(param1))
+        except ValueError:
+            code = ReasonCode.OTHER
+        if int(param2) != param2 or int(param2) not in (0, 1, 2):
+            raise ValueError(f"criticality must be 0, 1 or 2, got {param2}")
+        return Alarm(code, Criticality(int(param2)), text or code.name.lower(), source, time.monotonic())

@@ -1,0 +1,116 @@
+"""``companion``: the emergency-landing daemon (DESIGN.md section 4)."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import logging
+import os
+import signal
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from companion.alarms import Criticality
+from companion.config import CompanionConfig, ConfigError, load_config
+from companion.daemon import Companion
+from companion.reasoning.onboard import OnboardReasoner
+from companion.recovery import RecoveryParams
+
+REASONERS = {"onboard": OnboardReasoner}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="companion", description="Landfall: land the drone safely when an alarm fires."
+    )
+    p.add_argument("--mavlink", help="MAVLink endpoint, e.g. udp:14550 (default from the config: udp:14550)")
+    p.add_argument("--config", type=Path, help="TOML configuration file (deploy/companion.toml documents it)")
+    p.add_argument("--reasoner", help=f"reasoning tier: {', '.join(REASONERS)}")
+    p.add_argument("--sensors", metavar="HOST:PORT", help="sensor stream endpoint (simbridge --sensors)")
+    p.add_argument("--record", type=Path, metavar="DIR", help="keep a flight record of every round here")
+    p.add_argument("--log-level", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
+    return p
+
+
+def params_from(cfg: CompanionConfig) -> RecoveryParams:
+    r = cfg.recovery
+    return RecoveryParams(
+        rounds_by_criticality={c: cfg.rounds_for(c.name.lower()) for c in Criticality},  # type: ignore[arg-type]
+        descent_fraction=r.descent_fraction,
+        final_land_m=r.final_land_m,
+        arrival_tolerance_m=r.arrival_tolerance_m,
+        arrival_speed_m_s=r.arrival_speed_m_s,
+        move_timeout_s=r.move_timeout_s,
+        explore_climb_m=r.explore_climb_m,
+        explore_max_alt_m=r.explore_max_alt_m,
+        min_candidate_area_m2=r.min_candidate_area_m2,
+    )
+
+
+def build_companion(cfg: CompanionConfig) -> Companion:
+    from simbridge.sensorstream import parse_endpoint
+
+    if cfg.reasoner.name not in REASONERS:
+        raise ConfigError(
+            "reasoner.name", f"unknown reasoner {cfg.reasoner.name!r}; available: {', '.join(REASONERS)}"
+        )
+    record: Any = None
+    if cfg.record.dir is not None:
+        from companion.record import FlightRecord
+
+        record = FlightRecord(cfg.record.dir, cfg.record.max_mb)
+    a = cfg.alarms
+    return Companion(
+        mavlink_url=cfg.mavlink.url,
+        component_id=cfg.mavlink.component_id,
+        vehicle_system_id=cfg.mavlink.vehicle_system_id,
+        signing_key=cfg.signing_key(),
+        sensors=parse_endpoint(cfg.sensors.endpoint),
+        frame_timeout_s=cfg.sensors.frame_timeout_s,
+        reasoner=REASONERS[cfg.reasoner.name](),
+        params=params_from(cfg),
+        record=record,
+        watch_battery_pct=a.battery_critical_pct if a.watch_battery else None,
+        watch_failsafe_text=a.watch_failsafe_text,
+        watch_gps=a.watch_gps,
+        accept_from=tuple(a.accept_from_system_ids),
+        heartbeat_hz=cfg.mavlink.heartbeat_hz,
+    )
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    overrides = {
+        key: value
+        for key, value in (
+            ("mavlink.url", args.mavlink),
+            ("sensors.endpoint", args.sensors),
+            ("reasoner.name", args.reasoner),
+            ("record.dir", args.record),
+            ("log.level", args.log_level),
+        )
+        if value is not None
+    }
+    try:
+        cfg = load_config(args.config, os.environ, overrides)
+        companion = build_companion(cfg)
+    except (ConfigError, ValueError) as exc:
+        print(f"companion: configuration error: {exc}", file=sys.stderr)
+        return 2
+    logging.basicConfig(level=cfg.log.level, stream=sys.stderr, format="%(levelname)s %(name)s: %(message)s")
+
+    async def run() -> None:
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, companion.stop)
+        await companion.run()
+
+    asyncio.run(run())
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,260 @@
+"""Flying the vehicle from the companion: mode changes with acknowledgements, a position setpoint
+streamed at 10 Hz (PX4 needs it before and during OFFBOARD), arrival judged from telemetry, and an
+operator takeover detected the moment someone else changes the mode.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import math
+import time
+from collections.abc import Callable
+from typing import Any
+
+from pymavlink.dialects.v20 import common as mavlink2
+
+from companion.flavour import Flavour, Mode, flavour_for
+from companion.telemetry import TelemetryCache
+
+POSITION_YAW_MASK = 2552  # use x, y, z and yaw
+STREAM_HZ = 20.0  # >= 10 Hz on a real vehicle; 20 keeps PX4's 2 Hz rule at 4x simulation speed
+MAV_STATE_CRITICAL = 5
+MAV_RESULT_ACCEPTED, MAV_RESULT_TEMPORARILY_REJECTED = 0, 1
+
+
+class ControlError(RuntimeError):
+    """Base of the companion's flight-control errors."""
+
+
+class CommandRefused(ControlError):
+    def __init__(self, command: int, result: int) -> None:
+        super().__init__(f"command {command} refused by the autopilot (MAV_RESULT {result})")
+        self.command = command
+        self.result = result
+
+
+class OperatorTakeover(ControlError):
+    """Someone else changed the mode: the companion stops commanding at once."""
+
+    def __init__(self, mode: int) -> None:
+        super().__init__(f"mode changed to custom_mode {mode} by someone else: operator takeover")
+        self.custom_mode = mode
+
+
+class AutopilotFailsafe(ControlError):
+    """The autopilot left our mode by itself (system status critical): a failsafe, not an operator."""
+
+    def __init__(self, mode: int) -> None:
+        super().__init__(f"autopilot failsafe switched to custom_mode {mode}")
+        self.custom_mode = mode
+
+
+class TargetTimeout(ControlError):
+    def __init__(self, target: tuple[float, float, float], error_m: float, timeout_s: float) -> None:
+        super().__init__(f"target {target} not reached within {timeout_s:.0f} s ({error_m:.1f} m away)")
+        self.target = target
+        self.error_m = error_m
+
+
+class TelemetryLost(ControlError):
+    pass
+
+
+class VehicleController:
+    """Commands one vehicle through ``send_to(msg, system, component)``.
+
+    ``on_command_ack`` must be fed every COMMAND_ACK the link receives.
+    """
+
+    def __init__(
+        self,
+        telemetry: TelemetryCache,
+        send_to: Callable[[Any, int, int], None],
+        mav: Any,
+        *,
+        logger: logging.Logger | None = None,
+    ) -> None:
+        self.tm = telemetry
+        self._send_to = send_to
+        self._mav = mav
+        self._log = logger or logging.getLogger("companion.control")
+        self._acks: dict[int, asyncio.Future[int]] = {}
+        self._target: tuple[float, float, float, float] | None = None  # n, e, d, yaw
+        self._streamer: asyncio.Task[None] | None = None
+        self._engaged_mode: int | None = None
+        self._mode_set_at = 0.0
+        self.takeover: OperatorTakeover | None = None
+        self.failsafe: AutopilotFailsafe | None = None
+
+    # ------------------------------------------------------------------ basics
+    @property
+    def flavour(self) -> Flavour:
+        return flavour_for(self.tm.state.autopilot)
+
+    @property
+    def vehicle(self) -> tuple[int, int]:
+        return (self.tm.state.system_id, 1)
+
+    def on_command_ack(self, msg: Any) -> None:
+        if (msg.get_srcSystem(), msg.get_srcComponent()) != self.vehicle:
+            return
+        fut = self._acks.get(int(msg.command))
+        if fut is not None and not fut.done():
+            fut.set_result(int(msg.result))
+
+    async def command(self, command: int, *params: float, timeout_s: float = 1.5, tries: int = 3) -> int:
+        """COMMAND_LONG to the autopilot; returns its MAV_RESULT (retried on silence)."""
+        p = [*params, *([0.0] * (7 - len(params)))]
+        loop = asyncio.get_running_loop()
+        for attempt in range(tries):
+            fut: asyncio.Future[int] = loop.create_future()
+            self._acks[command] = fut
+            sys_id, comp_id = self.vehicle
+            self._send_to(
+                self._mav.command_long_encode(sys_id, comp_id, command, attempt, *p), sys_id, comp_id
+            )
+            try:
+                async with asyncio.timeout(timeout_s):
+                    return await fut
+            except TimeoutError:
+                continue
+            finally:
+                self._acks.pop(command, None)
+        raise ControlError(f"no COMMAND_ACK for command {command} after {tries} tries")
+
+    async def set_mode(self, mode: Mode) -> None:
+        params = self.flavour.set_mode[mode]
+        for _ in range(5):
+            result = await self.command(mavlink2.MAV_CMD_DO_SET_MODE, *params)
+            if result == MAV_RESULT_ACCEPTED:
+                self._engaged_mode = self.flavour.modes[mode]
+                self._mode_set_at = time.monotonic()
+                return
+            if result != MAV_RESULT_TEMPORARILY_REJECTED:
+                break
+            await self.tm.wait_update(2.0)  # give the setpoint stream another telemetry period
+        raise CommandRefused(mavlink2.MAV_CMD_DO_SET_MODE, result)
+
+    # ------------------------------------------------------------------ setpoints
+    def _send_target(self) -> None:
+        if self._target is None:
+            return
+        n, e, d, yaw = self._target
+        sys_id, comp_id = self.vehicle
+        msg = self._mav.set_position_target_local_ned_encode(
+            int(self.tm.state.t_boot_s * 1000) & 0xFFFFFFFF,
+            sys_id,
+            comp_id,
+            1,
+            POSITION_YAW_MASK,
+            n,
+            e,
+            d,
+            0,
+            0,
+            0,
+            0,
+            0,
+            0,
+            yaw,
+            0,
+        )
+        self._send_to(msg, sys_id, comp_id)
+
+    async def _stream(self) -> None:
+        period = 1.0 / STREAM_HZ
+        while True:
+            self._check_takeover()
+            self._send_target()
+            await asyncio.sleep(period)
+
+    def _check_takeover(self) -> None:
+        if self._engaged_mode is None or self.takeover is not None or self.failsafe is not None:
+            return
+        heard = self.tm.state.stamps.get("heartbeat", 0.0)
+        if heard <= self._mode_set_at or self.tm.state.custom_mode == self._engaged_mode:
+            return  # the heartbeat predates our own mode change, or the mode is ours
+        if self.tm.state.system_status == MAV_STATE_CRITICAL:
+            self.failsafe = AutopilotFailsafe(self.tm.state.custom_mode)
+            self._log.warning("%s", self.failsafe)
+        else:
+            self.takeover = OperatorTakeover(self.tm.state.custom_mode)
+            self._log.warning("%s", self.takeover)
+        self._target = None  # stop commanding at once
+
+    def _raise_interruption(self) -> None:
+        self._check_takeover()
+        if self.takeover is not None:
+            raise self.takeover
+        if self.failsafe is not None:
+            raise self.failsafe
+
+    def set_target(self, n: float, e: float, d: float, yaw: float | None = None) -> None:
+        if not all(math.isfinite(v) for v in (n, e, d)):
+            raise ControlError(f"refusing a non-finite target ({n}, {e}, {d})")
+        if yaw is None:
+            w, x, y, z = self.tm.state.quat_wxyz
+            yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+        self._target = (n, e, d, yaw)
+        self._send_target()
+
+    async def engage(self) -> None:
+        """Hold where the vehicle is and take control (OFFBOARD after a 1 s stream, or GUIDED)."""
+        n, e, d = self.tm.state.pos_ned_m
+        self.takeover = None
+        self.failsafe = None
+        self.set_target(n, e, d)
+        if self._streamer is None:
+            self._streamer = asyncio.create_task(self._stream(), name="setpoint-stream")
+        if self.flavour.needs_stream:
+            t0 = time.monotonic()
+            while time.monotonic() - t0 < 1.2:  # PX4: >2 Hz for about 1 s before OFFBOARD
+                await self.tm.wait_update(5.0)
+        await self.set_mode(Mode.GUIDED)
+        self.set_target(n, e, d)
+
+    async def release(self) -> None:
+        if self._streamer is not None:
+            self._streamer.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._streamer
+            self._streamer = None
+        self._engaged_mode = None
+
+    async def goto(
+        self, n: float, e: float, d: float, *, tolerance_m: float, speed_m_s: float, timeout_s: float
+    ) -> None:
+        """Fly to a point; return when within ``tolerance_m`` and slower than ``speed_m_s``."""
+        self.set_target(n, e, d)
+        deadline = time.monotonic() + timeout_s
+        err = math.inf
+        while True:
+            self._raise_interruption()
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise TargetTimeout((n, e, d), err, timeout_s)
+            try:
+                await self.tm.wait_update(min(remaining, 3.0))
+            except TimeoutError:
+                if self.tm.age_s("position") > 3.0:
+                    raise TelemetryLost("no LOCAL_POSITION_NED for 3 s") from None
+                continue
+            err = math.dist(self.tm.state.pos_ned_m, (n, e, d))
+            if err < tolerance_m and self.tm.speed_m_s < speed_m_s:
+                return
+
+    async def land(self, timeout_s: float) -> None:
+        """Hand over to the autopilot's land mode and wait for the touchdown (landed or disarmed)."""
+        await self.set_mode(Mode.LAND)
+        self._target = None
+        await self.release()
+        self._engaged_mode = self.flavour.modes[Mode.LAND]
+        deadline = time.monotonic() + timeout_s
+        while self.tm.state.armed and self.tm.state.landed_state != 1:
+            self._raise_interruption()
+            if time.monotonic() > deadline:
+                raise ControlError(f"no touchdown within {timeout_s:.0f} s of switching to land")
+            with contextlib.suppress(TimeoutError):
+                await self.tm.wait_update(3.0)

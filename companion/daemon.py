@@ -1,0 +1,265 @@
+"""The companion daemon: one MAVLink endpoint shared with the autopilot, the ground station and the
+alarm tool (replies routed by system/component id), its own HEARTBEAT, alarm intake and watchers,
+and at most one recovery at a time."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import time
+from typing import Any
+
+from companion.alarms import ALARM_TEXT_PREFIX, MAV_CMD_USER_1, Alarm, Criticality, ReasonCode
+from companion.control import VehicleController
+from companion.reasoning.onboard import OnboardReasoner, Reasoner
+from companion.recovery import Outcome, Record, Recovery, RecoveryParams
+from companion.telemetry import TelemetryCache
+from simbridge.link import MavlinkUdpLink
+
+MAV_TYPE_ONBOARD_CONTROLLER = 18
+MAV_AUTOPILOT_INVALID = 8
+MAV_STATE_STANDBY, MAV_STATE_ACTIVE = 3, 4
+RESULT_ACCEPTED, RESULT_TEMP_REJECTED, RESULT_DENIED, RESULT_UNSUPPORTED, RESULT_IN_PROGRESS = 0, 1, 2, 3, 5
+
+
+class Companion:
+    """Build, then ``await run()``; ``stop()`` ends it."""
+
+    def __init__(
+        self,
+        *,
+        mavlink_url: str,
+        component_id: int = 191,
+        vehicle_system_id: int = 0,
+        signing_key: bytes | None = None,
+        sensors: tuple[str, int] | None = None,
+        frame_timeout_s: float = 10.0,
+        reasoner: Reasoner | None = None,
+        params: RecoveryParams | None = None,
+        record: Record | None = None,
+        watch_battery_pct: float | None = 15.0,
+        watch_failsafe_text: bool = True,
+        watch_gps: bool = True,
+        accept_from: tuple[int, ...] = (),
+        heartbeat_hz: float = 1.0,
+        logger: logging.Logger | None = None,
+    ) -> None:
+        self.log = logger or logging.getLogger("companion")
+        self.component_id = component_id
+        self.tm = TelemetryCache(vehicle_system_id)
+        self.link = MavlinkUdpLink(
+            mavlink_url,
+            vehicle_system_id or 1,
+            component_id,
+            self._on_message,
+            signing_key=signing_key,
+            logger=logging.getLogger("companion.link"),
+        )
+        self.ctl = VehicleController(self.tm, self.link.send_to, self.link.mav, logger=self.log)
+        self.reasoner = reasoner or OnboardReasoner()
+        self.params = params or RecoveryParams()
+        self.record = record
+        self._sensors = sensors
+        self._frame_timeout_s = frame_timeout_s
+        self._watch_battery_pct = watch_battery_pct
+        self._watch_failsafe = watch_failsafe_text
+        self._watch_gps = watch_gps
+        self._accept_from = accept_from
+        self._heartbeat_period = 1.0 / heartbeat_hz
+        self._alarm_texts: dict[tuple[int, int], str] = {}
+        self.recovery: Recovery | None = None
+        self._recovery_task: asyncio.Task[Outcome] | None = None
+        self.outcomes: list[Outcome] = []
+        self.alarms_refused = 0
+        self._stop = asyncio.Event()
+        self._client: Any = None
+        self._gps_was_ok = False
+        self._texts_seen = 0
+
+    # ------------------------------------------------------------------ MAVLink in
+    def _on_message(self, msg: Any, addr: tuple[str, int]) -> None:
+        self.tm.on_message(msg)
+        if self.tm.state.system_id and self.link.mav.srcSystem != self.tm.state.system_id:
+            self.link.mav.srcSystem = self.tm.state.system_id  # our heartbeat carries the vehicle's id
+        kind = msg.get_type()
+        if kind == "COMMAND_ACK":
+            self.ctl.on_command_ack(msg)
+        elif kind == "COMMAND_LONG":
+            self._on_command(msg)
+        elif kind == "STATUSTEXT" and str(msg.text).startswith(ALARM_TEXT_PREFIX):
+            self._alarm_texts[(msg.get_srcSystem(), msg.get_srcComponent())] = str(msg.text)[
+                len(ALARM_TEXT_PREFIX) :
+            ]
+
+    def _ack(self, msg: Any, result: int) -> None:
+        src = (msg.get_srcSystem(), msg.get_srcComponent())
+        ack = self.link.mav.command_ack_encode(int(msg.command), result, 0, 0, src[0], src[1])
+        self.link.send_to(ack, *src)
+
+    def _on_command(self, msg: Any) -> None:
+        ours = msg.target_component == self.component_id and msg.target_system in (0, self.link.mav.srcSystem)
+        if not ours:
+            return
+        if int(msg.command) != MAV_CMD_USER_1:
+            self._ack(msg, RESULT_UNSUPPORTED)
+            return
+        src = (msg.get_srcSystem(), msg.get_srcComponent())
+        try:
+            alarm = Alarm.from_command(msg.param1, msg.param2, self._alarm_texts.pop(src, ""), src)
+        except ValueError as exc:
+            self.log.warning("malformed alarm from %s: %s", src, exc)
+            self.alarms_refused += 1
+            self._ack(msg, RESULT_DENIED)
+            return
+        self._ack(msg, self.raise_alarm(alarm))
+
+    def raise_alarm(self, alarm: Alarm) -> int:
+        """Start a recovery (ACCEPTED), merge into the running one (IN_PROGRESS), or refuse."""
+        if self._accept_from and alarm.source[0] not in self._accept_from and alarm.source != (0, 0):
+            self.alarms_refused += 1
+            self.log.warning("alarm from system %d refused: not in accept_from_system_ids", alarm.source[0])
+            return RESULT_DENIED
+        if self.recovery is not None and self._recovery_task is not None and not self._recovery_task.done():
+            self.recovery.raise_criticality(alarm.criticality)
+            self.log.info("alarm %r merged into the running recovery", alarm.reason)
+            return RESULT_IN_PROGRESS
+        s = self.tm.state
+        if s.system_id == 0 or self.tm.age_s("position") > 3.0:
+            self.log.warning("alarm %r refused: no fresh vehicle telemetry", alarm.reason)
+            return RESULT_TEMP_REJECTED
+        if not s.armed or s.landed_state == 1:
+            self.log.warning("alarm %r refused: the vehicle is not flying", alarm.reason)
+            return RESULT_DENIED
+        if self._client is None:
+            self.log.warning("alarm %r refused: no sensor stream", alarm.reason)
+            return RESULT_TEMP_REJECTED
+        self.recovery = Recovery(
+            alarm,
+            control=self.ctl,
+            telemetry=self.tm,
+            frames=self._frame,
+            reasoner=self.reasoner,
+            announce=self.announce,
+            params=self.params,
+            record=self.record,
+            logger=self.log,
+        )
+        self._recovery_task = asyncio.get_running_loop().create_task(self.recovery.run(), name="recovery")
+        self._recovery_task.add_done_callback(self._recovery_done)
+        return RESULT_ACCEPTED
+
+    def _recovery_done(self, task: asyncio.Task[Outcome]) -> None:
+        if task.cancelled():
+            return
+        exc = task.exception()
+        if exc is not None:
+            self.log.error("recovery failed: %r", exc)
+            self.announce(2, f"Landfall: recovery failed: {exc}"[:150])
+            return
+        outcome = task.result()
+        self.outcomes.append(outcome)
+        if self.record is not None:
+            self.record.record_event(
+                "outcome", {"state": outcome.state.value, "rounds": outcome.rounds, "reason": outcome.reason}
+            )
+        self.log.info(
+            "recovery ended: %s after %d rounds (%s)", outcome.state.value, outcome.rounds, outcome.reason
+        )
+
+    async def _frame(self) -> Any:
+        return await self._client.frame(want=("image", "lidar"), image_encoding="raw")
+
+    # ------------------------------------------------------------------ MAVLink out
+    def announce(self, severity: int, text: str) -> None:
+        """STATUSTEXT to every peer (ground stations show severity <= notice)."""
+        chunks = [text[i : i + 50] for i in range(0, len(text), 50)] or [""]
+        msg_id = ((hash(text) & 0xFFFF) or 1) if len(chunks) > 1 else 0
+        for seq, chunk in enumerate(chunks):
+            self.link.send(self.link.mav.statustext_encode(severity, chunk.encode(), msg_id, seq))
+
+    async def _heartbeats(self) -> None:
+        while True:
+            busy = self._recovery_task is not None and not self._recovery_task.done()
+            state = MAV_STATE_ACTIVE if busy else MAV_STATE_STANDBY
+            self.link.send(
+                self.link.mav.heartbeat_encode(
+                    MAV_TYPE_ONBOARD_CONTROLLER, MAV_AUTOPILOT_INVALID, 0, 0, state
+                )
+            )
+            await asyncio.sleep(self._heartbeat_period)
+
+    async def _watchers(self) -> None:
+        """Raise alarms from autopilot signals: battery critical, failsafe text, GPS fix lost."""
+        while True:
+            await asyncio.sleep(1.0)
+            s = self.tm.state
+            if not s.armed or s.landed_state == 1:
+                continue
+            if self._watch_battery_pct is not None and s.battery_pct < self._watch_battery_pct:
+                self._own_alarm(ReasonCode.LOW_BATTERY, Criticality.HIGH, f"battery {s.battery_pct:.0f} %")
+            new_texts = self.tm.texts[self._texts_seen :]
+            self._texts_seen = len(self.tm.texts)
+            if self._watch_failsafe:
+                for _, _, text in new_texts:
+                    if "failsafe" in text.lower():
+                        self._own_alarm(ReasonCode.FAILSAFE, Criticality.HIGH, text)
+            if self._watch_gps and s.gps_fix >= 0:
+                if s.gps_fix >= 3:
+                    self._gps_was_ok = True
+                elif self._gps_was_ok:
+                    self._own_alarm(ReasonCode.GPS_LOST, Criticality.CRITICAL, "GPS fix lost")
+                    self._gps_was_ok = False
+
+    def _own_alarm(self, code: ReasonCode, criticality: Criticality, text: str) -> None:
+        result = self.raise_alarm(Alarm(code, criticality, text, (0, 0), time.monotonic()))
+        self.log.info("watcher alarm %r -> MAV_RESULT %d", text, result)
+
+    async def _connect_sensors(self, stack: contextlib.AsyncExitStack, client_cls: Any) -> None:
+        """Connect to the sensor stream, retrying every second: it may come up after us. Alarms
+        are answered TEMPORARILY_REJECTED until it is there."""
+        from simbridge.sensorstream import SensorStreamError
+
+        assert self._sensors is not None
+        warned = False
+        while True:
+            try:
+                client = client_cls(self._sensors[0], self._sensors[1], timeout_s=self._frame_timeout_s)
+                self._client = await stack.enter_async_context(client)
+                self.log.info("sensor stream connected: %s:%d", *self._sensors)
+                return
+            except SensorStreamError as exc:
+                if not warned:
+                    self.log.warning("sensor stream not available yet (%s); retrying every second", exc)
+                    warned = True
+                await asyncio.sleep(1.0)
+
+    # ------------------------------------------------------------------ lifetime
+    def stop(self) -> None:
+        self._stop.set()
+
+    async def run(self) -> None:
+        from simbridge.sensorstream import SensorClient
+
+        async with contextlib.AsyncExitStack() as stack:
+            await stack.enter_async_context(self.link)
+            tasks = [
+                asyncio.create_task(self._heartbeats(), name="heartbeat"),
+                asyncio.create_task(self._watchers(), name="watchers"),
+            ]
+            if self._sensors is not None:
+                tasks.append(asyncio.create_task(self._connect_sensors(stack, SensorClient), name="sensors"))
+            self.log.info("companion up on %s (component %d)", self.link.url, self.component_id)
+            try:
+                await self._stop.wait()
+            finally:
+                for t in tasks:
+                    t.cancel()
+                if self._recovery_task is not None and not self._recovery_task.done():
+                    self._recovery_task.cancel()
+                    with contextlib.suppress(asyncio.CancelledError):
+                        await self._recovery_task
+                await self.ctl.release()
+                for t in tasks:
+                    with contextlib.suppress(asyncio.CancelledError):
+                        await t

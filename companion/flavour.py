@@ -1,0 +1,51 @@
+"""PX4 and ArduPilot as the companion commands them: which mode is which, told apart by the
+heartbeat's ``autopilot`` field."""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+from companion.telemetry import MAV_AUTOPILOT_ARDUPILOTMEGA, MAV_AUTOPILOT_PX4
+
+
+class Mode(enum.Enum):
+    GUIDED = "guided"  # PX4 OFFBOARD, ArduPilot GUIDED: the companion flies
+    HOLD = "hold"  # PX4 AUTO.LOITER, ArduPilot LOITER
+    LAND = "land"  # PX4 AUTO.LAND, ArduPilot LAND
+
+
+@dataclass(frozen=True, slots=True)
+class Flavour:
+    name: str
+    modes: dict[Mode, int]  # custom_mode values in the heartbeat
+    set_mode: dict[Mode, tuple[float, float, float]]  # DO_SET_MODE params 1-3
+    needs_stream: bool  # PX4: setpoints must stream before and during OFFBOARD
+
+    def mode_of(self, custom_mode: int) -> Mode | None:
+        for mode, value in self.modes.items():
+            if value == custom_mode:
+                return mode
+        return None
+
+
+PX4 = Flavour(
+    name="px4",
+    modes={Mode.GUIDED: 6 << 16, Mode.HOLD: (4 << 16) | (3 << 24), Mode.LAND: (4 << 16) | (6 << 24)},
+    set_mode={Mode.GUIDED: (1, 6, 0), Mode.HOLD: (1, 4, 3), Mode.LAND: (1, 4, 6)},
+    needs_stream=True,
+)
+ARDUPILOT = Flavour(
+    name="ardupilot",
+    modes={Mode.GUIDED: 4, Mode.HOLD: 5, Mode.LAND: 9},
+    set_mode={Mode.GUIDED: (1, 4, 0), Mode.HOLD: (1, 5, 0), Mode.LAND: (1, 9, 0)},
+    needs_stream=False,
+)
+
+
+def flavour_for(autopilot: int) -> Flavour:
+    if autopilot == MAV_AUTOPILOT_PX4:
+        return PX4
+    if autopilot == MAV_AUTOPILOT_ARDUPILOTMEGA:
+        return ARDUPILOT
+    raise ValueError(f"unsupported autopilot type {autopilot} (expected 12 PX4 or 3 ArduPilot)")

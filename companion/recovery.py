@@ -1,0 +1,387 @@
+"""The recovery loop (DESIGN.md section 2): acquire, Surface ID, rank, move, confirm, descend, land.
+
+One :class:`Recovery` per alarm. Its state is explicit (:class:`State`); every decision is announced
+(STATUSTEXT), recorded, and taken from telemetry, never from sleeps. A round that finds nothing
+explores (climbs, then spirals outward); a target never reached or a site rejected at confirmation
+ends the round; when the round budget runs out the vehicle lands at the best site seen.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import enum
+import logging
+import math
+import time
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+from companion.alarms import Alarm, Criticality
+from companion.control import (
+    AutopilotFailsafe,
+    ControlError,
+    OperatorTakeover,
+    TargetTimeout,
+    VehicleController,
+)
+from companion.guidance.frames import PinholeCamera
+from companion.guidance.ipm import IpmError, LidarPixelIndex, pixel_to_ned, pixel_to_ned_flat
+from companion.perception.surface_id import Candidate, check_site, surface_id
+from companion.reasoning.onboard import Reasoner
+from companion.telemetry import TelemetryCache
+
+MAX_REENGAGE = 2
+
+
+class State(enum.Enum):
+    IDLE = "idle"
+    ACQUIRE = "acquire"
+    SURFACE_ID = "surface_id"
+    RANK = "rank"
+    MOVE = "move"
+    CONFIRM = "confirm"
+    DESCEND = "descend"
+    EXPLORE = "explore"
+    LAND = "land"
+    LANDED = "landed"
+    ABORTED = "aborted"
+
+
+@dataclass(frozen=True, slots=True)
+class RecoveryParams:
+    rounds_by_criticality: dict[Criticality, int] = field(
+        default_factory=lambda: {Criticality.LOW: 10, Criticality.HIGH: 6, Criticality.CRITICAL: 3}
+    )
+    descent_fraction: float = 0.8  # descend by this share of the rangefinder distance per step
+    final_land_m: float = 5.0
+    arrival_tolerance_m: float = 0.5
+    arrival_speed_m_s: float = 0.3
+    move_timeout_s: float = 60.0
+    explore_climb_m: float = 15.0
+    explore_max_alt_m: float = 150.0
+    min_candidate_area_m2: float = 30.0
+    rejected_radius_m: float = 4.0  # a rejected site rules out candidates this close to it
+    land_timeout_s: float = 120.0
+
+
+class Record(Protocol):
+    def record_event(self, kind: str, fields: dict[str, Any]) -> None: ...
+
+    def save_image(self, name: str, rgb: Any) -> Any: ...
+
+
+class NoRecord:
+    def record_event(self, kind: str, fields: dict[str, Any]) -> None:
+        return None
+
+    def save_image(self, name: str, rgb: Any) -> Any:
+        return None
+
+
+@dataclass
+class Site:
+    ned_m: tuple[float, float, float]
+    score_rank: int
+    candidate: Candidate
+
+
+@dataclass(frozen=True, slots=True)
+class Outcome:
+    state: State
+    rounds: int
+    site_ned_m: tuple[float, float, float] | None
+    reason: str
+
+
+FrameSource = Callable[[], Awaitable[Any]]  # -> simbridge.sensorstream.SensorFrame-like
+
+
+class Recovery:
+    def __init__(
+        self,
+        alarm: Alarm,
+        *,
+        control: VehicleController,
+        telemetry: TelemetryCache,
+        frames: FrameSource,
+        reasoner: Reasoner,
+        announce: Callable[[int, str], None],
+        params: RecoveryParams | None = None,
+        record: Record | None = None,
+        logger: logging.Logger | None = None,
+    ) -> None:
+        self.alarm = alarm
+        self.ctl = control
+        self.tm = telemetry
+        self._frames = frames
+        self.reasoner = reasoner
+        self._announce = announce
+        self.p = params or RecoveryParams()
+        self.record: Record = record or NoRecord()
+        self.log = logger or logging.getLogger("companion.recovery")
+        self.state = State.IDLE
+        self.criticality = alarm.criticality
+        self.round = 0
+        self.best: Site | None = None
+        self.rejected: list[tuple[float, float]] = []
+        self._explore_step = 0
+
+    @property
+    def budget(self) -> int:
+        return self.p.rounds_by_criticality[self.criticality]
+
+    def raise_criticality(self, criticality: Criticality) -> None:
+        """A repeated alarm can make the recovery more urgent (a shorter budget), never less."""
+        if criticality > self.criticality:
+            self.criticality = criticality
+            self._say(5, f"alarm raised to {criticality.name.lower()}: {self.budget} rounds")
+
+    def _set(self, state: State) -> None:
+        self.state = state
+        self.record.record_event("state", {"state": state.value, "round": self.round})
+
+    def _say(self, severity: int, text: str) -> None:
+        self.log.info("%s", text)
+        self._announce(severity, f"Landfall: {text}")
+
+    # ------------------------------------------------------------------ the loop
+    async def run(self) -> Outcome:
+        self._say(5, f"alarm '{self.alarm.reason}' ({self.criticality.name.lower()}), {self.budget} rounds")
+        try:
+            await self.ctl.engage()
+            reengaged = 0
+            while self.round < self.budget:
+                self.round += 1
+                try:
+                    landed = await self._round()
+                except AutopilotFailsafe as exc:
+                    # policy: the autopilot's own failsafe (e.g. a lost setpoint stream) is re-engaged
+                    # from where the vehicle is, twice at most; then the autopilot keeps control
+                    reengaged += 1
+                    if reengaged > MAX_REENGAGE:
+                        raise ControlError(f"{exc}; not re-engaging again") from exc
+                    self._say(4, f"{exc}: re-engaging")
+                    await self.ctl.engage()
+                    continue
+                if landed:
+                    return Outcome(State.LANDED, self.round, self._site_ned(), "landed")
+            return await self._land_at_best()
+        except OperatorTakeover as exc:
+            self._set(State.ABORTED)
+            self._say(4, "operator took over: stopped commanding")
+            await self.ctl.release()
+            return Outcome(State.ABORTED, self.round, None, str(exc))
+        except ControlError as exc:
+            self._set(State.ABORTED)
+            self._say(2, f"aborted: {exc}")
+            await self.ctl.release()
+            return Outcome(State.ABORTED, self.round, None, str(exc))
+
+    def _site_ned(self) -> tuple[float, float, float] | None:
+        return self.best.ned_m if self.best is not None else None
+
+    async def _acquire(self) -> Any:
+        self._set(State.ACQUIRE)
+        return await self._frames()
+
+    async def _round(self) -> bool:
+        frame = await self._acquire()
+        self._set(State.SURFACE_ID)
+        camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
+        candidates = surface_id(
+            frame.lidar_frd,
+            frame.pos_ned_m,
+            frame.quat_wxyz,
+            camera,
+            min_area_m2=self.p.min_candidate_area_m2,
+        )
+        candidates = [c for c in candidates if not self._near_rejected(c)]
+        if frame.image_rgb is not None:
+            self.record.save_image(f"round{self.round:02d}-acquire", frame.image_rgb)
+        if not candidates or all(c.fallback for c in candidates):
+            await self._explore()
+            return False
+        self._set(State.RANK)
+        ranking = await self.reasoner.rank(candidates, frame)
+        self.record.record_event(
+            "rank",
+            {
+                "round": self.round,
+                "order": list(ranking.order),
+                "rationale": ranking.rationale,
+                "tier": ranking.tier,
+                "latency_s": ranking.latency_s,
+                "candidates": [_cand_json(c) for c in candidates],
+            },
+        )
+        choice = next((candidates[k] for k in ranking.order if not candidates[k].fallback), None)
+        if choice is None:
+            await self._explore()
+            return False
+        target = await asyncio.to_thread(self._ipm, choice, frame, camera)
+        if self.best is None:
+            self.best = Site(target, 0, choice)
+        n, e, d = self.tm.state.pos_ned_m
+        dist = math.hypot(target[0] - n, target[1] - e)
+        bearing = _compass(math.degrees(math.atan2(target[1] - e, target[0] - n)))
+        kind = "roof" if choice.height_above_m >= 3.0 else "ground"
+        self._say(6, f"site {choice.index} {kind} {dist:.0f} m {bearing}")
+        self._say(6, ranking.rationale[:200])
+        self._set(State.MOVE)
+        try:
+            await self.ctl.goto(
+                target[0],
+                target[1],
+                d,
+                tolerance_m=self.p.arrival_tolerance_m,
+                speed_m_s=self.p.arrival_speed_m_s,
+                timeout_s=self.p.move_timeout_s + dist / 2.0,
+            )
+        except TargetTimeout as exc:
+            self._say(4, f"target not reached ({exc.error_m:.1f} m off): next round")
+            return False
+        return await self._confirm_and_descend(target, choice)
+
+    async def _confirm_and_descend(self, target: tuple[float, float, float], choice: Candidate) -> bool:
+        while True:
+            frame = await self._acquire()
+            self._set(State.CONFIRM)
+            check = await asyncio.to_thread(
+                check_site, frame.lidar_frd, frame.pos_ned_m, frame.quat_wxyz, (target[0], target[1])
+            )
+            decision = await self.reasoner.confirm(check, frame)
+            self.record.record_event(
+                "confirm",
+                {
+                    "round": self.round,
+                    "accept": decision.accept,
+                    "rationale": decision.rationale,
+                    "tier": decision.tier,
+                    "latency_s": decision.latency_s,
+                    "site_ned_m": list(target),
+                },
+            )
+            if not decision.accept:
+                self.rejected.append((target[0], target[1]))
+                if (
+                    self.best is not None
+                    and math.dist(self.best.ned_m[:2], target[:2]) < self.p.rejected_radius_m
+                ):
+                    self.best = None
+                self._say(4, f"site {choice.index} {decision.rationale[:120]}")
+                return False
+            self.best = Site(target, 0, choice)
+            rng_m = frame.rangefinder_m
+            if not math.isfinite(rng_m):
+                rng_m = self.tm.state.rangefinder_m
+            if rng_m <= self.p.final_land_m:
+                return await self._land()
+            self._set(State.DESCEND)
+            _n, _e, d = self.tm.state.pos_ned_m
+            new_d = d + self.p.descent_fraction * rng_m
+            self._say(6, f"descending {self.p.descent_fraction * rng_m:.0f} m, {decision.rationale[:80]}")
+            try:
+                await self.ctl.goto(
+                    target[0],
+                    target[1],
+                    new_d,
+                    tolerance_m=self.p.arrival_tolerance_m,
+                    speed_m_s=self.p.arrival_speed_m_s,
+                    timeout_s=self.p.move_timeout_s + rng_m,
+                )
+            except TargetTimeout as exc:
+                self._say(4, f"descent target not reached ({exc.error_m:.1f} m off): next round")
+                return False
+
+    async def _land(self) -> bool:
+        self._set(State.LAND)
+        self._say(5, "final approach: autopilot land mode")
+        await self.ctl.land(self.p.land_timeout_s)
+        self._set(State.LANDED)
+        self._say(5, "landed")
+        return True
+
+    async def _land_at_best(self) -> Outcome:
+        if self.best is None:
+            n, e, _ = self.tm.state.pos_ned_m
+            self._say(4, "round budget spent with no site: landing here")
+        else:
+            n, e, _ = self.best.ned_m
+            self._say(4, f"round budget spent: landing at the best site seen, {self.best.candidate.index}")
+            _, _, d = self.tm.state.pos_ned_m
+            try:
+                await self.ctl.goto(
+                    n,
+                    e,
+                    d,
+                    tolerance_m=self.p.arrival_tolerance_m,
+                    speed_m_s=self.p.arrival_speed_m_s,
+                    timeout_s=self.p.move_timeout_s,
+                )
+            except TargetTimeout:
+                self._say(4, "best site not reached: landing here")
+        await self._land()
+        return Outcome(State.LANDED, self.round, self._site_ned(), "round budget spent")
+
+    async def _explore(self) -> None:
+        """Nothing survived screening: climb for a wider view, then step outward on a spiral."""
+        self._set(State.EXPLORE)
+        n, e, d = self.tm.state.pos_ned_m
+        alt = self.tm.state.rangefinder_m
+        if math.isfinite(alt) and alt + self.p.explore_climb_m <= self.p.explore_max_alt_m:
+            target = (n, e, d - self.p.explore_climb_m)
+            self._say(6, f"no flat site in view: climbing {self.p.explore_climb_m:.0f} m")
+        else:
+            self._explore_step += 1
+            angle = self._explore_step * 2.4  # golden-angle spiral
+            radius = 30.0 * math.sqrt(self._explore_step)
+            target = (n + radius * math.cos(angle), e + radius * math.sin(angle), d)
+            self._say(6, f"no flat site in view: moving {radius:.0f} m outward")
+        with contextlib.suppress(TargetTimeout):
+            await self.ctl.goto(*target, tolerance_m=1.0, speed_m_s=0.5, timeout_s=self.p.move_timeout_s)
+
+    def _near_rejected(self, c: Candidate) -> bool:
+        if c.site_ned_m is None:
+            return False
+        return any(math.dist(c.site_ned_m[:2], r) < self.p.rejected_radius_m for r in self.rejected)
+
+    def _ipm(self, c: Candidate, frame: Any, camera: PinholeCamera) -> tuple[float, float, float]:
+        """The chosen pixel -> world point through the LiDAR; the flat-ground fallback without it."""
+        u, v = c.centre_px
+        try:
+            index = LidarPixelIndex(frame.lidar_frd, camera)
+            p = pixel_to_ned(u, v, index, frame.pos_ned_m, frame.quat_wxyz)
+        except IpmError as exc:
+            ground_d = frame.pos_ned_m[2] + frame.rangefinder_m
+            self.log.warning(
+                "IPM through the LiDAR failed (%s): flat ground at the rangefinder distance", exc
+            )
+            p = pixel_to_ned_flat(u, v, camera, frame.pos_ned_m, frame.quat_wxyz, ground_d)
+        return (float(p[0]), float(p[1]), float(p[2]))
+
+
+def _cand_json(c: Candidate) -> dict[str, Any]:
+    return {
+        "index": c.index,
+        "box_px": list(c.box_px),
+        "centre_px": [round(v, 1) for v in c.centre_px],
+        "area_m2": round(c.area_m2, 1),
+        "height_above_m": _r(c.height_above_m),
+        "edge_distance_m": round(c.edge_distance_m, 2),
+        "roughness_m": _r(c.roughness_m),
+        "fallback": c.fallback,
+    }
+
+
+def _r(v: float) -> float | None:
+    return None if not math.isfinite(v) else round(v, 3)
+
+
+def _compass(bearing_deg: float) -> str:
+    names = ["N", "NE", "E", "SE", "S", "SW", "W", "NW"]
+    return names[round((bearing_deg % 360) / 45) % 8]
+
+
+_ = time

@@ -1,0 +1,94 @@
+"""The product end to end: simbridge and the companion as separate processes, an alarm from
+trigger_alarm.py, and the verdict from simbridge's ground truth (its episode log)."""
+
+from __future__ import annotations
+
+import re
+import time
+from collections.abc import Callable
+
+import pytest
+
+from tests.conftest import Rig
+
+pytestmark = pytest.mark.slow
+
+
+def _wait_touchdown(rig: Rig, timeout_s: float) -> dict[str, object]:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        events = rig.sim.events("touchdown")
+        if events:
+            return events[0]
+        assert rig.companion.poll() is None, rig.log_text()
+        time.sleep(0.5)  # polling a file another process writes; no event to wait on
+    raise AssertionError(f"no touchdown within {timeout_s} s\n{rig.log_text()[-3000:]}")
+
+
+def _wait_for_companion(rig: Rig) -> None:
+    """Until the companion accepts alarms, trigger_alarm.py reports 'refused for now' (exit 1)."""
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        if "sensor stream connected" in rig.log_text():
+            return
+        time.sleep(0.2)
+    raise AssertionError(rig.log_text())
+
+
+@pytest.mark.parametrize(
+    ("autopilot", "scenario", "roof_ne", "roof_height_m"),
+    [("px4", "scenario1", (0.0, -27.0), 22.0), ("ardupilot", "scenario2", None, None)],
+)
+def test_alarm_lands_on_the_clear_roof(
+    start_rig: Callable[..., Rig],
+    autopilot: str,
+    scenario: str,
+    roof_ne: tuple[float, float] | None,
+    roof_height_m: float | None,
+) -> None:
+    rig = start_rig(["--scenario", scenario, "--autopilot", autopilot, "--speed", "4"])
+    _wait_for_companion(rig)
+    out = rig.alarm("--reason", "GPS spoofing detected", "--criticality", "high", "--code", "gps_spoofing")
+    for _ in range(20):  # the first heartbeats and telemetry may still be on their way
+        if out.returncode == 0:
+            break
+        time.sleep(0.5)
+        out = rig.alarm("--reason", "GPS spoofing detected", "--criticality", "high")
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "accepted: recovery started" in out.stdout
+    td = _wait_touchdown(rig, timeout_s=150)
+    assert td["surface"] == "rooftop_clear", (td, rig.log_text()[-2000:])
+    assert td["safe"] is True
+    log = rig.log_text()
+    assert "recovery ended: landed" in log
+    rounds = int(log.split("recovery ended: landed after ")[1].split(" ")[0])
+    assert rounds <= 6  # the budget of a 'high' alarm
+    if roof_ne is not None and roof_height_m is not None:
+        n, e, d = td["pos_ned_m"]  # type: ignore[misc]
+        assert abs(n - roof_ne[0]) < 18
+        assert abs(e - roof_ne[1]) < 13
+        assert -d == pytest.approx(roof_height_m + 0.15, abs=0.1)
+
+
+def test_repeated_alarm_merges_and_unsigned_alarm_is_refused(start_rig: Callable[..., Rig]) -> None:
+    key = "ab" * 32
+    rig = start_rig(
+        ["--scenario", "scenario1", "--speed", "2", "--signing-key", key], env={"LANDFALL_SIGNING_KEY": key}
+    )
+    _wait_for_companion(rig)
+    unsigned = rig.alarm("--reason", "spoofed", "--criticality", "critical", timeout_s=3)
+    assert unsigned.returncode == 3  # silently dropped by the signed link: no acknowledgement
+    first = rig.alarm("--reason", "low battery", "--signing-key", key)
+    for _ in range(20):
+        if first.returncode == 0:
+            break
+        time.sleep(0.5)
+        first = rig.alarm("--reason", "low battery", "--signing-key", key)
+    assert "recovery started" in first.stdout, first.stdout + first.stderr
+    second = rig.alarm("--reason", "storm", "--criticality", "critical", "--signing-key", key)
+    assert second.returncode == 0
+    assert "merged into the running recovery" in second.stdout
+    log = rig.log_text()
+    assert "alarm raised to critical: 3 rounds" in log  # the repeat shortened the budget
+    starts = re.findall(r"INFO companion: alarm '[^']*' \(\w+\), \d+ rounds", log)
+    assert len(starts) == 1, starts  # and never started a second loop

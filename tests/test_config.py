@@ -1,0 +1,499 @@
+"""companion.config: defaults, precedence, errors naming the option, the signing key, the shipped TOML."""
+
+from __future__ import annotations
+
+import logging
+import tomllib
+from pathlib import Path
+
+import pytest
+from pydantic import ValidationError
+
+from companion.config import (
+    CompanionConfig,
+    ConfigError,
+    RoundsByCriticality,
+    env_var_name,
+    load_config,
+)
+
+REPO = Path(__file__).resolve().parents[1]
+KEY_HEX = "0123456789abcdef" * 4
+KEY_HEX_2 = "fedcba9876543210" * 4
+
+
+def write(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+@pytest.fixture
+def in_tmp(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """Work in tmp_path so a relative Path("companion.toml") reads as the user typed it."""
+    monkeypatch.chdir(tmp_path)
+    return tmp_path
+
+
+def error_of(path: Path | None = None, env: dict[str, str] | None = None, **overrides: object) -> ConfigError:
+    with pytest.raises(ConfigError) as info:
+        load_config(path, env or {}, {k.replace("__", "."): v for k, v in overrides.items()})
+    return info.value
+
+
+# --- defaults and precedence -------------------------------------------------------------------------
+
+
+def test_load_config_defaults_match_the_brief() -> None:
+    cfg = load_config(None, {}, {})
+    assert cfg == CompanionConfig()
+    assert cfg.mavlink.url == "udp:14550"
+    assert cfg.mavlink.component_id == 191
+    assert cfg.mavlink.vehicle_system_id == 0
+    assert cfg.mavlink.signing_key_env == "LANDFALL_SIGNING_KEY"
+    assert cfg.mavlink.signing_key is None
+    assert cfg.mavlink.heartbeat_hz == 1.0
+    assert (cfg.sensors.endpoint, cfg.sensors.frame_timeout_s, cfg.sensors.max_frame_age_s) == (
+        "127.0.0.1:5600",
+        10.0,
+        2.0,
+    )
+    r = cfg.recovery
+    assert r.max_rounds == 10
+    assert r.rounds_by_criticality == RoundsByCriticality(low=10, high=6, critical=3)
+    assert (r.descent_fraction, r.final_land_m, r.arrival_tolerance_m, r.arrival_speed_m_s) == (
+        0.8,
+        5.0,
+        0.5,
+        0.3,
+    )
+    assert (r.move_timeout_s, r.explore_climb_m, r.explore_max_alt_m, r.min_candidate_area_m2) == (
+        60.0,
+        15.0,
+        150.0,
+        30.0,
+    )
+    a = cfg.alarms
+    assert (a.watch_battery, a.battery_critical_pct, a.watch_failsafe_text, a.watch_gps) == (
+        True,
+        15.0,
+        True,
+        True,
+    )
+    assert a.accept_from_system_ids == ()
+    assert (cfg.reasoner.name, cfg.reasoner.rank_deadline_s, cfg.reasoner.confirm_deadline_s) == (
+        "onboard",
+        8.0,
+        5.0,
+    )
+    assert (cfg.record.dir, cfg.record.max_mb) == (None, 500)
+    assert cfg.log.level == "INFO"
+    assert cfg.signing_key() is None
+
+
+def test_load_config_precedence_file_then_env_then_flags(in_tmp: Path) -> None:
+    path = write(
+        Path("companion.toml"),
+        """
+        [recovery]
+        max_rounds = 7
+        final_land_m = 4.0
+        [sensors]
+        endpoint = "10.0.0.1:1000"
+        frame_timeout_s = 3.0
+        [reasoner]
+        name = "from-file"
+        """,
+    )
+    env = {
+        "LANDFALL_RECOVERY_MAX_ROUNDS": "6",
+        "LANDFALL_SENSORS_ENDPOINT": "10.0.0.2:2000",
+        "LANDFALL_REASONER_NAME": "from-env",
+    }
+    overrides = {"sensors.endpoint": "10.0.0.3:3000", "mavlink.url": None, "record.dir": Path("rec")}
+    cfg = load_config(path, env, overrides)
+    assert cfg.recovery.final_land_m == 4.0  # file only
+    assert cfg.sensors.frame_timeout_s == 3.0  # file only
+    assert cfg.recovery.max_rounds == 6  # env beats file
+    assert cfg.reasoner.name == "from-env"  # env beats file
+    assert cfg.sensors.endpoint == "10.0.0.3:3000"  # flag beats env and file
+    assert cfg.mavlink.url == "udp:14550"  # a None override means "flag not given"
+    assert cfg.record.dir == Path("rec")
+
+
+def test_load_config_env_sub_table_replaces_only_given_keys(in_tmp: Path) -> None:
+    path = write(
+        Path("companion.toml"), "[recovery.rounds_by_criticality]\nlow = 9\nhigh = 5\ncritical = 4\n"
+    )
+    cfg = load_config(path, {"LANDFALL_RECOVERY_ROUNDS_BY_CRITICALITY": "critical=1"}, {})
+    assert cfg.recovery.rounds_by_criticality == RoundsByCriticality(low=9, high=5, critical=1)
+
+
+def test_load_config_env_text_parses_to_field_types() -> None:
+    env = {
+        "LANDFALL_ALARMS_WATCH_GPS": "off",
+        "LANDFALL_ALARMS_WATCH_BATTERY": "Yes",
+        "LANDFALL_ALARMS_BATTERY_CRITICAL_PCT": "20.5",
+        "LANDFALL_ALARMS_ACCEPT_FROM_SYSTEM_IDS": "1, 255",
+        "LANDFALL_MAVLINK_COMPONENT_ID": "190",
+        "LANDFALL_RECORD_DIR": "/var/lib/landfall",
+        "LANDFALL_RECORD_MAX_MB": "64",
+        "LANDFALL_LOG_LEVEL": "debug",
+        "LANDFALL_OTHER_THING": "ignored: not a section",
+        "LANDFALL_SIGNING_KEY_FILE": "ignored: SIGNING is not a section",
+    }
+    cfg = load_config(None, env, {})
+    assert cfg.alarms.watch_gps is False
+    assert cfg.alarms.watch_battery is True
+    assert cfg.alarms.battery_critical_pct == 20.5
+    assert cfg.alarms.accept_from_system_ids == (1, 255)
+    assert cfg.mavlink.component_id == 190
+    assert cfg.record.dir == Path("/var/lib/landfall")
+    assert cfg.record.max_mb == 64
+    assert cfg.log.level == "DEBUG"
+
+
+def test_load_config_empty_env_for_optional_means_none(in_tmp: Path) -> None:
+    path = write(Path("companion.toml"), '[record]\ndir = "/data/rec"\n')
+    assert load_config(path, {"LANDFALL_RECORD_DIR": ""}, {}).record.dir is None
+    assert (
+        load_config(path, {"LANDFALL_ALARMS_ACCEPT_FROM_SYSTEM_IDS": ""}, {}).alarms.accept_from_system_ids
+        == ()
+    )
+
+
+def test_load_config_flag_text_is_parsed_for_non_string_options() -> None:
+    cfg = load_config(None, {}, {"recovery.max_rounds": "4", "record.dir": "/tmp/rec"})
+    assert cfg.recovery.max_rounds == 4
+    assert cfg.record.dir == Path("/tmp/rec")
+
+
+def test_companion_config_is_frozen() -> None:
+    cfg = load_config(None, {}, {})
+    with pytest.raises(ValidationError):
+        cfg.recovery.max_rounds = 3
+
+
+def test_rounds_for_caps_by_max_rounds() -> None:
+    assert load_config(None, {}, {}).rounds_for("critical") == 3
+    assert load_config(None, {}, {}).rounds_for("low") == 10
+    assert load_config(None, {"LANDFALL_RECOVERY_MAX_ROUNDS": "2"}, {}).rounds_for("high") == 2
+
+
+def test_env_var_name_upper_cases_section_and_key() -> None:
+    assert env_var_name("recovery.max_rounds") == "LANDFALL_RECOVERY_MAX_ROUNDS"
+
+
+# --- errors name the option --------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("toml", "message"),
+    [
+        ("[recovery]\nmax_rounds = 0", "companion.toml: recovery.max_rounds: must be >= 1 (got 0)"),
+        (
+            "[recovery]\nmax_rounds = '10'",
+            "companion.toml: recovery.max_rounds: must be an integer (got '10')",
+        ),
+        (
+            "[recovery]\ndescent_fraction = 1.0",
+            "companion.toml: recovery.descent_fraction: must be < 1 (got 1.0)",
+        ),
+        (
+            "[recovery]\ndescent_fraction = 0",
+            "companion.toml: recovery.descent_fraction: must be > 0 (got 0)",
+        ),
+        (
+            "[recovery]\nfinal_land_m = nan",
+            "companion.toml: recovery.final_land_m: must be a finite number (got nan)",
+        ),
+        ("[alarms]\nwatch_gps = 1", "companion.toml: alarms.watch_gps: must be true or false (got 1)"),
+        (
+            "[alarms]\nbattery_critical_pct = 101",
+            "companion.toml: alarms.battery_critical_pct: must be <= 100 (got 101)",
+        ),
+        (
+            "[alarms]\naccept_from_system_ids = [1, 0]",
+            "companion.toml: alarms.accept_from_system_ids[1]: must be >= 1 (got 0)",
+        ),
+        ("[mavlink]\ncomponent_id = 256", "companion.toml: mavlink.component_id: must be <= 255 (got 256)"),
+        (
+            "[mavlink]\nurl = 'tcp:5760'",
+            "companion.toml: mavlink.url: must be udp:PORT, udpin:HOST:PORT or udpout:HOST:PORT "
+            "(got 'tcp:5760')",
+        ),
+        (
+            "[mavlink]\nsigning_key_env = 'A B'",
+            "companion.toml: mavlink.signing_key_env: must be an environment",
+        ),
+        ("[sensors]\nendpoint = 'localhost'", "companion.toml: sensors.endpoint: must be HOST:PORT"),
+        ("[reasoner]\nname = ''", "companion.toml: reasoner.name: must not be empty (got '')"),
+        ("[record]\nmax_mb = 0", "companion.toml: record.max_mb: must be >= 1 (got 0)"),
+        (
+            "[log]\nlevel = 'LOUD'",
+            "companion.toml: log.level: must be one of DEBUG, INFO, WARNING, ERROR, CRITICAL",
+        ),
+        (
+            "[recovery.rounds_by_criticality]\ncritical = 0",
+            "companion.toml: recovery.rounds_by_criticality.critical",
+        ),
+        (
+            "[recovery.rounds_by_criticality]\nlow = 2",
+            "companion.toml: recovery.rounds_by_criticality: must not grow with criticality",
+        ),
+        ("recovery = 5", "companion.toml: recovery: must be a table ([recovery]), got 5"),
+        (
+            "[recovery]\nmax_round = 3",
+            "companion.toml: recovery.max_round: unknown option (allowed: max_rounds, ",
+        ),
+        (
+            "[recovery.rounds_by_criticality]\nmedium = 3",
+            "companion.toml: recovery.rounds_by_criticality.medium: "
+            "unknown option (allowed: low, high, critical)",
+        ),
+        (
+            "[recoverry]\nmax_rounds = 3",
+            "companion.toml: recoverry: unknown section (allowed: mavlink, sensors",
+        ),
+        ("recovery = [", "companion.toml: invalid TOML"),
+    ],
+)
+def test_load_config_file_error_names_option(in_tmp: Path, toml: str, message: str) -> None:
+    err = error_of(write(Path("companion.toml"), toml))
+    assert str(err).startswith(message)
+    assert str(err) == f"{err.option}: {err.problem}"
+    assert err.option.startswith("companion.toml")
+    assert isinstance(err, ValueError)
+
+
+def test_load_config_unknown_file_option_lists_all_allowed(in_tmp: Path) -> None:
+    err = error_of(write(Path("companion.toml"), "[log]\nlevels = 'INFO'"))
+    assert err.option == "companion.toml: log.levels"
+    assert err.problem == "unknown option (allowed: level)"
+
+
+def test_load_config_missing_file_names_the_file(tmp_path: Path) -> None:
+    missing = tmp_path / "nope.toml"
+    err = error_of(missing)
+    assert err.option == str(missing)
+    assert "cannot read the file" in err.problem
+
+
+@pytest.mark.parametrize(
+    ("env", "message"),
+    [
+        (
+            {"LANDFALL_RECOVERY_MAX_ROUNDS": "ten"},
+            "LANDFALL_RECOVERY_MAX_ROUNDS: must be an integer (got 'ten')",
+        ),
+        ({"LANDFALL_RECOVERY_MAX_ROUNDS": "0"}, "LANDFALL_RECOVERY_MAX_ROUNDS: must be >= 1 (got 0)"),
+        (
+            {"LANDFALL_RECOVERY_MAX_ROUNDS": "2.5"},
+            "LANDFALL_RECOVERY_MAX_ROUNDS: must be an integer (got '2.5')",
+        ),
+        (
+            {"LANDFALL_ALARMS_WATCH_GPS": "maybe"},
+            "LANDFALL_ALARMS_WATCH_GPS: must be true or false (got 'maybe')",
+        ),
+        (
+            {"LANDFALL_SENSORS_FRAME_TIMEOUT_S": "fast"},
+            "LANDFALL_SENSORS_FRAME_TIMEOUT_S: must be a number (got 'fast')",
+        ),
+        (
+            {"LANDFALL_SENSORS_FRAME_TIMEOUT_S": "-1"},
+            "LANDFALL_SENSORS_FRAME_TIMEOUT_S: must be > 0 (got -1.0)",
+        ),
+        (
+            {"LANDFALL_SENSORS_FRAME_TIMEOUT_S": "inf"},
+            "LANDFALL_SENSORS_FRAME_TIMEOUT_S: must be a finite number",
+        ),
+        (
+            {"LANDFALL_ALARMS_ACCEPT_FROM_SYSTEM_IDS": "1,x"},
+            "LANDFALL_ALARMS_ACCEPT_FROM_SYSTEM_IDS: must be a comma-separated list of integers (got '1,x')",
+        ),
+        (
+            {"LANDFALL_ALARMS_ACCEPT_FROM_SYSTEM_IDS": "1,300"},
+            "LANDFALL_ALARMS_ACCEPT_FROM_SYSTEM_IDS[1]: must be <= 255 (got 300)",
+        ),
+        (
+            {"LANDFALL_RECOVERY_ROUNDS_BY_CRITICALITY": "critical=0"},
+            "LANDFALL_RECOVERY_ROUNDS_BY_CRITICALITY (critical): must be >= 1 (got 0)",
+        ),
+        (
+            {"LANDFALL_RECOVERY_ROUNDS_BY_CRITICALITY": "crit=1"},
+            "LANDFALL_RECOVERY_ROUNDS_BY_CRITICALITY: must be a comma-separated list of "
+            "low=..., high=..., critical=... (got 'crit=1')",
+        ),
+        (
+            {"LANDFALL_RECOVERY_ROUNDS_BY_CRITICALITY": "low=1"},
+            "LANDFALL_RECOVERY_ROUNDS_BY_CRITICALITY: must not grow with criticality",
+        ),
+        (
+            {"LANDFALL_RECOVERY_MAX_ROUND": "3"},
+            "LANDFALL_RECOVERY_MAX_ROUND: unknown option (allowed: LANDFALL_RECOVERY_MAX_ROUNDS, ",
+        ),
+        ({"LANDFALL_SENSORS_ENDPOINT": "host:0"}, "LANDFALL_SENSORS_ENDPOINT: must be HOST:PORT"),
+        ({"LANDFALL_LOG_LEVEL": "chatty"}, "LANDFALL_LOG_LEVEL: must be one of"),
+    ],
+)
+def test_load_config_env_error_names_variable(env: dict[str, str], message: str) -> None:
+    err = error_of(None, env)
+    assert str(err).startswith(message)
+    assert err.option == message.split(":")[0]
+
+
+def test_load_config_env_error_beats_valid_file(in_tmp: Path) -> None:
+    path = write(Path("companion.toml"), "[recovery]\nmax_rounds = 4\n")
+    err = error_of(path, {"LANDFALL_RECOVERY_MAX_ROUNDS": "-2"})
+    assert err.option == "LANDFALL_RECOVERY_MAX_ROUNDS"
+    assert err.problem == "must be >= 1 (got -2)"
+
+
+@pytest.mark.parametrize(
+    ("overrides", "option", "problem"),
+    [
+        (
+            {"sensors__endpoint": "localhost"},
+            "--sensors",
+            "must be HOST:PORT with a port in 1..65535 (got 'localhost')",
+        ),
+        (
+            {"sensors__endpoint": "h:70000"},
+            "--sensors",
+            "must be HOST:PORT with a port in 1..65535 (got 'h:70000')",
+        ),
+        (
+            {"mavlink__url": "14550"},
+            "--mavlink",
+            "must be udp:PORT, udpin:HOST:PORT or udpout:HOST:PORT (got '14550')",
+        ),
+        ({"mavlink__url": "udp:0"}, "--mavlink", "port must be in 1..65535 (got 'udp:0')"),
+        ({"reasoner__name": "two words"}, "--reasoner", "must be one word (no spaces) (got 'two words')"),
+        ({"record__dir": 5}, "--record", "must be a path (a string) (got 5)"),
+        (
+            {"log__level": "loud"},
+            "--log-level",
+            "must be one of DEBUG, INFO, WARNING, ERROR, CRITICAL (got 'loud')",
+        ),
+        ({"recovery__max_rounds": "x"}, "override recovery.max_rounds", "must be an integer (got 'x')"),
+    ],
+)
+def test_load_config_flag_error_names_flag(overrides: dict[str, object], option: str, problem: str) -> None:
+    err = error_of(None, None, **overrides)
+    assert (err.option, err.problem) == (option, problem)
+
+
+def test_load_config_unknown_override_lists_options() -> None:
+    err = error_of(None, None, sensor__endpoint="h:1")
+    assert err.option == "override sensor.endpoint"
+    assert err.problem.startswith("unknown option (allowed: mavlink.url, mavlink.component_id,")
+    assert "sensors.endpoint" in err.problem
+
+
+# --- the signing key ---------------------------------------------------------------------------------
+
+
+def test_signing_key_from_default_env_variable() -> None:
+    cfg = load_config(None, {"LANDFALL_SIGNING_KEY": KEY_HEX.upper() + "\n"}, {})
+    assert cfg.signing_key() == bytes.fromhex(KEY_HEX)
+    assert len(cfg.signing_key() or b"") == 32
+
+
+def test_signing_key_env_beats_file_and_file_key_is_warned(
+    in_tmp: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    path = write(Path("companion.toml"), f'[mavlink]\nsigning_key = "{KEY_HEX}"\n')
+    assert load_config(path, {"LANDFALL_SIGNING_KEY": KEY_HEX_2}, {}).signing_key() == bytes.fromhex(
+        KEY_HEX_2
+    )
+    assert "discouraged" not in caplog.text
+    with caplog.at_level(logging.WARNING, logger="companion.config"):
+        cfg = load_config(path, {}, {})
+    assert cfg.signing_key() == bytes.fromhex(KEY_HEX)
+    assert "companion.toml: mavlink.signing_key: a key in the file is discouraged" in caplog.text
+    assert KEY_HEX not in caplog.text
+
+
+def test_signing_key_env_name_is_configurable_and_exempt(in_tmp: Path) -> None:
+    # The variable starts like an option of [mavlink] but is named by signing_key_env, so it is no typo.
+    path = write(Path("companion.toml"), '[mavlink]\nsigning_key_env = "LANDFALL_MAVLINK_KEY"\n')
+    cfg = load_config(path, {"LANDFALL_MAVLINK_KEY": KEY_HEX, "LANDFALL_SIGNING_KEY": KEY_HEX_2}, {})
+    assert cfg.signing_key() == bytes.fromhex(KEY_HEX)
+
+
+@pytest.mark.parametrize(
+    ("value", "problem"),
+    [
+        (KEY_HEX[:-2], "must be 64 hex digits (a 32-byte key); got 62 hex digits"),
+        (KEY_HEX + "00", "must be 64 hex digits (a 32-byte key); got 66 hex digits"),
+        (KEY_HEX[:-1] + "g", "must be 64 hex digits (a 32-byte key); it has non-hex characters"),
+        ("", "is empty: set 64 hex digits (a 32-byte key), or unset it to run unsigned"),
+    ],
+)
+def test_signing_key_bad_value_is_named_and_not_echoed(value: str, problem: str) -> None:
+    err = error_of(None, {"LANDFALL_SIGNING_KEY": value})
+    assert (err.option, err.problem) == ("LANDFALL_SIGNING_KEY", problem)
+    if value:
+        assert value not in str(err)
+        assert value[:16] not in str(err)
+    assert err.__cause__ is None
+    assert err.__suppress_context__ is True
+
+
+def test_signing_key_bad_value_in_file_is_not_echoed(in_tmp: Path) -> None:
+    bad = "ab" * 31
+    err = error_of(write(Path("companion.toml"), f'[mavlink]\nsigning_key = "{bad}"\n'))
+    assert err.option == "companion.toml: mavlink.signing_key"
+    assert bad not in str(err)
+
+
+def test_signing_key_never_in_repr_str_or_dumps(caplog: pytest.LogCaptureFixture) -> None:
+    cfg = load_config(None, {"LANDFALL_SIGNING_KEY": KEY_HEX}, {})
+    logging.getLogger("test").warning("config %s / %r", cfg, cfg.mavlink)
+    for text in (
+        repr(cfg),
+        str(cfg),
+        repr(cfg.mavlink),
+        str(cfg.mavlink),
+        cfg.model_dump_json(),
+        caplog.text,
+    ):
+        assert KEY_HEX not in text
+        assert KEY_HEX.upper() not in text
+    assert "**********" in repr(cfg.mavlink)
+
+
+# --- the shipped example -----------------------------------------------------------------------------
+
+
+def test_deploy_companion_toml_loads_to_defaults() -> None:
+    path = REPO / "deploy" / "companion.toml"
+    assert load_config(path, {}, {}) == CompanionConfig()
+
+
+def test_deploy_companion_toml_lists_every_option_with_a_comment() -> None:
+    path = REPO / "deploy" / "companion.toml"
+    text = path.read_text()
+    data = tomllib.loads(text)
+    present: set[str] = set()
+    for section, table in data.items():
+        for key, value in table.items():
+            if isinstance(value, dict):
+                present.update(f"{section}.{key}.{sub}" for sub in value)
+            else:
+                present.add(f"{section}.{key}")
+    expected: set[str] = set()
+    for section, field in CompanionConfig.model_fields.items():
+        model = field.annotation
+        assert isinstance(model, type)
+        for key in model.model_fields:
+            if key == "rounds_by_criticality":
+                expected.update(f"{section}.{key}.{k}" for k in RoundsByCriticality.model_fields)
+            else:
+                expected.add(f"{section}.{key}")
+    # The key itself is documented but commented out: keys belong in the environment.
+    assert present == expected - {"mavlink.signing_key"}
+    assert "# signing_key = " in text
+    lines = text.splitlines()
+    for i, line in enumerate(lines):
+        if "=" in line and not line.startswith("#"):
+            assert lines[i - 1].startswith("#"), f"option without a comment above it: {line!r}"
