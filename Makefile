@@ -12,7 +12,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(VENV)/bin/python -m simbridge.demo --speed 4
+	$(VENV)/bin/python -m companion.demo
 
 test: $(STAMP)
 	$(VENV)/bin/ruff check .
