@@ -205,6 +205,7 @@ class VehicleController:
         n, e, d = self.tm.state.pos_ned_m
         self.takeover = None
         self.failsafe = None
+        self._engaged_mode = None  # not ours yet: no takeover checks until our mode is acknowledged
         self.set_target(n, e, d)
         if self._streamer is None:
             self._streamer = asyncio.create_task(self._stream(), name="setpoint-stream")

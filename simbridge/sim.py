@@ -213,9 +213,10 @@ class SimBridge:
         cfg = self.config
         dt = Vehicle.DT_S
         self.log.info(
-            "simbridge %s on %s: scenario %s, seed %d, speed %.1fx, start %s",
+            "simbridge %s on %s (local UDP port %d): scenario %s, seed %d, speed %.1fx, start %s",
             cfg.autopilot,
             cfg.mavlink,
+            self.link.local_port,
             cfg.scenario,
             cfg.seed,
             cfg.speed,

@@ -92,3 +92,91 @@ def test_repeated_alarm_merges_and_unsigned_alarm_is_refused(start_rig: Callable
     assert "alarm raised to critical: 3 rounds" in log  # the repeat shortened the budget
     starts = re.findall(r"INFO companion: alarm '[^']*' \(\w+\), \d+ rounds", log)
     assert len(starts) == 1, starts  # and never started a second loop
+
+
+def _sim_port(rig: Rig) -> int:
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        text = rig.sim.stderr_path.read_text()
+        if "local UDP port" in text:
+            return int(text.split("local UDP port ")[1].split(")")[0])
+        time.sleep(0.2)
+    raise AssertionError("simbridge did not log its port")
+
+
+def test_operator_takeover_stops_the_companion(start_rig: Callable[..., Rig]) -> None:
+    from pymavlink import mavutil
+
+    rig = start_rig(["--scenario", "scenario1", "--autopilot", "ardupilot", "--speed", "2"])
+    _wait_for_companion(rig)
+    out = rig.alarm("--reason", "sensor failure", "--criticality", "low")
+    for _ in range(20):
+        if out.returncode == 0:
+            break
+        time.sleep(0.5)
+        out = rig.alarm("--reason", "sensor failure", "--criticality", "low")
+    assert out.returncode == 0, out.stdout + out.stderr
+    deadline = time.monotonic() + 60
+    while not [e for e in rig.sim.events("mode") if e["mode"] == "GUIDED"]:
+        assert time.monotonic() < deadline, rig.log_text()
+        time.sleep(0.2)
+    # a ground station takes over: LOITER, sent straight to the autopilot
+    gcs = mavutil.mavlink_connection(
+        f"udpout:127.0.0.1:{_sim_port(rig)}", source_system=255, source_component=190
+    )
+    try:
+        for _ in range(3):
+            gcs.mav.command_long_send(1, 1, 176, 0, 1, 5, 0, 0, 0, 0, 0)
+            if gcs.recv_match(type="COMMAND_ACK", blocking=True, timeout=2) is not None:
+                break
+    finally:
+        gcs.close()
+    deadline = time.monotonic() + 30
+    while "recovery ended" not in rig.log_text():
+        assert time.monotonic() < deadline, rig.log_text()
+        time.sleep(0.2)
+    log = rig.log_text()
+    assert "operator took over: stopped commanding" in log
+    assert "recovery ended: aborted" in log
+    modes = [e["mode"] for e in rig.sim.events("mode")]
+    assert modes[-1] == "LOITER"  # nobody switched it back
+    assert not rig.sim.events("touchdown")
+
+
+def test_unreachable_target_ends_the_round_and_the_budget_still_lands(start_rig: Callable[..., Rig]) -> None:
+    from pymavlink import mavutil
+
+    # ArduPilot's geofence (10 m) refuses every target toward the roofs and the vehicle holds:
+    # each move times out
+    env = {"LANDFALL_RECOVERY_MOVE_TIMEOUT_S": "2"}
+    rig = start_rig(["--scenario", "scenario1", "--autopilot", "ardupilot", "--speed", "4"], env=env)
+    gcs = mavutil.mavlink_connection(
+        f"udpout:127.0.0.1:{_sim_port(rig)}", source_system=255, source_component=190
+    )
+    try:
+        for _ in range(5):
+            gcs.mav.param_set_send(1, 1, b"FENCE_RADIUS", 10.0, mavutil.mavlink.MAV_PARAM_TYPE_REAL32)
+            echo = gcs.recv_match(type="PARAM_VALUE", blocking=True, timeout=2)
+            if echo is not None and echo.param_value == 10.0:
+                break
+        else:
+            raise AssertionError("geofence parameter not set")
+    finally:
+        gcs.close()
+    _wait_for_companion(rig)
+    out = rig.alarm("--reason", "storm", "--criticality", "critical")
+    for _ in range(20):
+        if out.returncode == 0:
+            break
+        time.sleep(0.5)
+        out = rig.alarm("--reason", "storm", "--criticality", "critical")
+    assert out.returncode == 0, out.stdout + out.stderr
+    _wait_touchdown(rig, timeout_s=200)
+    deadline = time.monotonic() + 30
+    while "recovery ended" not in rig.log_text():
+        assert time.monotonic() < deadline, rig.log_text()
+        time.sleep(0.2)
+    log = rig.log_text()
+    assert log.count("target not reached") == 3  # one per round of the critical budget
+    assert "round budget spent" in log
+    assert "recovery ended: landed after 3 rounds (round budget spent)" in log
