@@ -1,0 +1,158 @@
+"""Companion latency and memory through real landings (simbridge + companion processes).
+
+A UDP relay sits between simbridge and the companion and timestamps every frame: the benchmark sends
+the alarm itself and measures the time until the companion's first SET_POSITION_TARGET_LOCAL_NED
+passes the relay. The baseline in the same run is the companion's answer time to the alarm command
+(its COMMAND_ACK). The companion's RSS is sampled every 0.2 s through the whole landing.
+
+Usage: python benchmarks/bench_companion.py [--runs 3] [--speed 4]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink.dialects.v20 import common as mavlink2
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _port(kind: int) -> int:
+    with socket.socket(socket.AF_INET, kind) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _rss_mb(pid: int) -> float:
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return 0.0
+
+
+class Relay(asyncio.DatagramProtocol):
+    """simbridge <-> relay <-> companion; notes when the first setpoint leaves the companion."""
+
+    def __init__(self, companion_addr: tuple[str, int]) -> None:
+        self.companion_addr = companion_addr
+        self.sim_addr: tuple[str, int] | None = None
+        self.transport: Any = None
+        self.parser = mavlink2.MAVLink(None)
+        self.parser.robust_parsing = True
+        self.first_setpoint: float | None = None
+
+    def connection_made(self, transport: Any) -> None:
+        self.transport = transport
+
+    def datagram_received(self, data: bytes, addr: tuple[str, int]) -> None:
+        if addr == self.companion_addr:
+            if self.first_setpoint is None:
+                for m in self.parser.parse_buffer(data) or []:
+                    if m.get_type() == "SET_POSITION_TARGET_LOCAL_NED":
+                        self.first_setpoint = time.perf_counter()
+            if self.sim_addr is not None:
+                self.transport.sendto(data, self.sim_addr)
+        else:
+            self.sim_addr = addr
+            self.transport.sendto(data, self.companion_addr)
+
+
+async def one_run(speed: float) -> tuple[float, float, float, str]:
+    comp_port, relay_port, sensors = (
+        _port(socket.SOCK_DGRAM),
+        _port(socket.SOCK_DGRAM),
+        _port(socket.SOCK_STREAM),
+    )
+    loop = asyncio.get_running_loop()
+    relay = Relay(("127.0.0.1", comp_port))
+    transport, _ = await loop.create_datagram_endpoint(lambda: relay, local_addr=("127.0.0.1", relay_port))
+    with tempfile.TemporaryDirectory() as tmp:
+        episode = Path(tmp) / "ep.jsonl"
+        sim = await asyncio.create_subprocess_exec(
+            sys.executable, "-m", "simbridge", "--scenario", "scenario1", "--speed", str(speed),
+            "--mavlink", f"udpout:127.0.0.1:{relay_port}", "--sensors", f"127.0.0.1:{sensors}",
+            "--episode-log", str(episode), "--log-level", "WARNING", cwd=ROOT,
+        )  # fmt: skip
+        log = Path(tmp) / "companion.log"
+        with log.open("wb") as fh:
+            comp = await asyncio.create_subprocess_exec(
+                sys.executable, "-m", "companion", "--mavlink", f"udp:{comp_port}",
+                "--sensors", f"127.0.0.1:{sensors}", stdout=fh, stderr=subprocess.STDOUT, cwd=ROOT,
+            )  # fmt: skip
+        try:
+            # another process writes the log: polling the file is the only signal there is
+            while "sensor stream connected" not in log.read_text():  # noqa: ASYNC110
+                await asyncio.sleep(0.1)
+            await asyncio.sleep(2.0)  # a couple of seconds of telemetry, as a vehicle in flight has
+            alarm = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            alarm.bind(("127.0.0.1", 0))
+            alarm.settimeout(5.0)
+            mav = mavlink2.MAVLink(None, 255, 25)
+            t_sent = time.perf_counter()
+            alarm.sendto(mav.command_long_encode(1, 191, 31010, 0, 1, 1, 0, 0, 0, 0, 0).pack(mav),
+                         ("127.0.0.1", comp_port))  # fmt: skip
+            await loop.run_in_executor(None, alarm.recvfrom, 4096)
+            t_ack = time.perf_counter()
+            alarm.close()
+            peak = 0.0
+            deadline = time.monotonic() + 300
+            while time.monotonic() < deadline:
+                peak = max(peak, _rss_mb(comp.pid))
+                if episode.exists() and '"touchdown"' in episode.read_text():
+                    break
+                await asyncio.sleep(0.2)
+            td = next(json.loads(x) for x in episode.read_text().splitlines() if '"touchdown"' in x)
+            first = relay.first_setpoint
+            if first is None:
+                raise RuntimeError("no setpoint seen")
+            return first - t_sent, t_ack - t_sent, peak, f"{td['surface']} safe={td['safe']}"
+        finally:
+            for p in (comp, sim):
+                p.terminate()
+                await asyncio.wait_for(p.wait(), 10)
+            transport.close()
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
+    ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument("--speed", type=float, default=4.0)
+    args = ap.parse_args()
+    rows = []
+    for k in range(args.runs):
+        first, ack, rss, verdict = asyncio.run(one_run(args.speed))
+        rows.append((first, ack, rss))
+        print(
+            f"run {k + 1}/{args.runs}: alarm->first setpoint {first * 1e3:.1f} ms, "
+            f"alarm->ack {ack * 1e3:.1f} ms, "
+            f"companion peak RSS {rss:.0f} MB, touchdown {verdict}",
+            flush=True,
+        )
+    first = statistics.median(r[0] for r in rows)
+    ack = statistics.median(r[1] for r in rows)
+    rss = max(r[2] for r in rows)
+    print(
+        f"\nmedian of {args.runs} landings: alarm -> first setpoint {first * 1e3:.1f} ms "
+        f"(goal <= 500 ms; {first / ack:.1f}x the alarm acknowledgement, {ack * 1e3:.1f} ms)"
+    )
+    print(f"companion peak RSS over all landings: {rss:.0f} MB (goal <= 250 MB)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
