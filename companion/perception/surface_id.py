@@ -160,6 +160,33 @@ class SiteCheck:
         return not self.reasons
 
 
+def _edge_distance(
+    world: np.ndarray, d: np.ndarray, up: np.ndarray, site_ne_m: tuple[float, float], surface: float, reach_m: float
+) -> float:
+    """Distance to the nearest drop of more than 1 m, erring short.
+
+    Seen from above, the surface itself hides the ground just past its edge, so the first "drop"
+    return lies beyond the edge. In each of 16 directions where a drop is seen, the edge is taken at
+    the farthest surface-level return in that direction (the surface is known to reach that far, no
+    farther); the nearest such distance is the answer.
+    """
+    near = d <= reach_m
+    if not near.any():
+        return math.inf
+    ang = np.arctan2(world[near, 1] - site_ne_m[1], world[near, 0] - site_ne_m[0])
+    sector = ((ang + math.pi) / (2 * math.pi) * 16).astype(int) % 16
+    dn, upn = d[near], up[near]
+    drop = upn < surface - 1.0
+    level = np.abs(upn - surface) < 0.3
+    edge = math.inf
+    for s in np.unique(sector[drop]):
+        in_s = sector == s
+        first_drop = float(dn[in_s & drop].min())
+        roof = dn[in_s & level & (dn < first_drop)]
+        edge = min(edge, float(roof.max()) if len(roof) else 0.0)
+    return edge
+
+
 def check_site(
     lidar_frd: np.ndarray | None,
     pos_ned_m: tuple[float, float, float],
@@ -186,8 +213,7 @@ def check_site(
     surface = float(np.median(core))
     obstacle = float(up[disc].max() - surface)
     rough = float(np.std(up[disc][np.abs(up[disc] - surface) < max_obstacle_m]))
-    drops = (d <= clearance_m + 3.0) & (up < surface - 1.0)
-    edge = float(d[drops].min()) if drops.any() else math.inf
+    edge = _edge_distance(world, d, up, site_ne_m, surface, clearance_m + 4.0)
     reasons = []
     if obstacle > max_obstacle_m:
         reasons.append(f"object {obstacle:.1f} m tall within {clearance_m:.0f} m")
