@@ -263,3 +263,13 @@ class Companion:
                 for t in tasks:
                     with contextlib.suppress(asyncio.CancelledError):
                         await t
+                st = self.link.stats
+                self.log.info(
+                    "companion stopped: %d frames in, %d bad, %d unsigned and %d badly signed refused, "
+                    "%d alarms refused",
+                    st.received,
+                    st.bad_frames,
+                    st.rejected_unsigned,
+                    st.rejected_bad_signature,
+                    self.alarms_refused,
+                )

@@ -180,3 +180,33 @@ def test_unreachable_target_ends_the_round_and_the_budget_still_lands(start_rig:
     assert log.count("target not reached") == 3  # one per round of the critical budget
     assert "round budget spent" in log
     assert "recovery ended: landed after 3 rounds (round budget spent)" in log
+
+
+def test_autopilot_failsafe_text_raises_an_alarm_by_itself(start_rig: Callable[..., Rig]) -> None:
+    from pymavlink import mavutil
+
+    rig = start_rig(["--scenario", "scenario1", "--autopilot", "px4", "--speed", "2"])
+    _wait_for_companion(rig)
+    gcs = mavutil.mavlink_connection(
+        f"udpout:127.0.0.1:{_sim_port(rig)}", source_system=255, source_component=190
+    )
+    try:
+        # a ground station flies offboard for a moment, then its stream stops: PX4's offboard-loss
+        # failsafe announces itself by STATUSTEXT, and the companion's watcher takes it as an alarm
+        end = time.monotonic() + 1.5
+        while time.monotonic() < end:
+            gcs.mav.set_position_target_local_ned_send(0, 1, 1, 1, 3576, 0, 0, -110, 0, 0, 0, 0, 0, 0, 0, 0)
+            time.sleep(0.05)
+        gcs.mav.command_long_send(1, 1, 176, 0, 1, 6, 0, 0, 0, 0, 0)
+        ack = gcs.recv_match(type="COMMAND_ACK", blocking=True, timeout=5)
+        assert ack is not None
+        assert ack.result == 0
+    finally:
+        gcs.close()
+    deadline = time.monotonic() + 30
+    while "recovery started" not in rig.log_text() and "watcher alarm" not in rig.log_text():
+        assert time.monotonic() < deadline, rig.log_text()
+        time.sleep(0.2)
+    log = rig.log_text()
+    assert "watcher alarm 'Failsafe" in log
+    assert "-> MAV_RESULT 0" in log  # it started a recovery

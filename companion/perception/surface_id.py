@@ -161,7 +161,12 @@ class SiteCheck:
 
 
 def _edge_distance(
-    world: np.ndarray, d: np.ndarray, up: np.ndarray, site_ne_m: tuple[float, float], surface: float, reach_m: float
+    world: np.ndarray,
+    d: np.ndarray,
+    up: np.ndarray,
+    site_ne_m: tuple[float, float],
+    surface: float,
+    reach_m: float,
 ) -> float:
     """Distance to the nearest drop of more than 1 m, erring short.
 
