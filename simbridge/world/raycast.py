@@ -140,6 +140,7 @@ def cast_rays(
         if not inside or t0 >= t1:
             continue
         hd = math.sqrt(dn * dn + de * de)  # horizontal speed per unit t
+        dt_per_coarse = coarse_m / hd if hd > 1e-6 else 0.0  # t to cross one coarse cell (no divides below)
         step_n = 1 if dn > 0.0 else -1
         step_e = 1 if de > 0.0 else -1
         has_n = abs(dn) > 1e-12
@@ -163,8 +164,7 @@ def cast_rays(
                 bj = min(max(int(pe / coarse_m), 0), bcols - 1)
                 jumped = False
                 for lvl in range(top_lvl, -1, -1):
-                    reach = (1 << lvl) * coarse_m  # horizontal metres the jump covers
-                    dt = reach / hd
+                    dt = (1 << lvl) * dt_per_coarse  # t for a jump of 2**lvl coarse cells
                     if maps[lvl, bi, bj] < min(z, z + dt * du):
                         t += dt
                         jumped = True
@@ -176,7 +176,7 @@ def cast_rays(
                     continue
                 jumping = False
                 top_lvl = 1
-                fine_left = t + coarse_m / hd
+                fine_left = t + dt_per_coarse
             if not placed:
                 i = min(max(int((on + t * dn - n0) / res), 0), rows - 1)
                 j = min(max(int((oe + t * de - e0) / res), 0), cols - 1)
