@@ -6,6 +6,7 @@ from __future__ import annotations
 import re
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import pytest
 
@@ -210,3 +211,44 @@ def test_autopilot_failsafe_text_raises_an_alarm_by_itself(start_rig: Callable[.
     log = rig.log_text()
     assert "watcher alarm 'Failsafe" in log
     assert "-> MAV_RESULT 0" in log  # it started a recovery
+
+
+PITCHED_WORLD = """
+name = "nothing_flat"
+description = "one vast gable roof pitched about 25 deg: no flat surface anywhere in view"
+extent = { north = [-250.0, 250.0], east = [-250.0, 250.0] }
+resolution_m = 0.5
+ground = "soil"
+launch = { north = 0.0, east = 20.0, height_m = 100.0, yaw_deg = 0.0 }
+
+[[buildings]]
+id = "gable"
+centre = [0.0, 0.0]
+size = [496.0, 496.0]
+height_m = 2.0
+roof = "tiles"
+pitched = { ridge_m = 118.0 }
+"""
+
+
+def test_nothing_flat_explores_then_lands_when_the_budget_runs_out(
+    start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    scenario = tmp_path / "nothing_flat.toml"
+    scenario.write_text(PITCHED_WORLD)
+    env = {"LANDFALL_RECOVERY_EXPLORE_MAX_ALT_M": "120"}  # room for one 15 m climb from 100 m
+    rig = start_rig(["--scenario", str(scenario), "--autopilot", "ardupilot", "--speed", "8"], env=env)
+    _wait_for_companion(rig)
+    out = rig.alarm("--reason", "storm", "--criticality", "critical")
+    for _ in range(20):
+        if out.returncode == 0:
+            break
+        time.sleep(0.5)
+        out = rig.alarm("--reason", "storm", "--criticality", "critical")
+    assert out.returncode == 0, out.stdout + out.stderr
+    td = _wait_touchdown(rig, timeout_s=200)
+    log = rig.log_text()
+    assert "no flat site in view: climbing 15 m" in log  # first a wider view ...
+    assert "no flat site in view: moving" in log  # ... then outward once the ceiling is reached
+    assert "round budget spent with no site: landing here" in log  # never just give up
+    assert td["safe"] is False  # and the ground truth agrees that a gable roof was no place to land
