@@ -173,10 +173,7 @@ class Companion:
     # ------------------------------------------------------------------ MAVLink out
     def announce(self, severity: int, text: str) -> None:
         """STATUSTEXT to every peer (ground stations show severity <= notice)."""
-        chunks = [text[i : i + 50] for i in range(0, len(text), 50)] or [""]
-        msg_id = ((hash(text) & 0xFFFF) or 1) if len(chunks) > 1 else 0
-        for seq, chunk in enumerate(chunks):
-            self.link.send(self.link.mav.statustext_encode(severity, chunk.encode(), msg_id, seq))
+        self.link.send_statustext(severity, text)
 
     async def _heartbeats(self) -> None:
         while True:

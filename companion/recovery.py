@@ -13,7 +13,6 @@ import contextlib
 import enum
 import logging
 import math
-import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -83,7 +82,6 @@ class NoRecord:
 @dataclass
 class Site:
     ned_m: tuple[float, float, float]
-    score_rank: int
     candidate: Candidate
 
 
@@ -222,7 +220,7 @@ class Recovery:
             return False
         target = await asyncio.to_thread(self._ipm, choice, frame, camera)
         if self.best is None:
-            self.best = Site(target, 0, choice)
+            self.best = Site(target, choice)
         n, e, d = self.tm.state.pos_ned_m
         dist = math.hypot(target[0] - n, target[1] - e)
         bearing = _compass(math.degrees(math.atan2(target[1] - e, target[0] - n)))
@@ -272,7 +270,7 @@ class Recovery:
                     self.best = None
                 self._say(4, f"site {choice.index} {decision.rationale[:120]}")
                 return False
-            self.best = Site(target, 0, choice)
+            self.best = Site(target, choice)
             rng_m = frame.rangefinder_m
             if not math.isfinite(rng_m):
                 rng_m = self.tm.state.rangefinder_m
@@ -382,6 +380,3 @@ def _r(v: float) -> float | None:
 def _compass(bearing_deg: float) -> str:
     names = ["N", "NE", "E", "SE", "S", "SW", "W", "NW"]
     return names[round((bearing_deg % 360) / 45) % 8]
-
-
-_ = time

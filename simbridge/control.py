@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from simbridge.geo import Quat, Vec3, wrap_pi
+from simbridge.geo import Quat, Vec3
 from simbridge.physics import VehicleState
 
 G_M_S2 = 9.80665
@@ -243,8 +243,3 @@ class MulticopterController:
             t_i = base - sy * tx + sx * ty + sz * tz
             out.append(math.sqrt(max(t_i, 0.0) / THRUST_COEFF_N))
         return (out[0], out[1], out[2], out[3])
-
-
-def heading_error_rad(yaw_sp_rad: float, yaw_rad: float) -> float:
-    """Signed shortest heading error."""
-    return wrap_pi(yaw_sp_rad - yaw_rad)

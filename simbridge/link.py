@@ -23,6 +23,7 @@ Address = tuple[str, int]
 MessageHandler = Callable[[Any, Address], None]
 
 _PEER_TIMEOUT_S = 10.0
+_STATUSTEXT_CHUNK = 50
 _MAVLINK_EPOCH_UNIX_S = 1420070400  # signing timestamps count 10 us units from 2015-01-01
 
 
@@ -180,12 +181,17 @@ class MavlinkUdpLink(asyncio.DatagramProtocol):
             self._log.debug("bad MAVLink frame from %s: %s", addr, reason)
 
     # ---------------------------------------------------------------- sending
+    def _pack(self, msg: Any) -> bytes:
+        """Pack (signed when a key is set) and advance the sequence number."""
+        buf: bytes = msg.pack(self.mav)
+        self.mav.seq = (self.mav.seq + 1) % 256
+        return buf
+
     def send(self, msg: Any) -> None:
         """Pack ``msg`` (signed when a key is set) and send it to every live peer."""
         if self._transport is None:
             return
-        buf = msg.pack(self.mav)
-        self.mav.seq = (self.mav.seq + 1) % 256
+        buf = self._pack(msg)
         now = time.monotonic()
         dests = [a for a, seen in self._peers.items() if now - seen < _PEER_TIMEOUT_S]
         if self._fixed is not None and self._fixed not in dests:
@@ -207,11 +213,17 @@ class MavlinkUdpLink(asyncio.DatagramProtocol):
         if not dests:
             self.send(msg)
             return
-        buf = msg.pack(self.mav)
-        self.mav.seq = (self.mav.seq + 1) % 256
+        buf = self._pack(msg)
         for addr in dests:
             self._transport.sendto(buf, addr)
         self.stats.sent += 1
+
+    def send_statustext(self, severity: int, text: str) -> None:
+        """STATUSTEXT to every peer, in 50-character chunks sharing an id when it is longer."""
+        chunks = [text[i : i + _STATUSTEXT_CHUNK] for i in range(0, len(text), _STATUSTEXT_CHUNK)] or [""]
+        msg_id = ((hash(text) & 0xFFFF) or 1) if len(chunks) > 1 else 0
+        for seq, chunk in enumerate(chunks):
+            self.send(self.mav.statustext_encode(severity, chunk.encode(), msg_id, seq))
 
     def route(self, system: int, component: int) -> Address | None:
         return self._routes.get((system, component))

@@ -26,7 +26,6 @@ from simbridge.vehicle import Vehicle
 from simbridge.wind import WindConfig, WindModel
 
 _MAX_BATCH_STEPS = 6  # physics steps between two looks at the socket (50 ms simulated)
-_STATUSTEXT_CHUNK = 50
 
 
 @dataclass(frozen=True, slots=True)
@@ -123,11 +122,7 @@ class SimBridge:
 
     def _on_text(self, severity: int, text: str) -> None:
         self.log.info("STATUSTEXT[%d] %s", severity, text)
-        mav = self.link.mav
-        chunks = [text[i : i + _STATUSTEXT_CHUNK] for i in range(0, len(text), _STATUSTEXT_CHUNK)] or [""]
-        msg_id = 0 if len(chunks) == 1 else (hash(text) & 0xFFFF) or 1
-        for seq, chunk in enumerate(chunks):
-            self.link.send(mav.statustext_encode(severity, chunk.encode(), msg_id, seq))
+        self.link.send_statustext(severity, text)
 
     # ------------------------------------------------------------------ running
     def step(self) -> None:

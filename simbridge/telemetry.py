@@ -14,7 +14,9 @@ from typing import TYPE_CHECKING, Any
 from pymavlink.dialects.v20 import common as mavlink2
 
 from simbridge.autopilot.flavours import Nav
+from simbridge.control import THRUST_COEFF_N
 from simbridge.geo import GeoOrigin
+from simbridge.physics import MOTOR_COUNT
 
 if TYPE_CHECKING:
     from simbridge.autopilot.core import Autopilot
@@ -268,8 +270,8 @@ class Telemetry:
         s = self.ap.vehicle.state
         vn, ve, vd = s.vel_ned_m_s
         gs = math.hypot(vn, ve)
-        hover_n = 4 * 19.7
-        throttle = int(min(100, max(0, 100 * s.thrust_n / hover_n)))
+        max_thrust_n = MOTOR_COUNT * THRUST_COEFF_N  # all four ESCs at full command
+        throttle = int(min(100, max(0, 100 * s.thrust_n / max_thrust_n)))
         heading = round(math.degrees(s.euler_rad[2])) % 360
         return self._mav.vfr_hud_encode(gs, gs, heading, throttle, self.origin.alt_m - s.pos_ned_m[2], -vd)
 

@@ -7,6 +7,7 @@ import os
 import socket
 import subprocess
 import sys
+import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -113,6 +114,27 @@ class Rig:
 
     def log_text(self) -> str:
         return self.companion_log.read_text() if self.companion_log.exists() else ""
+
+    def alarm_accepted(self, *args: str, tries: int = 20) -> subprocess.CompletedProcess[str]:
+        """Send an alarm until the companion accepts it: right after start-up it answers 'refused for
+        now' while the first heartbeats and telemetry are still on their way. Returns the last try."""
+        out = self.alarm(*args)
+        for _ in range(tries):
+            if out.returncode == 0:
+                break
+            time.sleep(0.5)
+            out = self.alarm(*args)
+        return out
+
+    def wait_log(self, text: str, timeout_s: float = 30.0) -> str:
+        """Poll the companion's log (another process writes it) until ``text`` appears."""
+        deadline = time.monotonic() + timeout_s
+        while text not in self.log_text():
+            assert time.monotonic() < deadline, (
+                f"no {text!r} in the companion log:\n{self.log_text()[-3000:]}"
+            )
+            time.sleep(0.2)
+        return self.log_text()
 
 
 @pytest.fixture

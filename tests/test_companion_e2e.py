@@ -28,12 +28,7 @@ def _wait_touchdown(rig: Rig, timeout_s: float) -> dict[str, object]:
 
 def _wait_for_companion(rig: Rig) -> None:
     """Until the companion accepts alarms, trigger_alarm.py reports 'refused for now' (exit 1)."""
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline:
-        if "sensor stream connected" in rig.log_text():
-            return
-        time.sleep(0.2)
-    raise AssertionError(rig.log_text())
+    rig.wait_log("sensor stream connected", timeout_s=60)
 
 
 @pytest.mark.parametrize(
@@ -49,12 +44,9 @@ def test_alarm_lands_on_the_clear_roof(
 ) -> None:
     rig = start_rig(["--scenario", scenario, "--autopilot", autopilot, "--speed", "4"])
     _wait_for_companion(rig)
-    out = rig.alarm("--reason", "GPS spoofing detected", "--criticality", "high", "--code", "gps_spoofing")
-    for _ in range(20):  # the first heartbeats and telemetry may still be on their way
-        if out.returncode == 0:
-            break
-        time.sleep(0.5)
-        out = rig.alarm("--reason", "GPS spoofing detected", "--criticality", "high")
+    out = rig.alarm_accepted(
+        "--reason", "GPS spoofing detected", "--criticality", "high", "--code", "gps_spoofing"
+    )
     assert out.returncode == 0, out.stdout + out.stderr
     assert "accepted: recovery started" in out.stdout
     td = _wait_touchdown(rig, timeout_s=150)
@@ -79,12 +71,7 @@ def test_repeated_alarm_merges_and_unsigned_alarm_is_refused(start_rig: Callable
     _wait_for_companion(rig)
     unsigned = rig.alarm("--reason", "spoofed", "--criticality", "critical", timeout_s=3)
     assert unsigned.returncode == 3  # silently dropped by the signed link: no acknowledgement
-    first = rig.alarm("--reason", "low battery", "--signing-key", key)
-    for _ in range(20):
-        if first.returncode == 0:
-            break
-        time.sleep(0.5)
-        first = rig.alarm("--reason", "low battery", "--signing-key", key)
+    first = rig.alarm_accepted("--reason", "low battery", "--signing-key", key)
     assert "recovery started" in first.stdout, first.stdout + first.stderr
     second = rig.alarm("--reason", "storm", "--criticality", "critical", "--signing-key", key)
     assert second.returncode == 0
@@ -110,12 +97,7 @@ def test_operator_takeover_stops_the_companion(start_rig: Callable[..., Rig]) ->
 
     rig = start_rig(["--scenario", "scenario1", "--autopilot", "ardupilot", "--speed", "2"])
     _wait_for_companion(rig)
-    out = rig.alarm("--reason", "sensor failure", "--criticality", "low")
-    for _ in range(20):
-        if out.returncode == 0:
-            break
-        time.sleep(0.5)
-        out = rig.alarm("--reason", "sensor failure", "--criticality", "low")
+    out = rig.alarm_accepted("--reason", "sensor failure", "--criticality", "low")
     assert out.returncode == 0, out.stdout + out.stderr
     deadline = time.monotonic() + 60
     while not [e for e in rig.sim.events("mode") if e["mode"] == "GUIDED"]:
@@ -132,11 +114,7 @@ def test_operator_takeover_stops_the_companion(start_rig: Callable[..., Rig]) ->
                 break
     finally:
         gcs.close()
-    deadline = time.monotonic() + 30
-    while "recovery ended" not in rig.log_text():
-        assert time.monotonic() < deadline, rig.log_text()
-        time.sleep(0.2)
-    log = rig.log_text()
+    log = rig.wait_log("recovery ended")
     assert "operator took over: stopped commanding" in log
     assert "recovery ended: aborted" in log
     modes = [e["mode"] for e in rig.sim.events("mode")]
@@ -165,19 +143,10 @@ def test_unreachable_target_ends_the_round_and_the_budget_still_lands(start_rig:
     finally:
         gcs.close()
     _wait_for_companion(rig)
-    out = rig.alarm("--reason", "storm", "--criticality", "critical")
-    for _ in range(20):
-        if out.returncode == 0:
-            break
-        time.sleep(0.5)
-        out = rig.alarm("--reason", "storm", "--criticality", "critical")
+    out = rig.alarm_accepted("--reason", "storm", "--criticality", "critical")
     assert out.returncode == 0, out.stdout + out.stderr
     _wait_touchdown(rig, timeout_s=200)
-    deadline = time.monotonic() + 30
-    while "recovery ended" not in rig.log_text():
-        assert time.monotonic() < deadline, rig.log_text()
-        time.sleep(0.2)
-    log = rig.log_text()
+    log = rig.wait_log("recovery ended")
     assert log.count("target not reached") == 3  # one per round of the critical budget
     assert "round budget spent" in log
     assert "recovery ended: landed after 3 rounds (round budget spent)" in log
@@ -204,11 +173,7 @@ def test_autopilot_failsafe_text_raises_an_alarm_by_itself(start_rig: Callable[.
         assert ack.result == 0
     finally:
         gcs.close()
-    deadline = time.monotonic() + 30
-    while "recovery started" not in rig.log_text() and "watcher alarm" not in rig.log_text():
-        assert time.monotonic() < deadline, rig.log_text()
-        time.sleep(0.2)
-    log = rig.log_text()
+    log = rig.wait_log("watcher alarm")
     assert "watcher alarm 'Failsafe" in log
     assert "-> MAV_RESULT 0" in log  # it started a recovery
 
@@ -239,12 +204,7 @@ def test_nothing_flat_explores_then_lands_when_the_budget_runs_out(
     env = {"LANDFALL_RECOVERY_EXPLORE_MAX_ALT_M": "120"}  # room for one 15 m climb from 100 m
     rig = start_rig(["--scenario", str(scenario), "--autopilot", "ardupilot", "--speed", "8"], env=env)
     _wait_for_companion(rig)
-    out = rig.alarm("--reason", "storm", "--criticality", "critical")
-    for _ in range(20):
-        if out.returncode == 0:
-            break
-        time.sleep(0.5)
-        out = rig.alarm("--reason", "storm", "--criticality", "critical")
+    out = rig.alarm_accepted("--reason", "storm", "--criticality", "critical")
     assert out.returncode == 0, out.stdout + out.stderr
     td = _wait_touchdown(rig, timeout_s=200)
     log = rig.log_text()

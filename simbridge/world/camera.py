@@ -317,14 +317,6 @@ def shade(
     return out
 
 
-@njit(cache=True)
-def shadow_rays_dirs(n: int, sun: np.ndarray) -> np.ndarray:
-    out = np.empty((n, 3))
-    for k in range(n):
-        out[k, 0], out[k, 1], out[k, 2] = sun[0], sun[1], sun[2]
-    return out
-
-
 @njit(cache=True, nogil=True)
 def _tiles_needed(ii: np.ndarray, jj: np.ndarray, done: np.ndarray, tile: int) -> np.ndarray:
     need = np.zeros(done.shape, np.bool_)

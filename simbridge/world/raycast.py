@@ -59,7 +59,6 @@ class Pyramid:
 
     def __init__(self, height: np.ndarray) -> None:
         base = max_pool(height, COARSE)
-        self.coarse = base
         levels = [_dilate(base, 1)]
         for k in range(1, LEVELS):
             levels.append(_dilate(levels[-1], 1 << (k - 1)))
