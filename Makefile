@@ -2,6 +2,7 @@
 VENV ?= .venv
 PYTHON ?= python3
 STAMP := $(VENV)/.installed
+DEPTH_STAMP := $(VENV)/.installed-depth
 
 .PHONY: demo test lint bench clean
 
@@ -11,10 +12,17 @@ $(STAMP): pyproject.toml
 	$(VENV)/bin/pip install --quiet -e '.[dev]'
 	touch $(STAMP)
 
+# Tests also exercise the optional monocular-depth extra. torch 2.13.0 is pinned first so pip takes the
+# CPU build (a plain "torch" would pull a multi-GB CUDA build); the demo does not need it.
+$(DEPTH_STAMP): $(STAMP)
+	$(VENV)/bin/pip install --quiet 'torch==2.13.0'
+	$(VENV)/bin/pip install --quiet -e '.[dev,depth]'
+	touch $(DEPTH_STAMP)
+
 demo: $(STAMP)
 	$(VENV)/bin/python -m companion.demo
 
-test: $(STAMP)
+test: $(DEPTH_STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/mypy
 	$(VENV)/bin/pytest

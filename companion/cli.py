@@ -15,6 +15,8 @@ from typing import Any
 from companion.alarms import Criticality
 from companion.config import CompanionConfig, ConfigError, load_config
 from companion.daemon import Companion
+from companion.perception.depth import DepthError, DepthSource, make_source
+from companion.perception.surface_id import SurfaceParams
 from companion.reasoning.onboard import OnboardReasoner
 from companion.recovery import RecoveryParams
 
@@ -35,7 +37,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def params_from(cfg: CompanionConfig) -> RecoveryParams:
-    r = cfg.recovery
+    r, pc = cfg.recovery, cfg.perception
     return RecoveryParams(
         rounds_by_criticality={c: cfg.rounds_for(c.name.lower()) for c in Criticality},  # type: ignore[arg-type]
         descent_fraction=r.descent_fraction,
@@ -45,8 +47,25 @@ def params_from(cfg: CompanionConfig) -> RecoveryParams:
         move_timeout_s=r.move_timeout_s,
         explore_climb_m=r.explore_climb_m,
         explore_max_alt_m=r.explore_max_alt_m,
-        min_candidate_area_m2=r.min_candidate_area_m2,
+        surface=SurfaceParams(
+            cell_px=pc.cell_px,
+            window_cells=pc.window_cells,
+            max_slope_deg=pc.max_slope_deg,
+            max_roughness_m=pc.max_roughness_m,
+            min_area_m2=pc.min_area_m2,
+            edge_margin_m=pc.edge_margin_m,
+            max_candidates=pc.max_candidates,
+        ),
+        depth_source=_depth_source(cfg),
     )
+
+
+def _depth_source(cfg: CompanionConfig) -> DepthSource:
+    pc = cfg.perception
+    try:
+        return make_source(pc.depth, cell_px=pc.cell_px, model=pc.depth_model)
+    except DepthError as exc:
+        raise ConfigError(f"perception.depth = {pc.depth!r}", str(exc)) from exc
 
 
 def build_companion(cfg: CompanionConfig) -> Companion:

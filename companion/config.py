@@ -196,7 +196,32 @@ class RecoveryConfig(_Section):
     move_timeout_s: float = Field(default=60.0, gt=0)
     explore_climb_m: float = Field(default=15.0, gt=0)
     explore_max_alt_m: float = Field(default=150.0, gt=0)
-    min_candidate_area_m2: float = Field(default=30.0, gt=0)
+
+
+class PerceptionConfig(_Section):
+    """Surface ID: the depth source and the flatness thresholds (companion/perception)."""
+
+    depth: Literal["lidar", "depth-anything", "auto"] = "lidar"
+    depth_model: Path | None = Field(default=None, strict=False)
+    cell_px: int = Field(default=4, ge=1, le=32)
+    window_cells: int = Field(default=5, ge=3, le=31)
+    max_slope_deg: float = Field(default=8.0, gt=0, lt=90)
+    max_roughness_m: float = Field(default=0.06, gt=0)
+    min_area_m2: float = Field(default=30.0, gt=0)
+    edge_margin_m: float = Field(default=2.0, ge=0)
+    max_candidates: int = Field(default=5, ge=1, le=20)
+
+    @field_validator("window_cells")
+    @classmethod
+    def _odd(cls, window: int) -> int:
+        if window % 2 == 0:
+            raise ValueError(f"must be odd (got {window})")
+        return window
+
+    @field_validator("depth_model", mode="before")
+    @classmethod
+    def _empty_model_is_none(cls, value: object) -> object:
+        return None if value == "" else value
 
 
 class AlarmsConfig(_Section):
@@ -250,6 +275,7 @@ class CompanionConfig(_Section):
     mavlink: MavlinkConfig = MavlinkConfig()
     sensors: SensorsConfig = SensorsConfig()
     recovery: RecoveryConfig = RecoveryConfig()
+    perception: PerceptionConfig = PerceptionConfig()
     alarms: AlarmsConfig = AlarmsConfig()
     reasoner: ReasonerConfig = ReasonerConfig()
     record: RecordConfig = RecordConfig()

@@ -27,7 +27,9 @@ from companion.control import (
 )
 from companion.guidance.frames import PinholeCamera
 from companion.guidance.ipm import IpmError, LidarPixelIndex, pixel_to_ned, pixel_to_ned_flat
-from companion.perception.surface_id import Candidate, check_site, surface_id
+from companion.perception.depth import DepthError, DepthSource, LidarDepth
+from companion.perception.site_check import check_site
+from companion.perception.surface_id import Candidate, SurfaceParams, propose, quadrant_fallback
 from companion.reasoning.onboard import Reasoner
 from companion.telemetry import TelemetryCache
 
@@ -60,7 +62,8 @@ class RecoveryParams:
     move_timeout_s: float = 60.0
     explore_climb_m: float = 15.0
     explore_max_alt_m: float = 150.0
-    min_candidate_area_m2: float = 30.0
+    surface: SurfaceParams = field(default_factory=SurfaceParams)
+    depth_source: DepthSource = field(default_factory=LidarDepth)
     rejected_radius_m: float = 4.0  # a rejected site rules out candidates this close to it
     land_timeout_s: float = 120.0
 
@@ -188,13 +191,7 @@ class Recovery:
         frame = await self._acquire()
         self._set(State.SURFACE_ID)
         camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
-        candidates = surface_id(
-            frame.lidar_frd,
-            frame.pos_ned_m,
-            frame.quat_wxyz,
-            camera,
-            min_area_m2=self.p.min_candidate_area_m2,
-        )
+        candidates = await asyncio.to_thread(self._surface_id, frame, camera)
         candidates = [c for c in candidates if not self._near_rejected(c)]
         if frame.image_rgb is not None:
             self.record.save_image(f"round{self.round:02d}-acquire", frame.image_rgb)
@@ -211,7 +208,7 @@ class Recovery:
                 "rationale": ranking.rationale,
                 "tier": ranking.tier,
                 "latency_s": ranking.latency_s,
-                "candidates": [_cand_json(c) for c in candidates],
+                "candidates": [c.to_json() for c in candidates],
             },
         )
         choice = next((candidates[k] for k in ranking.order if not candidates[k].fallback), None)
@@ -340,6 +337,24 @@ class Recovery:
         with contextlib.suppress(TargetTimeout):
             await self.ctl.goto(*target, tolerance_m=1.0, speed_m_s=0.5, timeout_s=self.p.move_timeout_s)
 
+    def _surface_id(self, frame: Any, camera: PinholeCamera) -> list[Candidate]:
+        """Candidates from the configured depth source; the quadrant fallback when it has nothing."""
+        try:
+            cands, _depth = propose(
+                self.p.depth_source,
+                camera,
+                image=frame.image_rgb,
+                lidar_frd=frame.lidar_frd,
+                quat_wxyz=frame.quat_wxyz,
+                pos_ned_m=frame.pos_ned_m,
+                ground_up_m=frame.pos_ned_m[2],
+                params=self.p.surface,
+            )
+        except DepthError as exc:
+            self.log.warning("Surface ID has no depth (%s): quadrant fallback", exc)
+            return quadrant_fallback(camera)
+        return cands
+
     def _near_rejected(self, c: Candidate) -> bool:
         if c.site_ned_m is None:
             return False
@@ -358,23 +373,6 @@ class Recovery:
             )
             p = pixel_to_ned_flat(u, v, camera, frame.pos_ned_m, frame.quat_wxyz, ground_d)
         return (float(p[0]), float(p[1]), float(p[2]))
-
-
-def _cand_json(c: Candidate) -> dict[str, Any]:
-    return {
-        "index": c.index,
-        "box_px": list(c.box_px),
-        "centre_px": [round(v, 1) for v in c.centre_px],
-        "area_m2": round(c.area_m2, 1),
-        "height_above_m": _r(c.height_above_m),
-        "edge_distance_m": round(c.edge_distance_m, 2),
-        "roughness_m": _r(c.roughness_m),
-        "fallback": c.fallback,
-    }
-
-
-def _r(v: float) -> float | None:
-    return None if not math.isfinite(v) else round(v, 3)
 
 
 def _compass(bearing_deg: float) -> str:

@@ -66,11 +66,15 @@ def test_load_config_defaults_match_the_brief() -> None:
         0.5,
         0.3,
     )
-    assert (r.move_timeout_s, r.explore_climb_m, r.explore_max_alt_m, r.min_candidate_area_m2) == (
-        60.0,
-        15.0,
-        150.0,
+    assert (r.move_timeout_s, r.explore_climb_m, r.explore_max_alt_m) == (60.0, 15.0, 150.0)
+    pc = cfg.perception
+    assert (pc.depth, pc.depth_model, pc.cell_px, pc.window_cells) == ("lidar", None, 4, 5)
+    assert (pc.max_slope_deg, pc.max_roughness_m, pc.min_area_m2, pc.edge_margin_m, pc.max_candidates) == (
+        8.0,
+        0.06,
         30.0,
+        2.0,
+        5,
     )
     a = cfg.alarms
     assert (a.watch_battery, a.battery_critical_pct, a.watch_failsafe_text, a.watch_gps) == (

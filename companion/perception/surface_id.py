@@ -1,48 +1,113 @@
-"""A minimal, metric Surface ID from the LiDAR (issue 5 deepens it).
+"""Surface ID: the few flat surfaces worth asking the reasoner about, with their geometry.
 
-LiDAR returns (body FRD) are rotated into NED and binned on a horizontal grid whose cell grows with
-altitude (the returns spread out). A cell is flat when the heights in its 3 x 3 neighbourhood span
-at most ``flat_span_m``; flat cells are cleaned (morphological open and close), split into connected
-components, and components of at least ``min_area_m2`` become candidates, each with its geometry:
-area, roughness, height above the lowest surfaces in view, distance from its most interior point to
-its edge, and that interior point as the landing site. Boxes are the components projected into the
-image. With no candidate, the image's four quadrants and its centre are proposed (no geometry), so
-the reasoner can still point a direction.
+depth map -> per-cell flatness (:mod:`companion.perception.flatness`) -> morphological close then open
+(3 x 3: fill pinholes, drop slivers) -> connected components (4-connected) -> per component:
+
+- ``area_m2``: the flat surface, its cells grown back by the half window the flatness test loses at
+  the edges, each cell counted at its metric footprint ``(z / fx * cell_px)^2``; components under
+  ``min_area_m2`` are dropped;
+- ``edge_distance_m``: for each cell, the distance to the component's outline plus the half window,
+  in metres at the component's median depth; the landing site is the cell farthest from any edge;
+- the *landable* part: cells at least ``edge_margin_m`` from every edge (the rotor-clearance margin:
+  the drone's centre may touch down there with its disc clear). Its bounding box is the candidate's
+  box; a component with no landable cell is dropped;
+- ``slope_deg`` and ``roughness_m``: medians over the component;
+- ``height_above_m``: the component's median height above the lowest surface around it (the 10th
+  percentile of the heights in a ring just past its edge, or the ground level the caller knows,
+  whichever is lower);
+- ``score`` = min(landable area, ``score_area_m2``) x fill x min(1, edge_distance_m / (2 x
+  edge_margin_m)), where fill is the landable part's share of its box: compact sites with room to
+  spare first. Area counts up to ``score_area_m2`` (beyond it a site is not safer, only bigger); fill
+  keeps a sprawling street network, whose box is mostly buildings, behind a roof, whose box is the roof.
+
+A box contained in another candidate's box is dropped when both surfaces lie at the same height
+(within ``same_surface_m``: a fragment of the same surface, split off by clutter; a roof inside the
+box of the streets around it stays); the best ``max_candidates`` by score are
+kept and numbered 0.. in score order. Relative (monocular) depth has no metres: areas and margins are
+then fractions of the image and the geometry fields are NaN. When nothing qualifies the image's four
+quadrants and its centre are proposed instead (``fallback=True``, no geometry), so the reasoner can
+still point a direction.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
 
-from companion.guidance.frames import PinholeCamera, quat_to_matrix
+from companion.guidance.frames import PinholeCamera
+from companion.perception.depth import DepthError, DepthMap, DepthSource
+from companion.perception.flatness import Flatness, flatness
+
+__all__ = ["Candidate", "SurfaceParams", "propose", "quadrant_fallback", "surface_id"]
+
+LEVEL = (1.0, 0.0, 0.0, 0.0)
+_K3 = np.ones((3, 3), np.uint8)
+
+
+@dataclass(frozen=True, slots=True)
+class SurfaceParams:
+    """Surface ID thresholds (the ``[perception]`` section of the companion configuration)."""
+
+    cell_px: int = 4
+    window_cells: int = 5
+    max_slope_deg: float = 8.0
+    max_roughness_m: float = 0.06
+    min_area_m2: float = 30.0
+    edge_margin_m: float = 2.0
+    max_candidates: int = 5
+    max_relative_gradient: float = 0.004
+    min_area_frac: float = 0.01  # relative depth: smallest component, fraction of the image
+    relative_margin_frac: float = 0.02  # relative depth: edge margin, fraction of the image width
+    score_area_m2: float = 400.0  # landable area beyond this adds nothing to the score
+    same_surface_m: float = 1.0  # contained boxes this close in height are the same surface
+    same_surface_rel: float = 0.02  # the same for relative depth (fraction of the depth range)
 
 
 @dataclass(frozen=True, slots=True)
 class Candidate:
+    """One proposed surface. Boxes are ``(x0, y0, x1, y1)`` pixels, half-open: ``x0 <= u < x1``."""
+
     index: int
-    box_px: tuple[int, int, int, int]  # x0, y0, x1, y1
-    centre_px: tuple[float, float]  # the landing site's pixel
-    area_m2: float = 0.0
+    box_px: tuple[int, int, int, int]
+    centre_px: tuple[float, float]  # the landing site's pixel (the point farthest from an edge)
+    area_m2: float = math.nan
     roughness_m: float = math.nan
-    height_above_m: float = math.nan  # above the lowest surfaces in view
-    edge_distance_m: float = 0.0  # from the site to the region's edge
+    height_above_m: float = math.nan
+    edge_distance_m: float = math.nan
     site_ned_m: tuple[float, float, float] | None = None
     fallback: bool = False  # a quadrant or the centre: no geometry behind it
+    slope_deg: float = math.nan
+    landable_area_m2: float = math.nan
+    score: float = 0.0
 
+    def to_json(self) -> dict[str, Any]:
+        def num(v: float, nd: int) -> float | None:
+            return round(v, nd) if math.isfinite(v) else None
 
-def _world_points(
-    lidar_frd: np.ndarray, pos_ned_m: tuple[float, float, float], quat: tuple[float, ...]
-) -> np.ndarray:
-    pts = np.asarray(lidar_frd, dtype=np.float64)[:, :3]
-    pts = pts[np.isfinite(pts).all(axis=1)]
-    return np.asarray(pts @ quat_to_matrix(quat).T + np.asarray(pos_ned_m))
+        return {
+            "index": self.index,
+            "box": list(self.box_px),
+            "centre_px": [round(v, 1) for v in self.centre_px],
+            "score": round(self.score, 2),
+            "fallback": self.fallback,
+            "geometry": {
+                "area_m2": num(self.area_m2, 1),
+                "landable_area_m2": num(self.landable_area_m2, 1),
+                "slope_deg": num(self.slope_deg, 2),
+                "roughness_m": num(self.roughness_m, 3),
+                "height_above_m": num(self.height_above_m, 2),
+                "edge_distance_m": num(self.edge_distance_m, 2),
+                "site_ned_m": None if self.site_ned_m is None else [round(v, 2) for v in self.site_ned_m],
+            },
+        }
 
 
 def quadrant_fallback(camera: PinholeCamera) -> list[Candidate]:
+    """The four image quadrants and the centre, for when no surface qualifies."""
     w, h = camera.width, camera.height
     boxes = [
         (0, 0, w // 2, h // 2),
@@ -56,174 +121,203 @@ def quadrant_fallback(camera: PinholeCamera) -> list[Candidate]:
     ]
 
 
+def _ellipse(radius: int) -> np.ndarray:
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+
+
+def _contained(inner: tuple[int, int, int, int], outer: tuple[int, int, int, int]) -> bool:
+    return inner[0] >= outer[0] and inner[1] >= outer[1] and inner[2] <= outer[2] and inner[3] <= outer[3]
+
+
+def _component(
+    comp: np.ndarray,
+    offset: tuple[int, int],
+    fl: Flatness,
+    depth: DepthMap,
+    camera: PinholeCamera,
+    p: SurfaceParams,
+    pos_ned_m: tuple[float, float, float] | None,
+    ground_up_m: float | None,
+) -> tuple[Candidate, float] | None:
+    """Geometry, box and level (median height, or relative depth) of one component.
+
+    ``comp`` is the component's mask in a padded window of the grid at ``offset``.
+    """
+    r0, c0 = offset
+    rows, cols = comp.shape
+    sl = (slice(r0, r0 + rows), slice(c0, c0 + cols))
+    valid = depth.valid[sl]
+    hw = fl.half_window
+    grown = (
+        cv2.dilate(comp.astype(np.uint8), np.ones((2 * hw + 1, 2 * hw + 1), np.uint8)).astype(bool) & valid
+    )
+    dist = cv2.distanceTransform(comp.astype(np.uint8), cv2.DIST_L2, 5)
+    edge_cells = np.where(comp, dist + hw - 0.5, 0.0)
+    s = depth.cell_px
+    if depth.metric:
+        cell_m = fl.cell_m[sl]
+        area = float(np.sum(cell_m[grown] ** 2))
+        if area < p.min_area_m2:
+            return None
+        scale = float(np.median(cell_m[comp]))
+        edge_m = edge_cells * scale
+        land = comp & (edge_m >= p.edge_margin_m)
+        if not land.any():
+            return None
+        landable = float(np.sum(cell_m[land] ** 2))
+        margin, unit = p.edge_margin_m, scale  # metres per cell
+    else:
+        area_frac = float(grown.sum()) * s * s / (camera.width * camera.height)
+        if area_frac < p.min_area_frac:
+            return None
+        margin_cells = p.relative_margin_frac * camera.width / s
+        land = comp & (edge_cells >= margin_cells)
+        if not land.any():
+            return None
+        edge_m = edge_cells / margin_cells  # in margins, for the score only
+        landable, margin, area = float(land.sum()) * s * s, 1.0, math.nan
+        unit = 1.0 / margin_cells  # margins per cell
+    bi, bj = np.unravel_index(int(np.argmax(edge_m)), edge_m.shape)
+    best_edge = float(edge_m[bi, bj])
+    lr, lc = np.nonzero(land)
+    # Sub-cell box: the edge distance falls by one cell per cell outward, so the margin is crossed
+    # ``(edge - margin) / scale`` cells (at most one) past a landable cell's centre.
+    reach = np.clip((edge_m[lr, lc] - margin) / unit, 0.0, 1.0)
+    box = (
+        round(max((c0 + lc + 0.5 - reach).min() * s, 0)),
+        round(max((r0 + lr + 0.5 - reach).min() * s, 0)),
+        round(min((c0 + lc + 0.5 + reach).max() * s, camera.width)),
+        round(min((r0 + lr + 0.5 + reach).max() * s, camera.height)),
+    )
+    centre = (float((c0 + bj + 0.5) * s), float((r0 + bi + 0.5) * s))
+    fill = float(land.sum()) / float((lr.max() - lr.min() + 1) * (lc.max() - lc.min() + 1))
+    room = min(landable, p.score_area_m2) if depth.metric else landable
+    score = room * fill * min(1.0, best_edge / (2.0 * margin))
+    if not depth.metric:
+        return Candidate(0, box, centre, score=score), float(np.median(depth.depth[sl][comp]))
+    ned = fl.ned_m[sl]
+    up = -ned[..., 2]
+    ring = cv2.dilate(comp.astype(np.uint8), _ellipse(hw + 3)).astype(bool)
+    ring &= ~cv2.dilate(comp.astype(np.uint8), _ellipse(hw + 1)).astype(bool) & valid
+    low = float(np.percentile(up[ring], 10)) if ring.sum() >= 5 else math.nan
+    if ground_up_m is not None:
+        low = ground_up_m if math.isnan(low) else min(low, ground_up_m)
+    site = None
+    if pos_ned_m is not None:
+        site = (
+            float(pos_ned_m[0] + ned[bi, bj, 0]),
+            float(pos_ned_m[1] + ned[bi, bj, 1]),
+            float(pos_ned_m[2] + ned[bi, bj, 2]),
+        )
+    level = float(np.median(up[comp]))
+    cand = Candidate(
+        0,
+        box,
+        centre,
+        area_m2=area,
+        roughness_m=float(np.median(fl.roughness_m[sl][comp])),
+        height_above_m=level - low,
+        edge_distance_m=best_edge,
+        site_ned_m=site,
+        slope_deg=float(np.median(fl.slope_deg[sl][comp])),
+        landable_area_m2=landable,
+        score=score,
+    )
+    return cand, level
+
+
 def surface_id(
-    lidar_frd: np.ndarray | None,
-    pos_ned_m: tuple[float, float, float],
-    quat: tuple[float, float, float, float],
+    depth: DepthMap,
     camera: PinholeCamera,
     *,
-    min_area_m2: float = 30.0,
-    flat_span_m: float = 0.25,
-    max_candidates: int = 5,
+    quat_wxyz: tuple[float, float, float, float] = LEVEL,
+    pos_ned_m: tuple[float, float, float] | None = None,
+    ground_up_m: float | None = None,
+    params: SurfaceParams | None = None,
 ) -> list[Candidate]:
-    """Candidates, best-first by area x clearance; the quadrant fallback when none qualifies."""
-    if lidar_frd is None or len(lidar_frd) < 50:
-        return quadrant_fallback(camera)
-    world = _world_points(lidar_frd, pos_ned_m, quat)
-    if len(world) < 50:
-        return quadrant_fallback(camera)
-    altitude = max(-(pos_ned_m[2] - float(np.median(world[:, 2]))), 5.0)
-    cell = float(np.clip(altitude / 45.0, 0.5, 2.5))
-    n0, e0 = world[:, 0].min(), world[:, 1].min()
-    i = ((world[:, 0] - n0) / cell).astype(np.int64)
-    j = ((world[:, 1] - e0) / cell).astype(np.int64)
-    rows, cols = int(i.max()) + 1, int(j.max()) + 1
-    up = -world[:, 2]
-    hmax = np.full((rows, cols), -np.inf)
-    hmin = np.full((rows, cols), np.inf)
-    np.maximum.at(hmax, (i, j), up)
-    np.minimum.at(hmin, (i, j), up)
-    valid = np.isfinite(hmax)
-    kernel = np.ones((3, 3), np.uint8)
-    filled_max = np.where(valid, hmax, -1e6).astype(np.float32)
-    filled_min = np.where(valid, hmin, 1e6).astype(np.float32)
-    span = cv2.dilate(filled_max, kernel) - cv2.erode(filled_min, kernel)
-    flat = (valid & (span <= flat_span_m)).astype(np.uint8)
-    flat = cv2.morphologyEx(flat, cv2.MORPH_CLOSE, kernel)  # fill single empty cells
-    flat = cv2.morphologyEx(flat, cv2.MORPH_OPEN, kernel)  # drop slivers
-    count, labels, stats, _ = cv2.connectedComponentsWithStats(flat, connectivity=4)
-    ground = float(np.percentile(up, 10))
-    r_nb = quat_to_matrix(quat)
-    found: list[tuple[float, Candidate]] = []
-    for c in range(1, count):
-        area = float(stats[c, cv2.CC_STAT_AREA]) * cell * cell
-        if area < min_area_m2:
-            continue
-        mask = (labels == c).astype(np.uint8)
-        dist = cv2.distanceTransform(np.pad(mask, 1), cv2.DIST_L2, 5)[1:-1, 1:-1]
-        bi, bj = np.unravel_index(int(np.argmax(dist)), dist.shape)
-        edge = float(dist[bi, bj]) * cell
-        heights = np.where(mask.astype(bool) & valid, hmax, np.nan)
-        h = float(np.nanmedian(heights))
-        rough = float(np.nanstd(heights))
-        site = (n0 + (bi + 0.5) * cell, e0 + (bj + 0.5) * cell, -h)
-        ci, cj = np.nonzero(mask)
-        cell_pts = np.stack([n0 + (ci + 0.5) * cell, e0 + (cj + 0.5) * cell, np.full(len(ci), -h)], axis=1)
-        body = (cell_pts - np.asarray(pos_ned_m)) @ r_nb
-        uv, front = camera.project_frd(body)
-        uv = uv[front]
-        site_uv, site_front = camera.project_frd(((np.asarray(site) - np.asarray(pos_ned_m)) @ r_nb)[None, :])
-        if len(uv) == 0 or not site_front[0]:
-            continue
-        x0, y0 = np.clip(uv.min(axis=0), 0, [camera.width - 1, camera.height - 1]).astype(int)
-        x1, y1 = np.clip(uv.max(axis=0), 0, [camera.width - 1, camera.height - 1]).astype(int)
-        su, sv = float(site_uv[0, 0]), float(site_uv[0, 1])
-        if x1 - x0 < 4 or y1 - y0 < 4 or not (0 <= su < camera.width and 0 <= sv < camera.height):
-            continue
-        cand = Candidate(
-            0, (int(x0), int(y0), int(x1), int(y1)), (su, sv), area, rough, h - ground, edge, site
-        )
-        found.append((area * min(edge, 5.0), cand))
-    if not found:
-        return quadrant_fallback(camera)
-    found.sort(key=lambda sc: -sc[0])
-    out = []
-    for k, (_, cand) in enumerate(found[:max_candidates]):
-        out.append(
-            Candidate(
-                k,
-                cand.box_px,
-                cand.centre_px,
-                cand.area_m2,
-                cand.roughness_m,
-                cand.height_above_m,
-                cand.edge_distance_m,
-                cand.site_ned_m,
-            )
-        )
-    return out
+    """Candidates best-first (at most ``params.max_candidates``), or the quadrant fallback.
 
-
-@dataclass(frozen=True, slots=True)
-class SiteCheck:
-    """Geometry of a landing site from a close-up LiDAR sweep (the geometric veto)."""
-
-    points: int
-    surface_up_m: float
-    roughness_m: float
-    obstacle_m: float  # tallest return above the surface within the rotor-clearance radius
-    edge_distance_m: float  # to the nearest drop of more than 1 m (inf when none is seen)
-    reasons: tuple[str, ...]
-
-    @property
-    def clear(self) -> bool:
-        return not self.reasons
-
-
-def _edge_distance(
-    world: np.ndarray,
-    d: np.ndarray,
-    up: np.ndarray,
-    site_ne_m: tuple[float, float],
-    surface: float,
-    reach_m: float,
-) -> float:
-    """Distance to the nearest drop of more than 1 m, erring short.
-
-    Seen from above, the surface itself hides the ground just past its edge, so the first "drop"
-    return lies beyond the edge. In each of 16 directions where a drop is seen, the edge is taken at
-    the farthest surface-level return in that direction (the surface is known to reach that far, no
-    farther); the nearest such distance is the answer.
+    Args:
+        depth: from any depth source, on ``camera``'s grid.
+        quat_wxyz: vehicle attitude (body FRD -> NED), for the level frame; level when unknown.
+        pos_ned_m: vehicle position, to give each candidate its site in NED.
+        ground_up_m: ground level relative to the camera (metres, negative below it; in flight
+            ``pos_ned_m[2]`` when home is at ground level), a floor for ``height_above_m``.
     """
-    near = d <= reach_m
-    if not near.any():
-        return math.inf
-    ang = np.arctan2(world[near, 1] - site_ne_m[1], world[near, 0] - site_ne_m[0])
-    sector = ((ang + math.pi) / (2 * math.pi) * 16).astype(int) % 16
-    dn, upn = d[near], up[near]
-    drop = upn < surface - 1.0
-    level = np.abs(upn - surface) < 0.3
-    edge = math.inf
-    for s in np.unique(sector[drop]):
-        in_s = sector == s
-        first_drop = float(dn[in_s & drop].min())
-        roof = dn[in_s & level & (dn < first_drop)]
-        edge = min(edge, float(roof.max()) if len(roof) else 0.0)
-    return edge
-
-
-def check_site(
-    lidar_frd: np.ndarray | None,
-    pos_ned_m: tuple[float, float, float],
-    quat: tuple[float, float, float, float],
-    site_ne_m: tuple[float, float],
-    *,
-    clearance_m: float = 2.0,
-    max_obstacle_m: float = 0.3,
-    max_roughness_m: float = 0.08,
-    min_edge_m: float = 1.5,
-) -> SiteCheck:
-    """Slope/roughness, obstacles in the rotor disc and distance to an edge around ``site_ne_m``."""
-    if lidar_frd is None or len(lidar_frd) == 0:
-        return SiteCheck(0, math.nan, math.nan, math.nan, math.nan, ("no LiDAR returns",))
-    world = _world_points(lidar_frd, pos_ned_m, quat)
-    d = np.hypot(world[:, 0] - site_ne_m[0], world[:, 1] - site_ne_m[1])
-    disc = d <= clearance_m
-    if disc.sum() < 5:
-        return SiteCheck(
-            int(disc.sum()), math.nan, math.nan, math.nan, math.nan, ("too few returns on the site",)
+    p = params or SurfaceParams()
+    if depth.shape != (math.ceil(camera.height / depth.cell_px), math.ceil(camera.width / depth.cell_px)):
+        raise DepthError(f"depth map {depth.shape} does not match the camera at {depth.cell_px} px per cell")
+    fl = flatness(
+        depth,
+        camera,
+        quat_wxyz,
+        window=p.window_cells,
+        max_slope_deg=p.max_slope_deg,
+        max_roughness_m=p.max_roughness_m,
+        max_relative_gradient=p.max_relative_gradient,
+    )
+    mask = cv2.morphologyEx(fl.flat.astype(np.uint8), cv2.MORPH_CLOSE, _K3)
+    mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, _K3)
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=4)
+    rows, cols = depth.shape
+    pad = fl.half_window + 5
+    found: list[tuple[Candidate, float]] = []
+    for c in range(1, count):
+        x, y, w, h = (int(v) for v in stats[c, :4])
+        r0, c0 = max(y - pad, 0), max(x - pad, 0)
+        r1, c1 = min(y + h + pad, rows), min(x + w + pad, cols)
+        cand = _component(labels[r0:r1, c0:c1] == c, (r0, c0), fl, depth, camera, p, pos_ned_m, ground_up_m)
+        if cand is not None:
+            found.append(cand)
+    found.sort(key=lambda cl: -cl[0].score)
+    same = p.same_surface_m if depth.metric else p.same_surface_rel
+    kept = [
+        cd
+        for i, (cd, level) in enumerate(found)
+        if not any(
+            _contained(cd.box_px, other.box_px)
+            and abs(level - other_level) <= same
+            and (cd.box_px != other.box_px or j < i)
+            for j, (other, other_level) in enumerate(found)
+            if j != i
         )
-    up = -world[:, 2]
-    core = up[d <= clearance_m * 0.5] if (d <= clearance_m * 0.5).sum() >= 3 else up[disc]
-    surface = float(np.median(core))
-    obstacle = float(up[disc].max() - surface)
-    rough = float(np.std(up[disc][np.abs(up[disc] - surface) < max_obstacle_m]))
-    edge = _edge_distance(world, d, up, site_ne_m, surface, clearance_m + 4.0)
-    reasons = []
-    if obstacle > max_obstacle_m:
-        reasons.append(f"object {obstacle:.1f} m tall within {clearance_m:.0f} m")
-    if rough > max_roughness_m:
-        reasons.append(f"rough ({100 * rough:.0f} cm)")
-    if edge < min_edge_m:
-        reasons.append(f"{edge:.1f} m from an edge")
-    return SiteCheck(int(disc.sum()), surface, rough, obstacle, edge, tuple(reasons))
+    ]
+    if not kept:
+        return quadrant_fallback(camera)
+    return [_renumber(cd, k) for k, cd in enumerate(kept[: p.max_candidates])]
+
+
+def _renumber(c: Candidate, index: int) -> Candidate:
+    return Candidate(
+        index,
+        c.box_px,
+        c.centre_px,
+        c.area_m2,
+        c.roughness_m,
+        c.height_above_m,
+        c.edge_distance_m,
+        c.site_ned_m,
+        c.fallback,
+        c.slope_deg,
+        c.landable_area_m2,
+        c.score,
+    )
+
+
+def propose(
+    source: DepthSource,
+    camera: PinholeCamera,
+    *,
+    image: np.ndarray | None = None,
+    lidar_frd: np.ndarray | None = None,
+    quat_wxyz: tuple[float, float, float, float] = LEVEL,
+    pos_ned_m: tuple[float, float, float] | None = None,
+    ground_up_m: float | None = None,
+    params: SurfaceParams | None = None,
+) -> tuple[list[Candidate], DepthMap]:
+    """Depth from ``source`` then :func:`surface_id`; DepthError when the source has nothing to give."""
+    depth = source.depth_map(camera, image=image, lidar_frd=lidar_frd)
+    cands = surface_id(
+        depth, camera, quat_wxyz=quat_wxyz, pos_ned_m=pos_ned_m, ground_up_m=ground_up_m, params=params
+    )
+    return cands, depth

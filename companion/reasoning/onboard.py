@@ -8,7 +8,8 @@ import time
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-from companion.perception.surface_id import Candidate, SiteCheck
+from companion.perception.site_check import SiteCheck
+from companion.perception.surface_id import Candidate
 
 ROOF_HEIGHT_M = 3.0  # a surface this far above the lowest in view is taken for a roof, not a street
 

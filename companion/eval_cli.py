@@ -1,0 +1,148 @@
+"""``companion-eval``: run one pipeline module on files and print one JSON object (DESIGN.md section 4).
+
+    companion-eval surfaces IMAGE [--depth D.npy [--relative]] [--lidar L.npy] [--pose N,E,ALT,YAW]
+                            [--hfov DEG] [--annotated out.png]
+
+``surfaces`` runs Surface ID. Depth comes from ``--lidar`` (body FRD points, as ``simbridge render
+--lidar-out`` writes them; metric), else ``--depth`` (a depth image, camera z in metres as ``simbridge
+render --depth-out`` writes it, or relative with ``--relative``), else the image alone through Depth
+Anything V2 (the optional ``depth`` extra and local weights, ``--depth-model``). ``--pose`` places the
+camera (north, east, altitude above the ground, yaw in degrees; level) so candidates carry NED sites;
+without it the camera is level at an unknown place. Exit status: 0 with candidates or the fallback
+printed, 2 for bad input (the message says what was wrong).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from companion.guidance.frames import PinholeCamera
+from companion.perception.depth import (
+    ArrayDepth,
+    DepthError,
+    DepthSource,
+    LidarDepth,
+    load_depth_file,
+    make_source,
+)
+from companion.perception.surface_id import Candidate, SurfaceParams, propose
+
+
+def _pose(text: str) -> tuple[float, float, float, float]:
+    try:
+        parts = [float(v) for v in text.split(",")]
+    except ValueError:
+        parts = []
+    if len(parts) != 4 or not all(math.isfinite(v) for v in parts):
+        raise argparse.ArgumentTypeError(
+            f"expected N,E,ALT,YAW (metres, metres, metres, degrees), got {text!r}"
+        )
+    return parts[0], parts[1], parts[2], parts[3]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="companion-eval", description="Run one Landfall module on files.")
+    sub = p.add_subparsers(dest="command", required=True)
+    s = sub.add_parser("surfaces", help="Surface ID: flat-surface candidates as JSON")
+    s.add_argument("image", type=Path, help="camera image (PNG or JPEG), top = vehicle forward")
+    s.add_argument("--depth", type=Path, help="depth image .npy, camera z in metres (rows x cols of IMAGE)")
+    s.add_argument("--relative", action="store_true", help="--depth is relative (any scale), not metres")
+    s.add_argument("--lidar", type=Path, help="LiDAR points .npy, N x 3 or N x 4, body FRD metres")
+    s.add_argument("--depth-model", help="Depth Anything V2 checkpoint directory or cached Hugging Face id")
+    s.add_argument("--pose", type=_pose, help="N,E,ALT,YAW of the camera (level; ALT above the ground)")
+    s.add_argument("--hfov", type=float, default=90.0, help="horizontal field of view, degrees (default 90)")
+    s.add_argument("--annotated", type=Path, help="also draw the candidates on the image into this file")
+    return p
+
+
+def read_rgb(path: Path) -> np.ndarray:
+    bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if bgr is None:
+        raise DepthError(f"{path}: not a readable image (PNG or JPEG)")
+    return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+
+
+def draw_candidates(image_rgb: np.ndarray, cands: Sequence[Candidate]) -> np.ndarray:
+    """The image (BGR, for writing) with every box, its index and score; the best in green."""
+    out = cv2.cvtColor(image_rgb, cv2.COLOR_RGB2BGR)
+    for c in reversed(cands):
+        colour = (160, 160, 160) if c.fallback else (0, 220, 0) if c.index == 0 else (0, 200, 255)
+        x0, y0, x1, y1 = c.box_px
+        cv2.rectangle(out, (x0, y0), (x1 - 1, y1 - 1), colour, 2)
+        u, v = (round(x) for x in c.centre_px)
+        cv2.drawMarker(out, (u, v), colour, cv2.MARKER_CROSS, 14, 2)
+        label = f"{c.index}" if c.fallback else f"{c.index}: {c.score:.0f}"
+        cv2.putText(out, label, (x0 + 4, y0 + 18), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (0, 0, 0), 3)
+        cv2.putText(out, label, (x0 + 4, y0 + 18), cv2.FONT_HERSHEY_SIMPLEX, 0.55, colour, 1)
+    return out
+
+
+def surfaces(args: argparse.Namespace) -> dict[str, Any]:
+    image = read_rgb(args.image)
+    h, w = image.shape[:2]
+    camera = PinholeCamera.from_hfov(w, h, args.hfov)
+    lidar = None
+    source: DepthSource
+    if args.lidar is not None:
+        lidar = load_depth_file(args.lidar)
+        source = LidarDepth()
+    elif args.depth is not None:
+        source = ArrayDepth(load_depth_file(args.depth), metric=not args.relative)
+    else:
+        source = make_source("depth-anything", model=args.depth_model)
+    pos = quat = ground = None
+    if args.pose is not None:
+        n, e, alt, yaw = args.pose
+        pos, ground = (n, e, -alt), -alt
+        quat = (math.cos(math.radians(yaw) / 2), 0.0, 0.0, math.sin(math.radians(yaw) / 2))
+    t0 = time.perf_counter()
+    cands, depth = propose(
+        source,
+        camera,
+        image=image,
+        lidar_frd=lidar,
+        quat_wxyz=quat or (1.0, 0.0, 0.0, 0.0),
+        pos_ned_m=pos,
+        ground_up_m=ground,
+        params=SurfaceParams(),
+    )
+    latency = time.perf_counter() - t0
+    if args.annotated is not None:
+        args.annotated.parent.mkdir(parents=True, exist_ok=True)
+        if not cv2.imwrite(str(args.annotated), draw_candidates(image, cands)):
+            raise DepthError(f"--annotated: cannot write an image to {args.annotated} (use .png or .jpg)")
+    return {
+        "image": str(args.image),
+        "size": [w, h],
+        "depth_source": depth.source,
+        "metric": depth.metric,
+        "fallback": all(c.fallback for c in cands),
+        "boxes": [list(c.box_px) for c in cands],
+        "candidates": [c.to_json() for c in cands],
+        "latency_s": round(latency, 4),
+    }
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        result = surfaces(args)
+    except (DepthError, ValueError) as exc:
+        print(f"companion-eval {args.command}: {exc}", file=sys.stderr)
+        return 2
+    print(json.dumps(result))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

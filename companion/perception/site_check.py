@@ -1,0 +1,104 @@
+"""The geometric veto: slope, roughness, obstacles in the rotor-clearance disc and the distance to an
+edge around a landing site, from a close-up LiDAR sweep."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from companion.guidance.frames import quat_to_matrix
+
+
+def world_points(
+    lidar_frd: np.ndarray, pos_ned_m: tuple[float, float, float], quat: tuple[float, ...]
+) -> np.ndarray:
+    pts = np.asarray(lidar_frd, dtype=np.float64)[:, :3]
+    pts = pts[np.isfinite(pts).all(axis=1)]
+    return np.asarray(pts @ quat_to_matrix(quat).T + np.asarray(pos_ned_m))
+
+
+@dataclass(frozen=True, slots=True)
+class SiteCheck:
+    """Geometry of a landing site from a close-up LiDAR sweep (the geometric veto)."""
+
+    points: int
+    surface_up_m: float
+    roughness_m: float
+    obstacle_m: float  # tallest return above the surface within the rotor-clearance radius
+    edge_distance_m: float  # to the nearest drop of more than 1 m (inf when none is seen)
+    reasons: tuple[str, ...]
+
+    @property
+    def clear(self) -> bool:
+        return not self.reasons
+
+
+def _edge_distance(
+    world: np.ndarray,
+    d: np.ndarray,
+    up: np.ndarray,
+    site_ne_m: tuple[float, float],
+    surface: float,
+    reach_m: float,
+) -> float:
+    """Distance to the nearest drop of more than 1 m, erring short.
+
+    Seen from above, the surface itself hides the ground just past its edge, so the first "drop"
+    return lies beyond the edge. In each of 16 directions where a drop is seen, the edge is taken at
+    the farthest surface-level return in that direction (the surface is known to reach that far, no
+    farther); the nearest such distance is the answer.
+    """
+    near = d <= reach_m
+    if not near.any():
+        return math.inf
+    ang = np.arctan2(world[near, 1] - site_ne_m[1], world[near, 0] - site_ne_m[0])
+    sector = ((ang + math.pi) / (2 * math.pi) * 16).astype(int) % 16
+    dn, upn = d[near], up[near]
+    drop = upn < surface - 1.0
+    level = np.abs(upn - surface) < 0.3
+    edge = math.inf
+    for s in np.unique(sector[drop]):
+        in_s = sector == s
+        first_drop = float(dn[in_s & drop].min())
+        roof = dn[in_s & level & (dn < first_drop)]
+        edge = min(edge, float(roof.max()) if len(roof) else 0.0)
+    return edge
+
+
+def check_site(
+    lidar_frd: np.ndarray | None,
+    pos_ned_m: tuple[float, float, float],
+    quat: tuple[float, float, float, float],
+    site_ne_m: tuple[float, float],
+    *,
+    clearance_m: float = 2.0,
+    max_obstacle_m: float = 0.3,
+    max_roughness_m: float = 0.08,
+    min_edge_m: float = 1.5,
+) -> SiteCheck:
+    """Slope/roughness, obstacles in the rotor disc and distance to an edge around ``site_ne_m``."""
+    if lidar_frd is None or len(lidar_frd) == 0:
+        return SiteCheck(0, math.nan, math.nan, math.nan, math.nan, ("no LiDAR returns",))
+    world = world_points(lidar_frd, pos_ned_m, quat)
+    d = np.hypot(world[:, 0] - site_ne_m[0], world[:, 1] - site_ne_m[1])
+    disc = d <= clearance_m
+    if disc.sum() < 5:
+        return SiteCheck(
+            int(disc.sum()), math.nan, math.nan, math.nan, math.nan, ("too few returns on the site",)
+        )
+    up = -world[:, 2]
+    core = up[d <= clearance_m * 0.5] if (d <= clearance_m * 0.5).sum() >= 3 else up[disc]
+    surface = float(np.median(core))
+    obstacle = float(up[disc].max() - surface)
+    rough = float(np.std(up[disc][np.abs(up[disc] - surface) < max_obstacle_m]))
+    edge = _edge_distance(world, d, up, site_ne_m, surface, clearance_m + 4.0)
+    reasons = []
+    if obstacle > max_obstacle_m:
+        reasons.append(f"object {obstacle:.1f} m tall within {clearance_m:.0f} m")
+    if rough > max_roughness_m:
+        reasons.append(f"rough ({100 * rough:.0f} cm)")
+    if edge < min_edge_m:
+        reasons.append(f"{edge:.1f} m from an edge")
+    return SiteCheck(int(disc.sum()), surface, rough, obstacle, edge, tuple(reasons))

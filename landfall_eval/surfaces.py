@@ -1,0 +1,111 @@
+"""Surface ID against ground truth: the Jaccard index of the best candidate's box and the safe zone.
+
+A scenario's safe zone (a rectangle on a roof, in its file) is projected into the camera image at the
+height of the surface under it; its ground-truth box is the axis-aligned bounding box of the projected
+corners. The Jaccard index (intersection over union) of two boxes is the study's Surface ID figure.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from companion.guidance.frames import CAMERA_TO_BODY, PinholeCamera, quat_to_matrix
+from companion.perception.depth import ArrayDepth, DepthSource, LidarDepth
+from companion.perception.surface_id import SurfaceParams, propose
+from simbridge.geo import euler_to_quat
+from simbridge.scenarios import load_scenario
+from simbridge.world.live import LiveWorld
+from simbridge.world.world import SafeZone
+
+Box = tuple[float, float, float, float]
+
+
+def box_iou(a: Sequence[float], b: Sequence[float]) -> float:
+    """Jaccard index of two (x0, y0, x1, y1) boxes; 0 when either is empty."""
+    iw = min(a[2], b[2]) - max(a[0], b[0])
+    ih = min(a[3], b[3]) - max(a[1], b[1])
+    inter = max(iw, 0.0) * max(ih, 0.0)
+    area_a = max(a[2] - a[0], 0.0) * max(a[3] - a[1], 0.0)
+    area_b = max(b[2] - b[0], 0.0) * max(b[3] - b[1], 0.0)
+    union = area_a + area_b - inter
+    return inter / union if union > 0 else 0.0
+
+
+def zone_box(
+    zone: SafeZone,
+    surface_up_m: float,
+    camera: PinholeCamera,
+    pos_ned_m: tuple[float, float, float],
+    quat_wxyz: tuple[float, float, float, float],
+) -> Box:
+    """The safe zone's bounding box in the image (pixels), clipped to the image."""
+    corners = zone.corners_ne()
+    ned = np.column_stack([corners, np.full(len(corners), -surface_up_m)])
+    frd = (ned - np.asarray(pos_ned_m)) @ quat_to_matrix(quat_wxyz)
+    cam = frd @ CAMERA_TO_BODY
+    u = camera.fx * cam[:, 0] / cam[:, 2] + camera.cx
+    v = camera.fy * cam[:, 1] / cam[:, 2] + camera.cy
+    return (
+        float(np.clip(u.min(), 0, camera.width)),
+        float(np.clip(v.min(), 0, camera.height)),
+        float(np.clip(u.max(), 0, camera.width)),
+        float(np.clip(v.max(), 0, camera.height)),
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class LaunchFrame:
+    """One rendered sensor frame at a scenario's launch pose, with its ground-truth boxes."""
+
+    scenario: str
+    seed: int
+    image: np.ndarray
+    lidar_frd: np.ndarray
+    depth_m: np.ndarray
+    pos_ned_m: tuple[float, float, float]
+    quat_wxyz: tuple[float, float, float, float]
+    camera: PinholeCamera
+    truth_boxes: tuple[Box, ...]
+
+
+def launch_frame(scenario: str, seed: int, weather: str = "clear", t_s: float = 0.0) -> LaunchFrame:
+    sc = load_scenario(scenario, seed)
+    world = sc.terrain
+    if not isinstance(world, LiveWorld):
+        raise ValueError(f"scenario {scenario!r} has no rendered world")
+    if not world.world.safe_zones:
+        raise ValueError(f"scenario {scenario!r} has no ground-truth safe zone")
+    n, e = sc.launch_ne_m
+    pos = (n, e, -(world.height_m(n, e) + sc.launch_height_m))
+    quat = euler_to_quat(0.0, 0.0, sc.launch_yaw_rad)
+    rng = np.random.default_rng(seed)
+    frame = world.camera_frame(pos, quat, t_s, weather, rng)
+    lidar = world.lidar_sweep(pos, quat, t_s, rng)
+    cm = world.camera
+    camera = PinholeCamera.from_hfov(cm.width_px, cm.height_px, cm.hfov_deg)
+    boxes = tuple(
+        zone_box(z, world.height_m(*z.centre_ne), camera, pos, quat) for z in world.world.safe_zones
+    )
+    return LaunchFrame(scenario, seed, frame.rgb, lidar, frame.depth_m, pos, quat, camera, boxes)
+
+
+def best_jaccard(
+    lf: LaunchFrame, source: str = "lidar", params: SurfaceParams | None = None
+) -> tuple[float, list[float]]:
+    """Jaccard index of the best candidate against the best-matching safe zone, and the box."""
+    src: DepthSource = LidarDepth() if source == "lidar" else ArrayDepth(lf.depth_m)
+    cands, _ = propose(
+        src,
+        lf.camera,
+        image=lf.image,
+        lidar_frd=lf.lidar_frd,
+        quat_wxyz=lf.quat_wxyz,
+        pos_ned_m=lf.pos_ned_m,
+        ground_up_m=lf.pos_ned_m[2],
+        params=params,
+    )
+    best = cands[0]
+    return max(box_iou(best.box_px, b) for b in lf.truth_boxes), [float(v) for v in best.box_px]
