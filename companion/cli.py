@@ -55,6 +55,7 @@ def params_from(cfg: CompanionConfig) -> RecoveryParams:
             min_area_m2=pc.min_area_m2,
             edge_margin_m=pc.edge_margin_m,
             max_candidates=pc.max_candidates,
+            extend_with_image=pc.extend_with_image,
         ),
         depth_source=_depth_source(cfg),
     )
@@ -63,7 +64,7 @@ def params_from(cfg: CompanionConfig) -> RecoveryParams:
 def _depth_source(cfg: CompanionConfig) -> DepthSource:
     pc = cfg.perception
     try:
-        return make_source(pc.depth, cell_px=pc.cell_px, model=pc.depth_model)
+        return make_source(pc.depth, cell_px=pc.cell_px, model=pc.depth_model, lidar_range_m=pc.lidar_range_m)
     except DepthError as exc:
         raise ConfigError(f"perception.depth = {pc.depth!r}", str(exc)) from exc
 

@@ -210,6 +210,8 @@ class PerceptionConfig(_Section):
     min_area_m2: float = Field(default=30.0, gt=0)
     edge_margin_m: float = Field(default=2.0, ge=0)
     max_candidates: int = Field(default=5, ge=1, le=20)
+    lidar_range_m: float = Field(default=100.0, gt=0)
+    extend_with_image: bool = False
 
     @field_validator("window_cells")
     @classmethod

@@ -7,6 +7,7 @@ corners. The Jaccard index (intersection over union) of two boxes is the study's
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -71,7 +72,16 @@ class LaunchFrame:
     truth_boxes: tuple[Box, ...]
 
 
-def launch_frame(scenario: str, seed: int, weather: str = "clear", t_s: float = 0.0) -> LaunchFrame:
+HOVER_SIGMA_M = 0.5  # hover position scatter about the launch point, per axis
+HOVER_TILT_SIGMA_DEG = 1.5  # roll and pitch scatter while holding position in light wind
+HOVER_YAW_SIGMA_DEG = 3.0
+
+
+def launch_frame(
+    scenario: str, seed: int, weather: str = "clear", t_s: float = 0.0, hover: bool = True
+) -> LaunchFrame:
+    """A frame at the scenario's launch pose; with ``hover`` the pose scatters as a hovering drone's
+    does (seeded): position, roll, pitch and yaw drawn about the launch pose."""
     sc = load_scenario(scenario, seed)
     world = sc.terrain
     if not isinstance(world, LiveWorld):
@@ -79,9 +89,14 @@ def launch_frame(scenario: str, seed: int, weather: str = "clear", t_s: float = 
     if not world.world.safe_zones:
         raise ValueError(f"scenario {scenario!r} has no ground-truth safe zone")
     n, e = sc.launch_ne_m
-    pos = (n, e, -(world.height_m(n, e) + sc.launch_height_m))
-    quat = euler_to_quat(0.0, 0.0, sc.launch_yaw_rad)
     rng = np.random.default_rng(seed)
+    dn, de, dd, roll, pitch, yaw = (
+        np.array([HOVER_SIGMA_M] * 3 + [HOVER_TILT_SIGMA_DEG] * 2 + [HOVER_YAW_SIGMA_DEG])
+        * rng.standard_normal(6)
+        * hover
+    )
+    pos = (n + dn, e + de, -(world.height_m(n, e) + sc.launch_height_m) + dd)
+    quat = euler_to_quat(math.radians(roll), math.radians(pitch), sc.launch_yaw_rad + math.radians(yaw))
     frame = world.camera_frame(pos, quat, t_s, weather, rng)
     lidar = world.lidar_sweep(pos, quat, t_s, rng)
     cm = world.camera

@@ -7,6 +7,7 @@ from the geometry, not from a run of the code under test.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -15,7 +16,7 @@ import pytest
 
 from companion.guidance.frames import PinholeCamera
 from companion.perception.crops import PAD_LEVELS, context_crops, crop, pad_box
-from companion.perception.depth import ArrayDepth, DepthError, LidarDepth, make_source
+from companion.perception.depth import ArrayDepth, DepthError, DepthMap, LidarDepth, make_source
 from companion.perception.surface_id import SurfaceParams, propose, quadrant_fallback, surface_id
 
 CAM = PinholeCamera.from_hfov(960, 540, 90.0)  # fx = 480 px
@@ -247,3 +248,63 @@ def test_context_crops_cover_every_level_and_the_full_frame() -> None:
     assert sizes[0] > 100
     assert crops["full"] is image
     assert crop(image, box, 0.0).flags.c_contiguous
+
+
+# ------------------------------------------------------------------------- extension over unmeasured cells
+EXTEND = SurfaceParams(extend_with_image=True)  # off by default (see docs/surface-id.md)
+
+
+def _roof_image(roof_rgb: tuple[int, int, int]) -> np.ndarray:
+    """Grey ground, the roof in ``roof_rgb`` with a little texture, a dark parapet line round it."""
+    rng = np.random.default_rng(3)
+    img = np.full((CAM.height, CAM.width, 3), 110, np.uint8)
+    x0, y0, x1, y1 = (round(v) for v in expected_box(ROOF.n0, ROOF.n1, ROOF.e0, ROOF.e1, ROOF.up))
+    img[y0:y1, x0:x1] = roof_rgb
+    img[y0:y1, x0:x1] += rng.integers(0, 4, (y1 - y0, x1 - x0, 3), dtype=np.uint8)
+    img[y0 : y0 + 2, x0:x1] = img[y1 - 2 : y1, x0:x1] = 40
+    img[y0:y1, x0 : x0 + 2] = img[y0:y1, x1 - 2 : x1] = 40
+    return img
+
+
+def test_the_image_extends_a_roof_over_cells_the_depth_never_reached() -> None:
+    d = depth_image([ROOF])
+    d[:, :300] = np.nan  # out of LiDAR range: the roof's west part (x 258..300) and the ground beyond
+    dm = ArrayDepth(d).depth_map(CAM)
+    m = SurfaceParams().edge_margin_m
+    want = expected_box(ROOF.n0 + m, ROOF.n1 - m, ROOF.e0 + m, ROOF.e1 - m, ROOF.up)
+
+    def roof_of(image: np.ndarray | None, depth: DepthMap = dm) -> list:
+        cands = surface_id(depth, CAM, pos_ned_m=POS, ground_up_m=-ALT, image=image, params=EXTEND)
+        return [c for c in cands if c.height_above_m > 3]
+
+    (alike,) = roof_of(_roof_image((200, 196, 190)))
+    assert iou(alike.box_px, want) > 0.9
+    assert alike.box_px[0] == pytest.approx(want[0], abs=6)  # stopped at the parapet, not the ground
+    assert 0.6 < alike.measured_share < 0.85
+    assert alike.centre_px[0] > 300  # the landing site stays on measured cells
+    (blind,) = roof_of(None)
+    assert blind.box_px[0] >= 300
+    assert blind.measured_share == 1.0
+    # The unmeasured strip looks different (another colour): no extension.
+    img = _roof_image((200, 196, 190))
+    img[:, :300] = (60, 120, 60)
+    (other,) = roof_of(img)
+    assert other.box_px[0] >= 300
+    # A sensor that reaches 200 m would have answered from the roof's plane there: not the roof.
+    (in_range,) = roof_of(_roof_image((200, 196, 190)), dataclasses.replace(dm, max_range_m=200.0))
+    assert in_range.box_px[0] >= 300
+    (beyond,) = roof_of(_roof_image((200, 196, 190)), dataclasses.replace(dm, max_range_m=60.0))
+    assert beyond.box_px[0] == pytest.approx(want[0], abs=6)
+
+
+def test_the_image_never_extends_across_measured_cells() -> None:
+    d = depth_image([ROOF])  # all measured: the roof's edges, and the ground beyond, are known
+    cands = surface_id(
+        ArrayDepth(d).depth_map(CAM),
+        CAM,
+        pos_ned_m=POS,
+        ground_up_m=-ALT,
+        image=_roof_image((110, 110, 110)),
+        params=EXTEND,
+    )
+    assert all(c.measured_share == 1.0 for c in cands)

@@ -60,6 +60,7 @@ class DepthMap:
             ``[c * cell_px, (c + 1) * cell_px) x [r * cell_px, (r + 1) * cell_px)``.
         source: ``"lidar"``, ``"file"`` or the monocular model's name.
         measured: (rows, cols) bool, cells holding a measurement (the rest were filled), or None.
+        max_range_m: the sensor's range, when a cell can be unknown because its surface lies beyond it.
     """
 
     depth: np.ndarray
@@ -67,6 +68,7 @@ class DepthMap:
     cell_px: int
     source: str
     measured: np.ndarray | None = field(default=None, repr=False)
+    max_range_m: float | None = None
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -146,10 +148,12 @@ class LidarDepth:
         cell_px: image pixels per depth cell.
         gap_cells: largest gap between samples, in cells, that is filled (the scan-ring spacing in the
             image; 1.5 m rings seen from 90 m are 8 px apart).
+        range_m: the LiDAR's maximum range (a surface farther away returns nothing).
     """
 
     cell_px: int = 4
     gap_cells: int = 3
+    range_m: float = 100.0
     name: str = "lidar"
 
     def depth_map(
@@ -174,7 +178,8 @@ class LidarDepth:
         sparse = np.full((rows, cols), np.nan, np.float32)
         sparse[r[order], c[order]] = z[order]
         measured = np.isfinite(sparse)
-        return DepthMap(densify(sparse, self.gap_cells), True, self.cell_px, self.name, measured)
+        dense = densify(sparse, self.gap_cells)
+        return DepthMap(dense, True, self.cell_px, self.name, measured, self.range_m)
 
 
 def to_cells(depth_px: np.ndarray, camera: PinholeCamera, cell_px: int) -> np.ndarray:
@@ -259,18 +264,24 @@ class FirstAvailable:
         raise DepthError("; ".join(problems) or "no depth source configured")
 
 
-def make_source(kind: str, *, cell_px: int = 4, model: str | Path | None = None) -> DepthSource:
+def make_source(
+    kind: str, *, cell_px: int = 4, model: str | Path | None = None, lidar_range_m: float = 100.0
+) -> DepthSource:
     """A configured depth source: ``lidar``, ``depth-anything`` or ``auto`` (LiDAR, else the image).
 
     Loading the monocular network happens here, so a missing extra or missing weights fail at start-up.
     """
     if kind == "lidar":
-        return LidarDepth(cell_px=cell_px)
+        return LidarDepth(cell_px=cell_px, range_m=lidar_range_m)
     if kind in ("depth-anything", "auto"):
         from companion.perception.mono_depth import DEFAULT_MODEL, DepthAnythingV2
 
         mono = DepthAnythingV2(model or DEFAULT_MODEL, cell_px=cell_px)
-        return mono if kind == "depth-anything" else FirstAvailable((LidarDepth(cell_px=cell_px), mono))
+        return (
+            mono
+            if kind == "depth-anything"
+            else FirstAvailable((LidarDepth(cell_px=cell_px, range_m=lidar_range_m), mono))
+        )
     raise DepthError(f"unknown depth source {kind!r}; use lidar, depth-anything or auto")
 
 

@@ -18,7 +18,9 @@ depth map -> per-cell flatness (:mod:`companion.perception.flatness`) -> morphol
 - ``score`` = min(landable area, ``score_area_m2``) x fill x min(1, edge_distance_m / (2 x
   edge_margin_m)), where fill is the landable part's share of its box: compact sites with room to
   spare first. Area counts up to ``score_area_m2`` (beyond it a site is not safer, only bigger); fill
-  keeps a sprawling street network, whose box is mostly buildings, behind a roof, whose box is the roof.
+  keeps a sprawling street network, whose box is mostly buildings, behind a roof, whose box is the roof;
+  metric surfaces less than ``roof_height_m`` above their surroundings score ``ground_level_factor``
+  times less (streets, plazas and parking lots carry traffic and people even when they look empty).
 
 A box contained in another candidate's box is dropped when both surfaces lie at the same height
 (within ``same_surface_m``: a fragment of the same surface, split off by clutter; a roof inside the
@@ -40,7 +42,8 @@ import numpy as np
 
 from companion.guidance.frames import PinholeCamera
 from companion.perception.depth import DepthError, DepthMap, DepthSource
-from companion.perception.flatness import Flatness, flatness
+from companion.perception.flatness import Flatness, cell_points, flatness
+from companion.perception.image_extend import ImageCells, extend_unmeasured
 
 __all__ = ["Candidate", "SurfaceParams", "propose", "quadrant_fallback", "surface_id"]
 
@@ -65,6 +68,9 @@ class SurfaceParams:
     score_area_m2: float = 400.0  # landable area beyond this adds nothing to the score
     same_surface_m: float = 1.0  # contained boxes this close in height are the same surface
     same_surface_rel: float = 0.02  # the same for relative depth (fraction of the depth range)
+    extend_with_image: bool = False  # grow metric surfaces over unmeasured cells that look the same
+    roof_height_m: float = 3.0  # a surface this far above its surroundings is elevated (a roof)
+    ground_level_factor: float = 0.5  # score factor for surfaces at street level (traffic, people)
 
 
 @dataclass(frozen=True, slots=True)
@@ -83,6 +89,7 @@ class Candidate:
     slope_deg: float = math.nan
     landable_area_m2: float = math.nan
     score: float = 0.0
+    measured_share: float = 1.0  # of the area, measured by depth (the rest extended from the image)
 
     def to_json(self) -> dict[str, Any]:
         def num(v: float, nd: int) -> float | None:
@@ -101,6 +108,7 @@ class Candidate:
                 "roughness_m": num(self.roughness_m, 3),
                 "height_above_m": num(self.height_above_m, 2),
                 "edge_distance_m": num(self.edge_distance_m, 2),
+                "measured_share": round(self.measured_share, 3),
                 "site_ned_m": None if self.site_ned_m is None else [round(v, 2) for v in self.site_ned_m],
             },
         }
@@ -138,10 +146,12 @@ def _component(
     p: SurfaceParams,
     pos_ned_m: tuple[float, float, float] | None,
     ground_up_m: float | None,
+    extra: np.ndarray | None = None,
 ) -> tuple[Candidate, float] | None:
     """Geometry, box and level (median height, or relative depth) of one component.
 
-    ``comp`` is the component's mask in a padded window of the grid at ``offset``.
+    ``comp`` is the component's mask in a padded window of the grid at ``offset``; ``extra`` the
+    unmeasured cells the image extends it over (same window), if any.
     """
     r0, c0 = offset
     rows, cols = comp.shape
@@ -151,20 +161,35 @@ def _component(
     grown = (
         cv2.dilate(comp.astype(np.uint8), np.ones((2 * hw + 1, 2 * hw + 1), np.uint8)).astype(bool) & valid
     )
-    dist = cv2.distanceTransform(comp.astype(np.uint8), cv2.DIST_L2, 5)
-    edge_cells = np.where(comp, dist + hw - 0.5, 0.0)
+    extended = extra is not None and bool(extra.any())
+    if extended:
+        assert extra is not None
+        # The surface's extent is known (measured, grown back to its edges, plus the image's share):
+        # edge distances are measured from that outline itself.
+        body = comp | extra
+        dist = cv2.distanceTransform((grown | extra).astype(np.uint8), cv2.DIST_L2, 5)
+        edge_cells = np.where(body, dist - 0.5, 0.0)
+    else:
+        body = comp
+        dist = cv2.distanceTransform(comp.astype(np.uint8), cv2.DIST_L2, 5)
+        edge_cells = np.where(comp, dist + hw - 0.5, 0.0)
     s = depth.cell_px
+    measured_share = 1.0
     if depth.metric:
         cell_m = fl.cell_m[sl]
-        area = float(np.sum(cell_m[grown] ** 2))
+        scale = float(np.median(cell_m[comp]))
+        # Unmeasured cells count at the surface's own scale (they lie at its depth if they are it).
+        foot = np.where(np.isfinite(cell_m), cell_m, scale) ** 2
+        area = float(np.sum(foot[grown])) + (float(np.sum(foot[extra])) if extended else 0.0)
         if area < p.min_area_m2:
             return None
-        scale = float(np.median(cell_m[comp]))
+        if extended:
+            measured_share = float(np.sum(foot[grown])) / area
         edge_m = edge_cells * scale
-        land = comp & (edge_m >= p.edge_margin_m)
+        land = body & (edge_m >= p.edge_margin_m)
         if not land.any():
             return None
-        landable = float(np.sum(cell_m[land] ** 2))
+        landable = float(np.sum(foot[land]))
         margin, unit = p.edge_margin_m, scale  # metres per cell
     else:
         area_frac = float(grown.sum()) * s * s / (camera.width * camera.height)
@@ -177,7 +202,8 @@ def _component(
         edge_m = edge_cells / margin_cells  # in margins, for the score only
         landable, margin, area = float(land.sum()) * s * s, 1.0, math.nan
         unit = 1.0 / margin_cells  # margins per cell
-    bi, bj = np.unravel_index(int(np.argmax(edge_m)), edge_m.shape)
+    # The landing site: the measured cell farthest from an edge.
+    bi, bj = np.unravel_index(int(np.argmax(np.where(comp, edge_m, -1.0))), edge_m.shape)
     best_edge = float(edge_m[bi, bj])
     lr, lc = np.nonzero(land)
     # Sub-cell box: the edge distance falls by one cell per cell outward, so the margin is crossed
@@ -210,6 +236,8 @@ def _component(
             float(pos_ned_m[2] + ned[bi, bj, 2]),
         )
     level = float(np.median(up[comp]))
+    if not level - low >= p.roof_height_m:  # NaN (nothing around it measured) counts as street level
+        score *= p.ground_level_factor
     cand = Candidate(
         0,
         box,
@@ -222,8 +250,24 @@ def _component(
         slope_deg=float(np.median(fl.slope_deg[sl][comp])),
         landable_area_m2=landable,
         score=score,
+        measured_share=measured_share,
     )
     return cand, level
+
+
+_RANGE_SLACK = 0.97  # a surface this close to the sensor's range may already go unanswered
+
+
+def _ray_range_per_metre_below(
+    depth: DepthMap, camera: PinholeCamera, quat_wxyz: tuple[float, float, float, float]
+) -> np.ndarray:
+    """Range to a level plane one metre below the camera along each cell's centre ray (inf: no hit)."""
+    unit = DepthMap(np.ones(depth.shape, np.float32), True, depth.cell_px, "unit")
+    ray = cell_points(unit, camera, quat_wxyz)  # z = 1 rays in the level frame
+    down = ray[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out: np.ndarray = np.where(down > 1e-6, np.linalg.norm(ray, axis=-1) / down, np.inf)
+    return out
 
 
 def surface_id(
@@ -234,6 +278,7 @@ def surface_id(
     pos_ned_m: tuple[float, float, float] | None = None,
     ground_up_m: float | None = None,
     params: SurfaceParams | None = None,
+    image: np.ndarray | None = None,
 ) -> list[Candidate]:
     """Candidates best-first (at most ``params.max_candidates``), or the quadrant fallback.
 
@@ -243,6 +288,8 @@ def surface_id(
         pos_ned_m: vehicle position, to give each candidate its site in NED.
         ground_up_m: ground level relative to the camera (metres, negative below it; in flight
             ``pos_ned_m[2]`` when home is at ground level), a floor for ``height_above_m``.
+        image: the camera image (RGB, camera-sized), to extend metric surfaces over unmeasured cells
+            (:mod:`companion.perception.image_extend`); ignored when ``params.extend_with_image`` is off.
     """
     p = params or SurfaceParams()
     if depth.shape != (math.ceil(camera.height / depth.cell_px), math.ceil(camera.width / depth.cell_px)):
@@ -262,11 +309,43 @@ def surface_id(
     rows, cols = depth.shape
     pad = fl.half_window + 5
     found: list[tuple[Candidate, float]] = []
+    cells: ImageCells | None = None
+    use_image = depth.metric and image is not None and p.extend_with_image and not depth.valid.all()
+    ray_range = _ray_range_per_metre_below(depth, camera, quat_wxyz) if use_image else None
+
+    def beyond_range(below_m: float) -> np.ndarray | None:
+        """Cells where a level plane ``below_m`` under the camera lies beyond the sensor's range."""
+        if ray_range is None or depth.max_range_m is None:
+            return None
+        out: np.ndarray = ray_range * below_m >= _RANGE_SLACK * depth.max_range_m
+        return out
+
+    k_grow = np.ones((2 * fl.half_window + 1, 2 * fl.half_window + 1), np.uint8)
     for c in range(1, count):
         x, y, w, h = (int(v) for v in stats[c, :4])
         r0, c0 = max(y - pad, 0), max(x - pad, 0)
         r1, c1 = min(y + h + pad, rows), min(x + w + pad, cols)
-        cand = _component(labels[r0:r1, c0:c1] == c, (r0, c0), fl, depth, camera, p, pos_ned_m, ground_up_m)
+        comp = labels[r0:r1, c0:c1] == c
+        extra = None
+        if use_image:
+            grown = cv2.dilate(comp.astype(np.uint8), k_grow).astype(bool) & depth.valid[r0:r1, c0:c1]
+            edge_of_known = cv2.dilate(grown.astype(np.uint8), _K3).astype(bool) & ~depth.valid[r0:r1, c0:c1]
+            if edge_of_known.any():
+                if cells is None:
+                    assert image is not None
+                    cells = ImageCells.from_image(np.asarray(image), rows, cols, depth.cell_px)
+                full = np.zeros(depth.shape, bool)
+                full[r0:r1, c0:c1] = grown
+                below_m = -float(np.median(-fl.ned_m[r0:r1, c0:c1][comp][:, 2]))
+                ext = extend_unmeasured(full, depth.valid, cells, allowed=beyond_range(below_m))
+                if ext.any():
+                    er, ec = np.nonzero(ext)
+                    r0, c0 = min(r0, int(er.min()) - pad), min(c0, int(ec.min()) - pad)
+                    r1, c1 = max(r1, int(er.max()) + 1 + pad), max(c1, int(ec.max()) + 1 + pad)
+                    r0, c0, r1, c1 = max(r0, 0), max(c0, 0), min(r1, rows), min(c1, cols)
+                    comp = labels[r0:r1, c0:c1] == c
+                    extra = ext[r0:r1, c0:c1]
+        cand = _component(comp, (r0, c0), fl, depth, camera, p, pos_ned_m, ground_up_m, extra)
         if cand is not None:
             found.append(cand)
     found.sort(key=lambda cl: -cl[0].score)
@@ -301,6 +380,7 @@ def _renumber(c: Candidate, index: int) -> Candidate:
         c.slope_deg,
         c.landable_area_m2,
         c.score,
+        c.measured_share,
     )
 
 
@@ -318,6 +398,12 @@ def propose(
     """Depth from ``source`` then :func:`surface_id`; DepthError when the source has nothing to give."""
     depth = source.depth_map(camera, image=image, lidar_frd=lidar_frd)
     cands = surface_id(
-        depth, camera, quat_wxyz=quat_wxyz, pos_ned_m=pos_ned_m, ground_up_m=ground_up_m, params=params
+        depth,
+        camera,
+        quat_wxyz=quat_wxyz,
+        pos_ned_m=pos_ned_m,
+        ground_up_m=ground_up_m,
+        params=params,
+        image=image,
     )
     return cands, depth
