@@ -28,8 +28,8 @@ import numpy as np
 
 from companion.perception.depth import LidarDepth
 from companion.perception.flatness import cell_points, flatness
-from companion.perception.surface_id import SurfaceParams, propose
-from landfall_eval.surfaces import LaunchFrame, launch_frame
+from companion.perception.surface_id import SurfaceParams
+from landfall_eval.surfaces import LaunchFrame, launch_frame, propose_on
 
 GOAL_MS = 30.0
 
@@ -90,16 +90,7 @@ def main(argv: list[str] | None = None) -> int:
         t_flat = median_ms(lambda lf=lf, dm=dm: flatness(dm, lf.camera, lf.quat_wxyz), args.reps)
 
         def whole(lf: LaunchFrame = lf, src: LidarDepth = src) -> Any:
-            return propose(
-                src,
-                lf.camera,
-                image=lf.image,
-                lidar_frd=lf.lidar_frd,
-                quat_wxyz=lf.quat_wxyz,
-                pos_ned_m=lf.pos_ned_m,
-                ground_up_m=lf.pos_ned_m[2],
-                params=params,
-            )
+            return propose_on(lf, src, params)
 
         t_all = median_ms(whole, args.reps)
         t_direct = median_ms(lambda lf=lf: direct_slopes(lf, params.window_cells), max(3, args.reps // 5))

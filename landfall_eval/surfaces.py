@@ -13,9 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from companion.guidance.frames import CAMERA_TO_BODY, PinholeCamera, quat_to_matrix
-from companion.perception.depth import ArrayDepth, DepthSource, LidarDepth
-from companion.perception.surface_id import SurfaceParams, propose
+from companion.guidance.frames import PinholeCamera, quat_to_matrix
+from companion.perception.depth import ArrayDepth, DepthMap, DepthSource, LidarDepth
+from companion.perception.surface_id import Candidate, SurfaceParams, propose
 from simbridge.geo import euler_to_quat
 from simbridge.scenarios import load_scenario
 from simbridge.world.live import LiveWorld
@@ -45,10 +45,8 @@ def zone_box(
     """The safe zone's bounding box in the image (pixels), clipped to the image."""
     corners = zone.corners_ne()
     ned = np.column_stack([corners, np.full(len(corners), -surface_up_m)])
-    frd = (ned - np.asarray(pos_ned_m)) @ quat_to_matrix(quat_wxyz)
-    cam = frd @ CAMERA_TO_BODY
-    u = camera.fx * cam[:, 0] / cam[:, 2] + camera.cx
-    v = camera.fy * cam[:, 1] / cam[:, 2] + camera.cy
+    uv, _front = camera.project_frd((ned - np.asarray(pos_ned_m)) @ quat_to_matrix(quat_wxyz))
+    u, v = uv[:, 0], uv[:, 1]
     return (
         float(np.clip(u.min(), 0, camera.width)),
         float(np.clip(v.min(), 0, camera.height)),
@@ -107,13 +105,12 @@ def launch_frame(
     return LaunchFrame(scenario, seed, frame.rgb, lidar, frame.depth_m, pos, quat, camera, boxes)
 
 
-def best_jaccard(
-    lf: LaunchFrame, source: str = "lidar", params: SurfaceParams | None = None
-) -> tuple[float, list[float]]:
-    """Jaccard index of the best candidate against the best-matching safe zone, and the box."""
-    src: DepthSource = LidarDepth() if source == "lidar" else ArrayDepth(lf.depth_m)
-    cands, _ = propose(
-        src,
+def propose_on(
+    lf: LaunchFrame, source: DepthSource, params: SurfaceParams | None = None
+) -> tuple[list[Candidate], DepthMap]:
+    """Surface ID on a launch frame, with everything the frame knows (image, LiDAR, pose)."""
+    return propose(
+        source,
         lf.camera,
         image=lf.image,
         lidar_frd=lf.lidar_frd,
@@ -122,5 +119,12 @@ def best_jaccard(
         ground_up_m=lf.pos_ned_m[2],
         params=params,
     )
-    best = cands[0]
+
+
+def best_jaccard(
+    lf: LaunchFrame, source: str = "lidar", params: SurfaceParams | None = None
+) -> tuple[float, list[float]]:
+    """Jaccard index of the best candidate against the best-matching safe zone, and the box."""
+    src: DepthSource = LidarDepth() if source == "lidar" else ArrayDepth(lf.depth_m)
+    best = propose_on(lf, src, params)[0][0]
     return max(box_iou(best.box_px, b) for b in lf.truth_boxes), [float(v) for v in best.box_px]

@@ -13,10 +13,34 @@ transformers = pytest.importorskip("transformers")
 
 from companion.guidance.frames import PinholeCamera  # noqa: E402
 from companion.perception.depth import DepthError, FirstAvailable, LidarDepth  # noqa: E402
-from companion.perception.mono_depth import DepthAnythingV2, preprocess, tiny_config  # noqa: E402
+from companion.perception.mono_depth import DepthAnythingV2, preprocess  # noqa: E402
 from companion.perception.surface_id import propose  # noqa: E402
 
 CAM = PinholeCamera.from_hfov(320, 180, 90.0)
+
+
+def tiny_config(image_size: int = 56) -> object:
+    """A small Depth Anything V2 configuration of the real architecture, randomly initialised in tests."""
+    backbone = transformers.Dinov2Config(
+        hidden_size=32,
+        num_hidden_layers=4,
+        num_attention_heads=2,
+        mlp_ratio=2,
+        image_size=image_size,
+        patch_size=14,
+        out_indices=[1, 2, 3, 4],
+        reshape_hidden_states=False,
+        apply_layernorm=True,
+    )
+    return transformers.DepthAnythingConfig(
+        backbone_config=backbone,
+        patch_size=14,
+        reassemble_hidden_size=32,
+        neck_hidden_sizes=[8, 16, 32, 32],
+        fusion_hidden_size=16,
+        head_hidden_size=8,
+        depth_estimation_type="relative",
+    )
 
 
 @pytest.fixture(scope="module")

@@ -30,7 +30,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from companion.guidance.frames import CAMERA_TO_BODY, PinholeCamera
+from companion.guidance.frames import PinholeCamera
 
 __all__ = [
     "ArrayDepth",
@@ -161,18 +161,13 @@ class LidarDepth:
     ) -> DepthMap:
         rows, cols = grid_shape(camera, self.cell_px)
         pts = lidar_points(lidar_frd)
-        cam = pts @ CAMERA_TO_BODY  # rows: CAMERA_TO_BODY.T @ p for each point
-        z = cam[:, 2]
-        front = z > 0.05
-        cam, z = cam[front], z[front]
-        u = camera.fx * cam[:, 0] / z + camera.cx
-        v = camera.fy * cam[:, 1] / z + camera.cy
-        c = np.floor(u / self.cell_px).astype(np.int64)
-        r = np.floor(v / self.cell_px).astype(np.int64)
-        inside = (u >= 0) & (v >= 0) & (u < camera.width) & (v < camera.height)
+        uv, front = camera.project_frd(pts)
+        inside = front & camera.in_image(uv)
         if not inside.any():
             raise DepthError(f"none of the {len(pts)} LiDAR returns falls inside the camera image")
-        r, c, z = r[inside], c[inside], z[inside].astype(np.float32)
+        c = np.floor(uv[inside, 0] / self.cell_px).astype(np.int64)
+        r = np.floor(uv[inside, 1] / self.cell_px).astype(np.int64)
+        z = pts[inside, 2].astype(np.float32)  # camera z is body z (CAMERA_TO_BODY)
         # z-buffer: write far to near so the nearest return in a cell is the one left.
         order = np.argsort(-z, kind="stable")
         sparse = np.full((rows, cols), np.nan, np.float32)

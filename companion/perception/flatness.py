@@ -134,7 +134,6 @@ def _relative(depth: DepthMap, k: int, max_gradient: float) -> Flatness:
     gx = cv2.Sobel(rel, cv2.CV_32F, 1, 0, ksize=3) / 8.0
     gy = cv2.Sobel(rel, cv2.CV_32F, 0, 1, ksize=3) / 8.0
     grad = np.hypot(gx, gy)
-    grad[~valid] = np.inf
     # Sobel at a cell reads its 8 neighbours: an unknown neighbour makes the cell unknown too.
     unknown = cv2.dilate((~valid).astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool)
     grad[unknown] = np.inf

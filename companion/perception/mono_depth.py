@@ -121,31 +121,3 @@ class DepthAnythingV2:
         rel = 1.0 - normalise_relative(full)
         cells = to_cells(rel, camera, self.cell_px)
         return DepthMap(cells, False, self.cell_px, self.name, None)
-
-
-def tiny_config(image_size: int = 56) -> Any:
-    """A small Depth Anything V2 configuration of the real architecture (tests, benchmarks of overhead)."""
-    try:
-        from transformers import DepthAnythingConfig, Dinov2Config
-    except ImportError as exc:
-        raise DepthError(f"the 'depth' extra is not installed ({exc})") from exc
-    backbone = Dinov2Config(
-        hidden_size=32,
-        num_hidden_layers=4,
-        num_attention_heads=2,
-        mlp_ratio=2,
-        image_size=image_size,
-        patch_size=_PATCH,
-        out_indices=[1, 2, 3, 4],
-        reshape_hidden_states=False,
-        apply_layernorm=True,
-    )
-    return DepthAnythingConfig(
-        backbone_config=backbone,
-        patch_size=_PATCH,
-        reassemble_hidden_size=32,
-        neck_hidden_sizes=[8, 16, 32, 32],
-        fusion_hidden_size=16,
-        head_hidden_size=8,
-        depth_estimation_type="relative",
-    )

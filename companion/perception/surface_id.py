@@ -33,6 +33,7 @@ still point a direction.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -41,7 +42,7 @@ import cv2
 import numpy as np
 
 from companion.guidance.frames import PinholeCamera
-from companion.perception.depth import DepthError, DepthMap, DepthSource
+from companion.perception.depth import DepthError, DepthMap, DepthSource, grid_shape
 from companion.perception.flatness import Flatness, cell_points, flatness
 from companion.perception.image_extend import ImageCells, extend_unmeasured
 
@@ -292,7 +293,7 @@ def surface_id(
             (:mod:`companion.perception.image_extend`); ignored when ``params.extend_with_image`` is off.
     """
     p = params or SurfaceParams()
-    if depth.shape != (math.ceil(camera.height / depth.cell_px), math.ceil(camera.width / depth.cell_px)):
+    if depth.shape != grid_shape(camera, depth.cell_px):
         raise DepthError(f"depth map {depth.shape} does not match the camera at {depth.cell_px} px per cell")
     fl = flatness(
         depth,
@@ -363,25 +364,7 @@ def surface_id(
     ]
     if not kept:
         return quadrant_fallback(camera)
-    return [_renumber(cd, k) for k, cd in enumerate(kept[: p.max_candidates])]
-
-
-def _renumber(c: Candidate, index: int) -> Candidate:
-    return Candidate(
-        index,
-        c.box_px,
-        c.centre_px,
-        c.area_m2,
-        c.roughness_m,
-        c.height_above_m,
-        c.edge_distance_m,
-        c.site_ned_m,
-        c.fallback,
-        c.slope_deg,
-        c.landable_area_m2,
-        c.score,
-        c.measured_share,
-    )
+    return [dataclasses.replace(cd, index=k) for k, cd in enumerate(kept[: p.max_candidates])]
 
 
 def propose(
