@@ -17,10 +17,8 @@ from companion.config import CompanionConfig, ConfigError, load_config
 from companion.daemon import Companion
 from companion.perception.depth import DepthError, DepthSource, make_source
 from companion.perception.surface_id import SurfaceParams
-from companion.reasoning.onboard import OnboardReasoner
+from companion.reasoning.tiers import BUILTIN_PROFILES, ONBOARD, build_cascade
 from companion.recovery import RecoveryParams
-
-REASONERS = {"onboard": OnboardReasoner}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -29,7 +27,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--mavlink", help="MAVLink endpoint, e.g. udp:14550 (default from the config: udp:14550)")
     p.add_argument("--config", type=Path, help="TOML configuration file (deploy/companion.toml documents it)")
-    p.add_argument("--reasoner", help=f"reasoning tier: {', '.join(REASONERS)}")
+    p.add_argument(
+        "--reasoner",
+        help=f"first reasoning tier: {ONBOARD} (default), {', '.join(BUILTIN_PROFILES)} or a profile of the "
+        "config; the onboard tier always answers when the others cannot",
+    )
     p.add_argument("--sensors", metavar="HOST:PORT", help="sensor stream endpoint (simbridge --sensors)")
     p.add_argument("--record", type=Path, metavar="DIR", help="keep a flight record of every round here")
     p.add_argument("--log-level", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
@@ -58,6 +60,7 @@ def params_from(cfg: CompanionConfig) -> RecoveryParams:
             extend_with_image=pc.extend_with_image,
         ),
         depth_source=_depth_source(cfg),
+        context=cfg.reasoner.context,
     )
 
 
@@ -72,15 +75,12 @@ def _depth_source(cfg: CompanionConfig) -> DepthSource:
 def build_companion(cfg: CompanionConfig) -> Companion:
     from simbridge.sensorstream import parse_endpoint
 
-    if cfg.reasoner.name not in REASONERS:
-        raise ConfigError(
-            "reasoner.name", f"unknown reasoner {cfg.reasoner.name!r}; available: {', '.join(REASONERS)}"
-        )
     record: Any = None
     if cfg.record.dir is not None:
         from companion.record import FlightRecord
 
         record = FlightRecord(cfg.record.dir, cfg.record.max_mb)
+    reasoner = build_cascade(cfg.reasoner, record=record.record_event if record is not None else None)
     a = cfg.alarms
     return Companion(
         mavlink_url=cfg.mavlink.url,
@@ -89,7 +89,7 @@ def build_companion(cfg: CompanionConfig) -> Companion:
         signing_key=cfg.signing_key(),
         sensors=parse_endpoint(cfg.sensors.endpoint),
         frame_timeout_s=cfg.sensors.frame_timeout_s,
-        reasoner=REASONERS[cfg.reasoner.name](),
+        reasoner=reasoner,
         params=params_from(cfg),
         record=record,
         watch_battery_pct=a.battery_critical_pct if a.watch_battery else None,

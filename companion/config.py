@@ -52,6 +52,7 @@ __all__ = [
     "CompanionConfig",
     "ConfigError",
     "LogConfig",
+    "LvlmProfileConfig",
     "MavlinkConfig",
     "ReasonerConfig",
     "RecordConfig",
@@ -239,12 +240,51 @@ class AlarmsConfig(_Section):
     )
 
 
+class LvlmProfileConfig(_Section):
+    """One OpenAI-compatible model endpoint (``[reasoner.profiles.NAME]``). Every key is optional: over a
+    built-in profile of the same name only the keys given change; a new name needs base_url and model."""
+
+    base_url: str | None = Field(default=None, pattern=r"^https?://\S+$")
+    model: str | None = Field(default=None, min_length=1)
+    api_key_env: str | None = None  # "" = keyless (local servers)
+    schema_variant: Literal["strict", "relaxed", "none"] | None = None
+    max_side_px: int | None = Field(default=None, ge=64, le=4096)
+    jpeg_quality: int | None = Field(default=None, ge=30, le=100)
+    max_tokens: int | None = Field(default=None, ge=16)
+    max_completion_tokens: int | None = Field(default=None, ge=16)
+    reasoning_effort: Literal["minimal", "low", "medium", "high"] | None = None
+    temperature: float | None = Field(default=None, ge=0, le=2)
+    headers: dict[str, str] | None = None
+    extra_body: dict[str, Any] | None = None
+    attempt_timeout_s: float | None = Field(default=None, gt=0)
+    max_attempts: int | None = Field(default=None, ge=1, le=10)
+
+    @field_validator("api_key_env")
+    @classmethod
+    def _check_env_name(cls, name: str | None) -> str | None:
+        if name and _ENV_NAME_RE.fullmatch(name) is None:
+            raise ValueError(f"must be an environment variable name (got {name!r})")
+        return name
+
+
+_TIER_NAME = Annotated[str, Strict(), Field(min_length=1, pattern=r"^\S+$")]
+
+
 class ReasonerConfig(_Section):
-    """The reasoning tier and its per-call deadlines."""
+    """The reasoning tiers, their order per stage, deadlines and the confirmation rule
+    (companion/reasoning; DESIGN.md section 8)."""
 
     name: str = Field(default="onboard", min_length=1, pattern=r"^\S+$")
-    rank_deadline_s: float = Field(default=8.0, gt=0)
-    confirm_deadline_s: float = Field(default=5.0, gt=0)
+    rank_fallbacks: tuple[_TIER_NAME, ...] = Field(default=(), strict=False)
+    confirm_fallbacks: tuple[_TIER_NAME, ...] = Field(default=(), strict=False)
+    rank_deadline_s: float = Field(default=10.0, gt=0)
+    confirm_deadline_s: float = Field(default=6.0, gt=0)
+    critical_deadline_factor: float = Field(default=0.5, gt=0, le=1)
+    context: Literal["crop", "pad20", "pad30", "pad40", "pad50", "pad60", "full"] = "crop"
+    hedge: str = ""
+    hedge_after_s: float = Field(default=4.0, gt=0)
+    override_lone_no_after: int = Field(default=2, ge=1)
+    profiles: dict[str, LvlmProfileConfig] = Field(default_factory=dict, strict=False)
 
 
 class RecordConfig(_Section):
@@ -349,9 +389,13 @@ def _find_origin(origins: Mapping[tuple[str, ...], _Origin], loc: tuple[str | in
 
 def _model_at(path: tuple[str | int, ...]) -> type[BaseModel] | None:
     model: type[BaseModel] = CompanionConfig
-    for part in path:
-        field = model.model_fields.get(str(part))
+    parts = list(path)
+    while parts:
+        field = model.model_fields.get(str(parts.pop(0)))
         sub = field.annotation if field is not None else None
+        if get_origin(sub) is dict and parts:  # a table of named tables: skip the name
+            sub = get_args(sub)[1]
+            parts.pop(0)
         if not (isinstance(sub, type) and issubclass(sub, BaseModel)):
             return None
         model = sub
@@ -433,6 +477,8 @@ def _parse_text(annotation: Any, text: str, secret: bool) -> Any:
             raise ValueError(f"must be a number{got}") from exc
     if get_origin(annotation) is tuple:
         items = [t.strip() for t in text.split(",")] if text.strip() else []
+        if get_args(get_args(annotation)[0])[:1] == (str,):  # tuple[Annotated[str, ...], ...]
+            return tuple(items)
         try:
             return tuple(int(t) for t in items)
         except ValueError as exc:

@@ -12,7 +12,9 @@ from typing import Any
 
 from companion.alarms import ALARM_TEXT_PREFIX, MAV_CMD_USER_1, Alarm, Criticality, ReasonCode
 from companion.control import VehicleController
-from companion.reasoning.onboard import OnboardReasoner, Reasoner
+from companion.reasoning.base import Reasoner
+from companion.reasoning.cascade import Cascade
+from companion.reasoning.onboard import OnboardReasoner
 from companion.recovery import Outcome, Record, Recovery, RecoveryParams
 from companion.telemetry import TelemetryCache
 from simbridge.link import MavlinkUdpLink
@@ -57,7 +59,7 @@ class Companion:
             logger=logging.getLogger("companion.link"),
         )
         self.ctl = VehicleController(self.tm, self.link.send_to, self.link.mav, logger=self.log)
-        self.reasoner = reasoner or OnboardReasoner()
+        self.reasoner: Reasoner = reasoner or Cascade([], [], OnboardReasoner())
         self.params = params or RecoveryParams()
         self.record = record
         self._sensors = sensors

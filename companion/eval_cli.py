@@ -2,24 +2,41 @@
 
     companion-eval surfaces IMAGE [--depth D.npy [--relative]] [--lidar L.npy] [--pose N,E,ALT,YAW]
                             [--hfov DEG] [--annotated out.png]
+    companion-eval rank [--reasoner NAME] [--context IMAGE] [--config FILE] [--critical] [--no-fallback]
+                        IMAGE...
+    companion-eval confirm [--reasoner NAME] [--config FILE] [--critical] [--no-fallback] IMAGE
+
+``rank`` orders candidate images (index k = the k-th IMAGE) by landing safety and prints
+``{"ranking": [...], "rationale": ..., "tier": ..., "latency_s": ..., "errors": [...]}``; ``confirm``
+judges one close-up and prints ``{"confirm": true|false, "rationale": ..., "tier": ..., "latency_s": ...,
+"errors": [...]}``. They run the flight cascade: ``--reasoner`` first (default: the config's
+``reasoner.name``, else ``onboard``), the onboard tier when it cannot answer in time; ``tier`` says who
+answered and ``errors`` lists the tiers that failed first (tier, kind, message). With ``--no-fallback``
+only the named tier runs, and a failure prints ``{"error": {"kind", "message"}, "tier", "latency_s"}``
+with exit status 3. The onboard reasoner works on any RGB image alone (no geometry: degraded mode).
 
 ``surfaces`` runs Surface ID. Depth comes from ``--lidar`` (body FRD points, as ``simbridge render
 --lidar-out`` writes them; metric), else ``--depth`` (a depth image, camera z in metres as ``simbridge
 render --depth-out`` writes it, or relative with ``--relative``), else the image alone through Depth
 Anything V2 (the optional ``depth`` extra and local weights, ``--depth-model``). ``--pose`` places the
 camera (north, east, altitude above the ground, yaw in degrees; level) so candidates carry NED sites;
-without it the camera is level at an unknown place. Exit status: 0 with candidates or the fallback
-printed, 2 for bad input (the message says what was wrong).
+without it the camera is level at an unknown place.
+
+Exit status: 0 with an answer printed, 2 for bad input (the message says what was wrong), 3 when
+``--no-fallback`` and the tier failed.
 """
 
 from __future__ import annotations
 
 import argparse
+import asyncio
 import json
 import math
+import os
 import sys
 import time
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +53,8 @@ from companion.perception.depth import (
     make_source,
 )
 from companion.perception.surface_id import Candidate, SurfaceParams, propose
+from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequest, Reasoner, ReasonerError
+from companion.reasoning.tiers import ONBOARD, build_cascade
 
 
 def _pose(text: str) -> tuple[float, float, float, float]:
@@ -62,7 +81,84 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--pose", type=_pose, help="N,E,ALT,YAW of the camera (level; ALT above the ground)")
     s.add_argument("--hfov", type=float, default=90.0, help="horizontal field of view, degrees (default 90)")
     s.add_argument("--annotated", type=Path, help="also draw the candidates on the image into this file")
+
+    def reasoner_flags(q: argparse.ArgumentParser) -> None:
+        q.add_argument("--reasoner", help="first tier: onboard or an LVLM profile (default: the config's)")
+        q.add_argument("--config", type=Path, help="companion TOML (profiles, deadlines, fallbacks)")
+        q.add_argument("--critical", action="store_true", help="as for a critical alarm (shorter deadline)")
+        q.add_argument("--no-fallback", action="store_true", help="only the named tier; exit 3 if it fails")
+
+    r = sub.add_parser("rank", help="order candidate images by landing safety")
+    r.add_argument("images", type=Path, nargs="+", metavar="IMAGE", help="candidate crops (PNG or JPEG)")
+    r.add_argument("--context", type=Path, help="the whole camera view, shown as context only")
+    reasoner_flags(r)
+    c = sub.add_parser("confirm", help="is this close-up safe to descend onto")
+    c.add_argument("image", type=Path, help="close-up of the site (PNG or JPEG)")
+    reasoner_flags(c)
     return p
+
+
+MAX_RANK_IMAGES = 10
+
+
+def _reasoner_config(args: argparse.Namespace) -> Any:
+    from companion.config import load_config
+
+    overrides = {"reasoner.name": args.reasoner} if args.reasoner else {}
+    return load_config(args.config, os.environ, overrides).reasoner
+
+
+async def _ask(args: argparse.Namespace, request: RankRequest | ConfirmRequest) -> tuple[dict[str, Any], int]:
+    cfg = _reasoner_config(args)
+    exchanges: list[dict[str, Any]] = []
+    cascade = build_cascade(cfg, record=lambda kind, fields: exchanges.append(fields))
+    t0 = time.perf_counter()
+    try:
+        if args.no_fallback:
+            stage = "rank" if isinstance(request, RankRequest) else "confirm"
+            tiers = cascade.rank_tiers if stage == "rank" else cascade.confirm_tiers
+            tier: Reasoner = tiers[0] if cfg.name != ONBOARD else cascade.onboard
+            deadline = time.monotonic() + cascade.deadline_s(stage, request.critical)
+            try:
+                async with asyncio.timeout(deadline - time.monotonic()):
+                    answer: Ranking | Decision = await (
+                        tier.rank(replace(request, deadline=deadline))
+                        if isinstance(request, RankRequest)
+                        else tier.confirm(replace(request, deadline=deadline))
+                    )
+            except (ReasonerError, TimeoutError) as exc:
+                kind = exc.kind if isinstance(exc, ReasonerError) else "deadline"
+                return {
+                    "error": {"kind": kind, "message": str(exc) or "stage deadline"},
+                    "tier": tier.name,
+                    "latency_s": round(time.perf_counter() - t0, 4),
+                }, 3
+        elif isinstance(request, RankRequest):
+            answer = await cascade.rank(request)
+        else:
+            answer = await cascade.confirm(request)
+    finally:
+        await cascade.aclose()
+    out: dict[str, Any]
+    if isinstance(answer, Ranking):
+        out = {"ranking": list(answer.order)}
+    else:
+        out = {"confirm": answer.accept}
+    out.update(rationale=answer.rationale, tier=answer.tier, latency_s=round(time.perf_counter() - t0, 4))
+    out["errors"] = [{"tier": e["tier"], **e["error"]} for e in exchanges if "error" in e]
+    return out, 0
+
+
+def rank(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
+    if len(args.images) > MAX_RANK_IMAGES:
+        raise ValueError(f"at most {MAX_RANK_IMAGES} candidate images, got {len(args.images)}")
+    crops = tuple(read_rgb(p) for p in args.images)
+    context = read_rgb(args.context) if args.context is not None else None
+    return asyncio.run(_ask(args, RankRequest(crops, None, context=context, critical=args.critical)))
+
+
+def confirm(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
+    return asyncio.run(_ask(args, ConfirmRequest(read_rgb(args.image), None, critical=args.critical)))
 
 
 def read_rgb(path: Path) -> np.ndarray:
@@ -136,12 +232,15 @@ def surfaces(args: argparse.Namespace) -> dict[str, Any]:
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        result = surfaces(args)
-    except (DepthError, ValueError) as exc:
+        if args.command == "surfaces":
+            result, status = surfaces(args), 0
+        else:
+            result, status = (rank if args.command == "rank" else confirm)(args)
+    except (DepthError, ValueError) as exc:  # ConfigError is a ValueError
         print(f"companion-eval {args.command}: {exc}", file=sys.stderr)
         return 2
     print(json.dumps(result))
-    return 0
+    return status
 
 
 if __name__ == "__main__":

@@ -17,6 +17,8 @@ from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+import numpy as np
+
 from companion.alarms import Alarm, Criticality
 from companion.control import (
     AutopilotFailsafe,
@@ -25,12 +27,13 @@ from companion.control import (
     TargetTimeout,
     VehicleController,
 )
-from companion.guidance.frames import PinholeCamera
+from companion.guidance.frames import PinholeCamera, quat_to_matrix
 from companion.guidance.ipm import IpmError, LidarPixelIndex, pixel_to_ned, pixel_to_ned_flat
+from companion.perception.crops import crop
 from companion.perception.depth import DepthError, DepthSource, LidarDepth
 from companion.perception.site_check import check_site
 from companion.perception.surface_id import Candidate, SurfaceParams, propose, quadrant_fallback
-from companion.reasoning.onboard import Reasoner
+from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequest, Reasoner
 from companion.telemetry import TelemetryCache
 
 MAX_REENGAGE = 2
@@ -65,6 +68,8 @@ class RecoveryParams:
     surface: SurfaceParams = field(default_factory=SurfaceParams)
     depth_source: DepthSource = field(default_factory=LidarDepth)
     rejected_radius_m: float = 4.0  # a rejected site rules out candidates this close to it
+    context: str = "crop"  # what the reasoner sees per candidate: crop, pad20..pad60, or full (+ frame)
+    closeup_half_m: float = 6.0  # the confirmation close-up shows this far around the site
     land_timeout_s: float = 120.0
 
 
@@ -199,18 +204,7 @@ class Recovery:
             await self._explore()
             return False
         self._set(State.RANK)
-        ranking = await self.reasoner.rank(candidates, frame)
-        self.record.record_event(
-            "rank",
-            {
-                "round": self.round,
-                "order": list(ranking.order),
-                "rationale": ranking.rationale,
-                "tier": ranking.tier,
-                "latency_s": ranking.latency_s,
-                "candidates": [c.to_json() for c in candidates],
-            },
-        )
+        ranking = await self._rank(candidates, frame)
         choice = next((candidates[k] for k in ranking.order if not candidates[k].fallback), None)
         if choice is None:
             await self._explore()
@@ -246,18 +240,11 @@ class Recovery:
             check = await asyncio.to_thread(
                 check_site, frame.lidar_frd, frame.pos_ned_m, frame.quat_wxyz, (target[0], target[1])
             )
-            decision = await self.reasoner.confirm(check, frame)
-            self.record.record_event(
-                "confirm",
-                {
-                    "round": self.round,
-                    "accept": decision.accept,
-                    "rationale": decision.rationale,
-                    "tier": decision.tier,
-                    "latency_s": decision.latency_s,
-                    "site_ned_m": list(target),
-                },
-            )
+            decision = await self._confirm(check, frame, target)
+            if not decision.accept and decision.contested:
+                # a lone "no" on a clear site: ask again next round (the cascade's lone-"no" rule)
+                self._say(4, f"site {choice.index} contested: {decision.rationale[:110]}")
+                return False
             if not decision.accept:
                 self.rejected.append((target[0], target[1]))
                 if (
@@ -354,6 +341,105 @@ class Recovery:
             self.log.warning("Surface ID has no depth (%s): quadrant fallback", exc)
             return quadrant_fallback(camera)
         return cands
+
+    async def _rank(self, candidates: list[Candidate], frame: Any) -> Ranking:
+        """The reasoner's order of the candidates, from their crops (the configured context variant)."""
+        image = frame.image_rgb
+        names: list[str] = []
+        if image is None:
+            # no camera image this frame: Surface ID's own order (its score), said so in the record
+            ranking = Ranking(
+                tuple(c.index for c in candidates),
+                "no camera image: Surface ID's order (flat area, clearance, elevation)",
+                "surface-id",
+                0.0,
+            )
+        else:
+            pad = int(self.p.context[3:]) / 100 if self.p.context.startswith("pad") else 0.0
+            crops = tuple(crop(image, c.box_px, pad) for c in candidates)
+            for k, c in enumerate(crops):
+                path = self.record.save_image(f"round{self.round:02d}-rank-crop{k}", c)
+                names.append(str(getattr(path, "name", path)) if path is not None else "")
+            request = RankRequest(
+                crops,
+                None if all(c.fallback for c in candidates) else tuple(candidates),
+                context=image if self.p.context == "full" else None,
+                critical=self.criticality == Criticality.CRITICAL,
+            )
+            ranking = await self.reasoner.rank(request)
+        self.record.record_event(
+            "rank",
+            {
+                "round": self.round,
+                "order": list(ranking.order),
+                "rationale": ranking.rationale,
+                "tier": ranking.tier,
+                "latency_s": ranking.latency_s,
+                "context": self.p.context,
+                "images": names,
+                "candidates": [c.to_json() for c in candidates],
+            },
+        )
+        return ranking
+
+    async def _confirm(self, check: Any, frame: Any, target: tuple[float, float, float]) -> Decision:
+        """Reasoner and geometric veto on a close-up of the site (the cascade arbitrates)."""
+        image = frame.image_rgb
+        if image is None:
+            decision = Decision(
+                check.clear,
+                "no camera image: LiDAR check only: "
+                + ("clear" if check.clear else "; ".join(check.reasons)),
+                "site-check",
+                0.0,
+            )
+            closeup_name = ""
+        else:
+            closeup = self._closeup(image, frame, target)
+            path = self.record.save_image(f"round{self.round:02d}-confirm", closeup)
+            closeup_name = str(getattr(path, "name", path)) if path is not None else ""
+            decision = await self.reasoner.confirm(
+                ConfirmRequest(
+                    closeup,
+                    check if check.points > 0 else None,
+                    critical=self.criticality == Criticality.CRITICAL,
+                    site_ne_m=(target[0], target[1]),
+                )
+            )
+        self.record.record_event(
+            "confirm",
+            {
+                "round": self.round,
+                "accept": decision.accept,
+                "rationale": decision.rationale,
+                "tier": decision.tier,
+                "latency_s": decision.latency_s,
+                "site_ned_m": list(target),
+                "image": closeup_name,
+                "check": {
+                    "points": check.points,
+                    "roughness_m": check.roughness_m,
+                    "obstacle_m": check.obstacle_m,
+                    "edge_distance_m": check.edge_distance_m,
+                    "reasons": list(check.reasons),
+                },
+            },
+        )
+        return decision
+
+    def _closeup(self, image: Any, frame: Any, target: tuple[float, float, float]) -> Any:
+        """The part of the frame within ``closeup_half_m`` of the site (the whole frame when the site is
+        not in view)."""
+        camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
+        rel = np.asarray(target) - np.asarray(frame.pos_ned_m)
+        uv, front = camera.project_frd((rel @ quat_to_matrix(frame.quat_wxyz))[None, :])
+        dist = float(np.linalg.norm(rel))
+        if not front[0] or not (0 <= uv[0, 0] < camera.width and 0 <= uv[0, 1] < camera.height) or dist <= 0:
+            return image
+        half = max(int(camera.fx * self.p.closeup_half_m / dist), 48)
+        u, v = int(uv[0, 0]), int(uv[0, 1])
+        box = (max(u - half, 0), max(v - half, 0), min(u + half, camera.width), min(v + half, camera.height))
+        return crop(image, box)
 
     def _near_rejected(self, c: Candidate) -> bool:
         if c.site_ned_m is None:

@@ -86,8 +86,8 @@ def test_load_config_defaults_match_the_brief() -> None:
     assert a.accept_from_system_ids == ()
     assert (cfg.reasoner.name, cfg.reasoner.rank_deadline_s, cfg.reasoner.confirm_deadline_s) == (
         "onboard",
-        8.0,
-        5.0,
+        10.0,
+        6.0,
     )
     assert (cfg.record.dir, cfg.record.max_mb) == (None, 500)
     assert cfg.log.level == "INFO"
@@ -494,10 +494,79 @@ def test_deploy_companion_toml_lists_every_option_with_a_comment() -> None:
                 expected.update(f"{section}.{key}.{k}" for k in RoundsByCriticality.model_fields)
             else:
                 expected.add(f"{section}.{key}")
-    # The key itself is documented but commented out: keys belong in the environment.
-    assert present == expected - {"mavlink.signing_key"}
+    # The key itself is documented but commented out: keys belong in the environment. LVLM profiles are
+    # optional tables, documented with a commented-out example.
+    assert present == expected - {"mavlink.signing_key", "reasoner.profiles"}
     assert "# signing_key = " in text
+    assert "# [reasoner.profiles." in text
     lines = text.splitlines()
     for i, line in enumerate(lines):
         if "=" in line and not line.startswith("#"):
             assert lines[i - 1].startswith("#"), f"option without a comment above it: {line!r}"
+
+
+# --- reasoner tiers and LVLM profiles ----------------------------------------------------------------
+
+
+def test_reasoner_profiles_and_fallbacks_from_file_and_env(in_tmp: Path) -> None:
+    from companion.reasoning.tiers import resolve_profile
+
+    path = write(
+        Path("companion.toml"),
+        """
+        [reasoner]
+        name = "gpt-5-mini"
+        [reasoner.profiles.gpt-5-mini]
+        reasoning_effort = "minimal"
+        [reasoner.profiles.edge]
+        base_url = "http://10.0.0.2:8000/v1"
+        model = "Qwen/Qwen2.5-VL-7B-Instruct"
+        api_key_env = ""
+        schema_variant = "none"
+        """.replace("\n        ", "\n"),
+    )
+    cfg = load_config(path, {"LANDFALL_REASONER_RANK_FALLBACKS": "edge, onboard"}, {})
+    assert cfg.reasoner.rank_fallbacks == ("edge", "onboard")
+    mini = resolve_profile("gpt-5-mini", cfg.reasoner.profiles, "x")
+    # only the given key changes over the built-in
+    assert (mini.reasoning_effort, mini.max_completion_tokens, mini.api_key_env) == (
+        "minimal",
+        6000,
+        "OPENAI_API_KEY",
+    )
+    edge = resolve_profile("edge", cfg.reasoner.profiles, "x")
+    assert (edge.base_url, edge.api_key_env, edge.schema) == ("http://10.0.0.2:8000/v1", None, "none")
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        (
+            '[reasoner.profiles.edge]\nbase_url = "http://x/v1"\nmodle = "m"',
+            "companion.toml: reasoner.profiles.edge.modle: unknown option (allowed: base_url, model,",
+        ),
+        (
+            '[reasoner.profiles.edge]\nbase_url = "ftp://x"',
+            "companion.toml: reasoner.profiles.edge.base_url: ",
+        ),
+        (
+            '[reasoner.profiles.edge]\nmodel = "m"\nreasoning_effort = "max"',
+            "companion.toml: reasoner.profiles.edge.reasoning_effort: ",
+        ),
+        ('[reasoner]\ncontext = "pad25"', "companion.toml: reasoner.context: "),
+        (
+            "[reasoner]\ncritical_deadline_factor = 2.0",
+            "companion.toml: reasoner.critical_deadline_factor: must be <= 1",
+        ),
+    ],
+)
+def test_reasoner_config_errors(in_tmp: Path, text: str, message: str) -> None:
+    assert str(error_of(write(Path("companion.toml"), text))).startswith(message)
+
+
+def test_a_new_profile_needs_base_url_and_model(in_tmp: Path) -> None:
+    from companion.reasoning.tiers import resolve_profile
+
+    cfg = load_config(write(Path("companion.toml"), '[reasoner.profiles.edge]\nmodel = "m"'), {}, {})
+    with pytest.raises(ConfigError, match=r"reasoner\.profiles\.edge: a new profile needs base_url"):
+        resolve_profile("edge", cfg.reasoner.profiles, "reasoner.name")

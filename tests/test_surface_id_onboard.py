@@ -12,6 +12,7 @@ from companion.guidance.frames import PinholeCamera
 from companion.perception.depth import DepthError, LidarDepth
 from companion.perception.site_check import check_site
 from companion.perception.surface_id import Candidate, propose
+from companion.reasoning.base import RankRequest
 from companion.reasoning.onboard import OnboardReasoner
 from simbridge.geo import euler_to_quat
 from simbridge.world.lidar import LidarModel, sweep
@@ -80,7 +81,8 @@ async def test_onboard_ranker_prefers_the_roof_over_the_street() -> None:
     g = _block()
     pos = (0.0, 0.0, -100.0)
     cands = surface_id(_lidar(g, pos), pos)
-    ranking = await OnboardReasoner().rank(cands)
+    crops = tuple(np.zeros((8, 8, 3), np.uint8) for _ in cands)  # geometry decides on blank images
+    ranking = await OnboardReasoner().rank(RankRequest(crops, tuple(cands)))
     top = cands[ranking.order[0]]
     assert top.height_above_m > 3.0
     assert "roof" in ranking.rationale

@@ -1,5 +1,10 @@
-"""Reasoning tiers: which candidate is safest, and is this site still safe for the next step down."""
+"""Reasoning tiers: which candidate is safest, and is this site still safe for the next step down.
 
-from companion.reasoning.onboard import Decision, OnboardReasoner, Ranking, Reasoner
+``base`` holds the requests, answers and typed failures every tier shares; ``onboard`` the deterministic
+scorer; ``lvlm`` the OpenAI-compatible vision-language client; ``cascade`` the deadline-driven tier order
+and the confirmation arbitration; ``prompts`` and ``parsing`` what we ask models and how we read them.
+"""
 
-__all__ = ["Decision", "OnboardReasoner", "Ranking", "Reasoner"]
+from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequest, Reasoner, ReasonerError
+
+__all__ = ["ConfirmRequest", "Decision", "RankRequest", "Ranking", "Reasoner", "ReasonerError"]

@@ -1,82 +1,248 @@
-"""The onboard tier: deterministic, no network, milliseconds (issue 6 adds image cues and the
-LVLM cascade). It ranks by geometry and always explains itself."""
+"""The onboard tier: deterministic, no network, a few milliseconds (DESIGN.md section 8).
+
+**Rank.** Every crop is looked at (:func:`companion.reasoning.image_cues.analyse`): its ``hazard``
+(water, vegetation, lane markings, raised objects and their shadows, ...) always counts against it.
+When Surface ID's geometry comes with the request, each candidate also gets a geometry score
+(:func:`geometry_score`): room to land (landable area, up to ``GeometryWeights.area_full_m2``), distance
+to its edge, slope and roughness, and elevation: a surface ``roof_height_m`` or more above its
+surroundings is a roof, away from traffic and people, and scores ``elevated``; a surface at street level
+scores ``street_level`` (streets, plazas and car parks carry traffic even when they look empty). The
+score is geometry minus hazard; candidates without geometry (the quadrant fallback) come after every
+measured one. With images only (no depth: degraded mode) the hazard alone orders them. The weights are
+set so that a road's markings or water (2.5 to 3 hazard points) outweigh the elevation bonus, so an
+elevated highway deck, geometrically a fine roof, loses to a clear roof: the reference study's smaller
+models chose empty highways.
+
+**Confirm.** The close-up is judged in site mode (``analyse(image, site=True)``: the surface under the
+image centre). Descend only when the LiDAR check (when there is one) is clear and the image shows no
+veto on the site: water, vegetation, lane markings, a raised object (a person, a vehicle, clutter:
+``max_raised`` of them), pipes or rails, or a total hazard over ``max_hazard``. ``critical=True`` relaxes
+two things a little, never water, roads or people it can see against a clear LiDAR check: the total
+hazard limit rises from ``max_hazard`` to ``max_hazard_critical`` (flat patches, asphalt-like texture,
+busy edges), and when the LiDAR check is clear (nothing taller than 0.3 m inside the rotor disc) one
+raised object in view is tolerated (``max_raised_critical``): it stands outside the disc, or is a false
+sighting. Without a LiDAR check nothing is relaxed.
+
+Rationales name the chosen site and what was seen on it and on the runner-up, e.g. ``site 0: elevated
+flat roof 22 m up, 839 m2 landable, 14.3 m from its edge, no clutter, uniform gravel or tile texture
+(not a hazard); site 1 rejected: HVAC-like blobs with shadows (6)``. The work is CPU-bound and takes a
+few milliseconds, so the async methods run it inline: there is nothing to await.
+"""
 
 from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
-from typing import Any, Protocol
+from dataclasses import dataclass, field
 
 from companion.perception.site_check import SiteCheck
 from companion.perception.surface_id import Candidate
+from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequest, Reasoner
+from companion.reasoning.image_cues import ImageCues, analyse
 
-ROOF_HEIGHT_M = 3.0  # a surface this far above the lowest in view is taken for a roof, not a street
+__all__ = [
+    "ConfirmParams",
+    "Decision",
+    "GeometryWeights",
+    "OnboardReasoner",
+    "Ranking",
+    "Reasoner",
+    "geometry_score",
+]
 
 
 @dataclass(frozen=True, slots=True)
-class Ranking:
-    order: tuple[int, ...]  # candidate indices, best first
-    rationale: str
-    tier: str
-    latency_s: float
+class GeometryWeights:
+    """How Surface ID's geometry scores a candidate (points, comparable to image-cue hazard points)."""
+
+    area: float = 1.5  # at area_full_m2 of landable area or more
+    area_full_m2: float = 400.0  # beyond this a site is not safer, only bigger (Surface ID's score_area_m2)
+    edge: float = 1.0  # at edge_full_m from the nearest edge or more
+    edge_full_m: float = 8.0
+    slope_per_deg: float = 0.15  # lost per degree over slope_free_deg
+    slope_free_deg: float = 2.0
+    roughness_per_cm: float = 0.25  # lost per centimetre over roughness_free_m
+    roughness_free_m: float = 0.02
+    roof_height_m: float = 3.0  # this far above its surroundings: a roof (Surface ID's roof_height_m)
+    elevated: float = 2.0  # a roof: away from traffic and people
+    street_level: float = -1.0  # streets, plazas, car parks: traffic comes back
+    extended: float = 0.5  # lost at measured_share 0 (area the image extended, no depth behind it)
 
 
 @dataclass(frozen=True, slots=True)
-class Decision:
-    accept: bool
-    rationale: str
-    tier: str
-    latency_s: float
+class ConfirmParams:
+    """When the onboard tier says yes to a close-up (module docstring)."""
+
+    max_hazard: float = 1.0  # total site hazard; 0.5 is a fully asphalt-like (tar) roof, alone no reason
+    max_hazard_critical: float = 1.6
+    max_raised: int = 0  # raised objects on the site (people, vehicles, clutter)
+    max_raised_critical: int = 1  # ... with a critical alarm and a clear LiDAR check
+    max_water: float = 0.1  # share of the site (or right beside it)
+    max_vegetation: float = 0.15
+    max_markings: float = 0.3  # total lane-marking length, in working-image diagonals (about one line)
+    max_raised_lines: float = 0.3  # pipes, rails
 
 
-class Reasoner(Protocol):
-    name: str
+@dataclass(frozen=True, slots=True)
+class _Site:
+    index: int
+    score: float
+    fallback: bool
+    geometry: str  # what the geometry says, or "" without it
+    cues: ImageCues = field(repr=False)
 
-    async def rank(self, candidates: list[Candidate], context: Any) -> Ranking: ...
 
-    async def confirm(self, check: SiteCheck, context: Any) -> Decision: ...
+def geometry_score(c: Candidate, w: GeometryWeights | None = None) -> tuple[float, str]:
+    """Points for a candidate's geometry (0 where unknown) and a phrase naming it.
 
-
-def _score(c: Candidate) -> tuple[float, str]:
+    Relative depth (no metres) leaves area, heights and edges NaN: those terms count 0.
+    """
+    w = w or GeometryWeights()
     if c.fallback:
-        return -10.0 + 0.1 * (c.index == 4), "no flat surface measured there"
-    notes = []
-    s = math.log(max(c.area_m2, 1.0))
-    s += 0.8 * min(c.edge_distance_m, 6.0)
-    if c.height_above_m >= ROOF_HEIGHT_M:
-        s += 4.0
-        notes.append(f"elevated {c.height_above_m:.0f} m (a roof: away from traffic)")
-    else:
-        s -= 4.0
-        notes.append("at street level (roads stay risky even when empty)")
-    if math.isfinite(c.roughness_m):
-        s -= 10.0 * max(c.roughness_m - 0.05, 0.0)
-    notes.append(f"{c.area_m2:.0f} m2 flat, {c.edge_distance_m:.1f} m clear to its edge")
+        return 0.0, "no flat surface measured there (quadrant fallback)"
+    notes: list[str] = []
+    s = 0.0
+    h = c.height_above_m
+    if math.isfinite(h):
+        if h >= w.roof_height_m:
+            s += w.elevated
+            notes.append(f"elevated flat roof {h:.0f} m up")
+        else:
+            s += w.street_level
+            notes.append("at street level")
+    room = c.landable_area_m2 if math.isfinite(c.landable_area_m2) else c.area_m2
+    if math.isfinite(room):
+        s += w.area * min(room, w.area_full_m2) / w.area_full_m2
+        notes.append(f"{room:.0f} m2 landable")
+    if math.isfinite(c.edge_distance_m):
+        s += w.edge * min(c.edge_distance_m, w.edge_full_m) / w.edge_full_m
+        notes.append(f"{c.edge_distance_m:.1f} m from its edge")
+    if math.isfinite(c.slope_deg) and c.slope_deg > w.slope_free_deg:
+        s -= w.slope_per_deg * (c.slope_deg - w.slope_free_deg)
+        notes.append(f"sloped {c.slope_deg:.0f} deg")
+    if math.isfinite(c.roughness_m) and c.roughness_m > w.roughness_free_m:
+        s -= w.roughness_per_cm * 100.0 * (c.roughness_m - w.roughness_free_m)
+        notes.append(f"rough {100 * c.roughness_m:.0f} cm")
+    if c.measured_share < 1.0:
+        s -= w.extended * (1.0 - c.measured_share)
+    if not notes:
+        notes.append("no metric geometry")
     return s, ", ".join(notes)
 
 
 class OnboardReasoner:
-    name = "onboard"
+    """The onboard tier (module docstring). ``rank_sync``/``confirm_sync`` do the work; the async
+    methods of the :class:`~companion.reasoning.base.Reasoner` protocol call them."""
 
-    async def rank(self, candidates: list[Candidate], context: Any = None) -> Ranking:
-        t0 = time.monotonic()
-        scored = sorted(((*_score(c), c.index) for c in candidates), key=lambda x: -x[0])
-        _best_score, best_note, best = scored[0]
-        rationale = f"site {best}: {best_note}"
-        if len(scored) > 1:
-            rationale += f"; next site {scored[1][2]}: {scored[1][1]}"
-        return Ranking(tuple(int(s[2]) for s in scored), rationale, self.name, time.monotonic() - t0)
+    name: str = "onboard"
 
-    async def confirm(self, check: SiteCheck, context: Any = None) -> Decision:
-        t0 = time.monotonic()
-        if check.clear:
-            edge = (
-                "no edge in view"
-                if math.isinf(check.edge_distance_m)
-                else f"{check.edge_distance_m:.1f} m to an edge"
+    def __init__(self, weights: GeometryWeights | None = None, confirm: ConfirmParams | None = None) -> None:
+        self.weights = weights or GeometryWeights()
+        self.confirm_params = confirm or ConfirmParams()
+
+    async def rank(self, request: RankRequest) -> Ranking:
+        return self.rank_sync(request)
+
+    async def confirm(self, request: ConfirmRequest) -> Decision:
+        return self.confirm_sync(request)
+
+    # ------------------------------------------------------------------ rank
+    def rank_sync(self, request: RankRequest) -> Ranking:
+        """Every candidate, best first; ties keep the given order.
+
+        Raises:
+            ValueError: a crop that is not a non-empty (H, W, 3) uint8 image.
+        """
+        t0 = time.perf_counter()
+        sites: list[_Site] = []
+        for k, crop in enumerate(request.crops):
+            cues = analyse(crop)
+            cand = None if request.candidates is None else request.candidates[k]
+            g, geometry = (0.0, "") if cand is None else geometry_score(cand, self.weights)
+            fallback = cand is not None and cand.fallback
+            sites.append(_Site(k, g - cues.hazard, fallback, geometry, cues))
+        ranked = sorted(sites, key=lambda s: (s.fallback, -s.score, s.index))
+        rationale = _rank_rationale(ranked, request.candidates is None)
+        if request.transcript is not None:
+            request.transcript.append(
+                {
+                    "tier": self.name,
+                    "scores": {str(s.index): round(s.score, 3) for s in sites},
+                    "cues": [s.cues.to_json() for s in sites],
+                }
             )
-            why = f"clear: {check.points} returns, {100 * check.roughness_m:.0f} cm rough, {edge}"
+        order = tuple(s.index for s in ranked)
+        return Ranking(order, rationale, self.name, time.perf_counter() - t0)
+
+    # ------------------------------------------------------------------ confirm
+    def confirm_sync(self, request: ConfirmRequest) -> Decision:
+        """Descend or not (module docstring).
+
+        Raises:
+            ValueError: an image that is not a non-empty (H, W, 3) uint8 image.
+        """
+        t0 = time.perf_counter()
+        p = self.confirm_params
+        cues = analyse(request.image, site=True)
+        check = request.check
+        lidar_clear = check is not None and check.clear
+        relax = request.critical
+        max_raised = p.max_raised_critical if relax and lidar_clear else p.max_raised
+        vetoes: list[str] = []
+        if check is not None and not check.clear:
+            vetoes.append("LiDAR: " + "; ".join(check.reasons))
+        if cues.water_share > p.max_water:
+            vetoes.append(f"water ({100 * cues.water_share:.0f} % of the site)")
+        if cues.vegetation_share > p.max_vegetation:
+            vetoes.append(f"vegetation ({100 * cues.vegetation_share:.0f} %)")
+        if cues.line_length > p.max_markings:
+            vetoes.append(f"lane markings ({cues.lane_lines}): a road stays risky even when empty")
+        if cues.raised_blobs > max_raised:
+            vetoes.append(cues.phrase("raised"))
+        if cues.raised_line_length > p.max_raised_lines:
+            vetoes.append(cues.phrase("lines_raised"))
+        limit = p.max_hazard_critical if relax else p.max_hazard
+        if not vetoes and cues.hazard > limit:
+            seen = ", ".join(cues.phrase(name) for name, _v in cues.terms[:3])
+            vetoes.append(f"hazard {cues.hazard:.1f} over {limit:.1f}: {seen}")
+        accept = not vetoes
+        if accept:
+            why = f"site clear: {_geometry_phrase(check)}; image: {', '.join(cues.observations()[:3])}"
+            if relax and cues.raised_blobs:
+                why += " (critical: one object in view tolerated, LiDAR finds the rotor disc clear)"
         else:
-            why = "rejected: " + "; ".join(check.reasons)
-        return Decision(check.clear, why, self.name, time.monotonic() - t0)
+            why = "rejected: " + "; ".join(vetoes)
+            if check is None:
+                why += " (no LiDAR: judged from the image alone)"
+        if request.transcript is not None:
+            request.transcript.append({"tier": self.name, "cues": cues.to_json(), "accept": accept})
+        return Decision(accept, why, self.name, time.perf_counter() - t0)
+
+
+def _geometry_phrase(check: SiteCheck | None) -> str:
+    if check is None:
+        return "no LiDAR (judged from the image alone)"
+    edge = (
+        "no edge in view"
+        if math.isinf(check.edge_distance_m)
+        else f"{check.edge_distance_m:.1f} m to an edge"
+    )
+    return f"LiDAR {check.points} returns, {100 * check.roughness_m:.0f} cm rough, {edge}"
+
+
+def _describe(site: _Site, limit: int) -> str:
+    parts = [site.geometry] if site.geometry else []
+    parts.extend(site.cues.observations()[:limit])
+    return ", ".join(parts)
+
+
+def _rank_rationale(ranked: list[_Site], images_only: bool) -> str:
+    best = ranked[0]
+    text = f"site {best.index}: {_describe(best, 3)}"
+    if len(ranked) > 1:
+        nxt = ranked[1]
+        verdict = "rejected" if nxt.cues.hazard >= 1.0 or nxt.fallback else "next"
+        text += f"; site {nxt.index} {verdict}: {_describe(nxt, 2)}"
+    if images_only:
+        text += " (no geometry: image cues only)"
+    return text

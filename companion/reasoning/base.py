@@ -1,0 +1,188 @@
+"""What every reasoning tier takes and gives, and how it fails (DESIGN.md section 8).
+
+A tier answers two questions. **Rank**: given up to 5 candidate crops (and, when Surface ID had depth,
+their geometry), which is the safest place to land, best first. **Confirm**: given a close-up of the site
+the vehicle now hovers over (and, with a LiDAR, the geometric site check), is it still safe to descend.
+
+Tiers are the onboard scorer (no network, milliseconds) and OpenAI-compatible vision-language models.
+Every failure a tier can have is a :class:`ReasonerError` subclass, so the cascade can tell a slow answer
+from a refusal from a malformed one and the flight record can say which it was.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from companion.perception.site_check import SiteCheck
+from companion.perception.surface_id import Candidate
+
+__all__ = [
+    "ConfirmRequest",
+    "DeadlineExceeded",
+    "Decision",
+    "EmptyAnswer",
+    "EndpointError",
+    "ErrorBody",
+    "InvalidIndices",
+    "MalformedAnswer",
+    "NotConfigured",
+    "RankRequest",
+    "Ranking",
+    "RateLimited",
+    "Reasoner",
+    "ReasonerError",
+    "Refusal",
+    "TruncatedAnswer",
+    "Unreachable",
+]
+
+
+@dataclass(frozen=True, slots=True)
+class RankRequest:
+    """Candidates to order, best landing site first.
+
+    ``crops`` are RGB uint8 images, one per candidate, in candidate order (index k is crop k).
+    ``candidates`` carries Surface ID's geometry for the same indices, or is ``None`` when only images are
+    known (degraded mode: no depth, or ``companion-eval rank`` on image files). ``context`` is the whole
+    frame when the configured context variant sends it. ``critical`` is set for a critical alarm.
+    """
+
+    crops: tuple[np.ndarray, ...]
+    candidates: tuple[Candidate, ...] | None = None
+    context: np.ndarray | None = None
+    critical: bool = False
+    deadline: float | None = None  # time.monotonic() by which the answer is needed (set by the cascade)
+    transcript: list[dict[str, Any]] | None = field(default=None, compare=False)  # exchanges are appended
+
+    def __post_init__(self) -> None:
+        if not self.crops:
+            raise ValueError("a rank request needs at least one candidate crop")
+        if self.candidates is not None and len(self.candidates) != len(self.crops):
+            raise ValueError(f"{len(self.crops)} crops but {len(self.candidates)} candidates")
+
+
+@dataclass(frozen=True, slots=True)
+class ConfirmRequest:
+    """A close-up of the site under the vehicle: safe to descend onto, or not.
+
+    ``check`` is the geometric site check from the LiDAR (``None`` without one); the reasoner's answer
+    is its own, and the cascade applies the geometric veto on top.
+
+    Both requests carry an optional ``deadline`` (a ``time.monotonic()`` instant: remote tiers size their
+    attempts and retries to it) and ``transcript``, a list each tier appends its exchanges to (prompt,
+    image references, raw answer, status, latency, error) for the flight record.
+    """
+
+    image: np.ndarray
+    check: SiteCheck | None = None
+    critical: bool = False
+    site_ne_m: tuple[float, float] | None = None  # where the site is, for the lone-"no" rule
+    deadline: float | None = None
+    transcript: list[dict[str, Any]] | None = field(default=None, compare=False)
+
+
+@dataclass(frozen=True, slots=True)
+class Ranking:
+    order: tuple[int, ...]  # candidate indices, best first (may omit candidates judged unlandable)
+    rationale: str
+    tier: str
+    latency_s: float
+
+
+@dataclass(frozen=True, slots=True)
+class Decision:
+    accept: bool
+    rationale: str
+    tier: str
+    latency_s: float
+    # a "no" from a remote tier alone, on a site the LiDAR and the onboard cues find clear: the site stays
+    # eligible, and the lone-"no" rule (companion/reasoning/cascade.py) may accept it on a later round
+    contested: bool = False
+
+
+class Reasoner(Protocol):
+    """One tier. ``name`` is what the flight record and the JSON outputs call it."""
+
+    @property
+    def name(self) -> str: ...
+
+    async def rank(self, request: RankRequest) -> Ranking: ...
+
+    async def confirm(self, request: ConfirmRequest) -> Decision: ...
+
+
+# --------------------------------------------------------------------------------------------- failures
+class ReasonerError(Exception):
+    """A tier gave no usable answer. ``kind`` is a stable short name for records and JSON."""
+
+    kind = "error"
+
+
+class DeadlineExceeded(ReasonerError):
+    kind = "deadline"
+
+
+class NotConfigured(ReasonerError):
+    """The tier cannot be called as configured (no API key in its environment variable)."""
+
+    kind = "not_configured"
+
+
+class Unreachable(ReasonerError):
+    """No HTTP exchange completed (connection refused, DNS, TLS, reset)."""
+
+    kind = "unreachable"
+
+
+class EndpointError(ReasonerError):
+    """An HTTP status other than 200."""
+
+    kind = "http"
+
+    def __init__(self, message: str, status: int, retry_after_s: float | None = None) -> None:
+        super().__init__(message)
+        self.status = status
+        self.retry_after_s = retry_after_s
+
+    @property
+    def retryable(self) -> bool:
+        return self.status in (408, 409, 425, 429) or self.status >= 500
+
+
+class RateLimited(EndpointError):
+    kind = "rate_limited"
+
+
+class ErrorBody(ReasonerError):
+    """HTTP 200 whose body is an error object, not a completion."""
+
+    kind = "error_body"
+
+
+class Refusal(ReasonerError):
+    kind = "refusal"
+
+
+class EmptyAnswer(ReasonerError):
+    kind = "empty"
+
+
+class TruncatedAnswer(ReasonerError):
+    """The answer stopped early (``finish_reason`` "length", or JSON cut off)."""
+
+    kind = "truncated"
+
+
+class MalformedAnswer(ReasonerError):
+    """The answer cannot be read as the schema asks."""
+
+    kind = "malformed"
+
+
+class InvalidIndices(MalformedAnswer):
+    """A ranking with out-of-range or repeated candidate indices."""
+
+    kind = "invalid_indices"
