@@ -17,11 +17,7 @@ Usage: python benchmarks/bench_surface_id.py [--reps 30]
 from __future__ import annotations
 
 import argparse
-import os
-import statistics
 import sys
-import time
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -30,23 +26,9 @@ from companion.perception.depth import LidarDepth
 from companion.perception.flatness import cell_points, flatness
 from companion.perception.surface_id import SurfaceParams
 from landfall_eval.surfaces import LaunchFrame, launch_frame, propose_on
+from landfall_eval.timing import median_ms, pin_one_core
 
 GOAL_MS = 30.0
-
-
-def _pin() -> None:
-    if hasattr(os, "sched_setaffinity"):
-        os.sched_setaffinity(0, {0})
-
-
-def median_ms(fn: Callable[[], Any], reps: int) -> float:
-    fn()  # warm caches
-    times = []
-    for _ in range(reps):
-        t0 = time.perf_counter()
-        fn()
-        times.append((time.perf_counter() - t0) * 1e3)
-    return statistics.median(times)
 
 
 def direct_slopes(lf: LaunchFrame, window: int) -> np.ndarray:
@@ -74,7 +56,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--reps", type=int, default=30)
     args = ap.parse_args(argv)
-    _pin()
+    pin_one_core()
     params = SurfaceParams()
     frames = [launch_frame("scenario1", 0), launch_frame("scenario2", 0)]
     print(f"Surface ID per frame, LiDAR depth, one core, median of {args.reps}")

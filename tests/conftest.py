@@ -15,7 +15,10 @@ import pytest
 
 os.environ.setdefault("MAVLINK20", "1")
 
+from simbridge.world.camera import Frame
+from simbridge.world.live import LiveWorld
 from tests.mavclient import MavClient
+from tests.views import LAUNCH, SCENE, WEATHERS, render, world
 
 
 def free_udp_port() -> int:
@@ -167,3 +170,19 @@ def start_rig(start_sim: Callable[..., SimProcess], tmp_path: Path) -> Iterator[
             except subprocess.TimeoutExpired:
                 p.kill()
                 p.wait()
+
+
+# Scenes for the onboard-reasoner tests (tests/views.py).
+@pytest.fixture(scope="module")
+def city() -> LiveWorld:
+    return world("scenario1")
+
+
+@pytest.fixture(scope="module")
+def scene() -> LiveWorld:
+    return world(str(SCENE))
+
+
+@pytest.fixture(scope="module")
+def launch(city: LiveWorld) -> dict[str, Frame]:
+    return {weather: render(city, LAUNCH, weather) for weather in WEATHERS}

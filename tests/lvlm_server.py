@@ -3,8 +3,9 @@
 Real HTTP (the standard library's threading server), so the client under test goes through httpx,
 sockets, status codes and headers exactly as against a real endpoint. What it answers is scripted per
 model name: ``server.script("m", Reply(...), Reply(...))`` makes the first request for model ``m`` get
-the first reply, the second the second, and every later one the last. Every request is kept (path,
-headers, parsed body, arrival time) for the tests to inspect.
+the first reply, the second the second, and every later one the last; ``stage="rank"`` or
+``"confirm"`` scripts one stage of that model apart (told by the request's schema name or prompt).
+Every request is kept (path, headers, parsed body, arrival time) for the tests to inspect.
 """
 
 from __future__ import annotations
@@ -101,10 +102,19 @@ class ScriptedServer:
         self._thread = threading.Thread(target=self.httpd.serve_forever, args=(0.05,), daemon=True)
         self._thread.start()
 
-    def script(self, model: str, *replies: Reply) -> None:
+    def script(self, model: str, *replies: Reply, stage: str | None = None) -> None:
+        key = model if stage is None else f"{model}/{stage}"
         with self._lock:
-            self._scripts[model] = list(replies)
-            self._served[model] = 0
+            self._scripts[key] = list(replies)
+            self._served[key] = 0
+
+    @staticmethod
+    def _stage(body: dict[str, Any]) -> str:
+        fmt = body.get("response_format") or {}
+        name = str((fmt.get("json_schema") or {}).get("name", ""))
+        if name:
+            return "rank" if name.endswith("rank") else "confirm"
+        return "rank" if "Final Ranking" in json.dumps(body.get("messages")) else "confirm"
 
     def _next(self, path: str, headers: dict[str, str], body: Any) -> Reply:
         with self._lock:
@@ -112,11 +122,14 @@ class ScriptedServer:
                 Seen(path, {k.lower(): v for k, v in headers.items()}, body, time.monotonic())
             )
             model = body.get("model") if isinstance(body, dict) else None
-            replies = self._scripts.get(str(model))
+            key = str(model)
+            if isinstance(body, dict) and f"{model}/{self._stage(body)}" in self._scripts:
+                key = f"{model}/{self._stage(body)}"
+            replies = self._scripts.get(key)
             if not replies:
                 return Reply(404, {"error": {"message": f"no such model {model!r}", "code": 404}})
-            k = self._served[str(model)]
-            self._served[str(model)] = k + 1
+            k = self._served[key]
+            self._served[key] = k + 1
             return replies[min(k, len(replies) - 1)]
 
     def seen(self, model: str) -> list[Seen]:

@@ -3,6 +3,7 @@ trigger_alarm.py, and the verdict from simbridge's ground truth (its episode log
 
 from __future__ import annotations
 
+import json
 import re
 import time
 from collections.abc import Callable
@@ -212,3 +213,51 @@ def test_nothing_flat_explores_then_lands_when_the_budget_runs_out(
     assert "no flat site in view: moving" in log  # ... then outward once the ceiling is reached
     assert "round budget spent with no site: landing here" in log  # never just give up
     assert td["safe"] is False  # and the ground truth agrees that a gable roof was no place to land
+
+
+def test_an_lvlm_tier_flies_the_loop_and_a_lone_no_is_overridden(
+    start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """The companion asks a vision-language model over real HTTP (a scripted local OpenAI-compatible
+    server): it ranks the first candidate first, and at every confirmation sees "birds on the roof".
+    The LiDAR and the onboard cues find the clear roof clear, so the first "no" is a lone no (the site
+    is not struck off), the second is overridden (reasoner.override_lone_no_after = 2), and the vehicle
+    lands on the clear roof. The flight record keeps every exchange."""
+    from tests.lvlm_server import ScriptedServer, answer
+
+    server = ScriptedServer()
+    try:
+        server.script("vlm", answer({"explanation": "candidate 0 is a clear gravel roof", "ranking": [0]}),
+                      stage="rank")  # fmt: skip
+        server.script("vlm", answer({"explanation": "birds on the roof", "decision": 0}), stage="confirm")
+        config = tmp_path / "companion.toml"
+        config.write_text(
+            f'[reasoner]\nname = "edge"\n[reasoner.profiles.edge]\nbase_url = "{server.base_url}"\n'
+            'model = "vlm"\napi_key_env = ""\n'
+        )
+        record = tmp_path / "record"
+        rig = start_rig(
+            ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "4"],
+            ["--config", str(config), "--record", str(record)],
+        )
+        _wait_for_companion(rig)
+        out = rig.alarm_accepted("--reason", "sensor failure", "--criticality", "high")
+        assert out.returncode == 0, out.stdout + out.stderr
+        td = _wait_touchdown(rig, timeout_s=200)
+        assert td["surface"] == "rooftop_clear", (td, rig.log_text()[-3000:])
+        assert td["safe"] is True
+        log = rig.wait_log("recovery ended: landed", timeout_s=60)
+        assert "contested" in log
+        assert len(server.seen("vlm")) >= 4  # ranks and confirmations went over HTTP
+    finally:
+        server.close()
+    (events_file,) = record.glob("*/events.jsonl")
+    events = [json.loads(line) for line in events_file.read_text().splitlines()]
+    exchanges = [e for e in events if e["kind"] == "exchange"]
+    assert {e["tier"] for e in exchanges} == {"edge"}  # the model always answered validly
+    assert any(t.get("raw") and "birds" in t["raw"] for e in exchanges for t in e["transcript"])
+    confirms = [e for e in events if e["kind"] == "confirm"]
+    assert confirms[0]["accept"] is False
+    assert any(c["accept"] and "accepted over 2 lone no" in c["rationale"] for c in confirms)
+    ranks = [e for e in events if e["kind"] == "rank"]
+    assert all(r["tier"] == "edge" and r["images"] for r in ranks)

@@ -8,20 +8,23 @@ to its edge, slope and roughness, and elevation: a surface ``roof_height_m`` or 
 surroundings is a roof, away from traffic and people, and scores ``elevated``; a surface at street level
 scores ``street_level`` (streets, plazas and car parks carry traffic even when they look empty). The
 score is geometry minus hazard; candidates without geometry (the quadrant fallback) come after every
-measured one. With images only (no depth: degraded mode) the hazard alone orders them. The weights are
+measured one. With images only (no depth: degraded mode) the hazard orders them, and a crop's size (the
+boxes of one frame share a scale) breaks near-ties: a large clear roof before a clear sliver. The weights are
 set so that a road's markings or water (2.5 to 3 hazard points) outweigh the elevation bonus, so an
 elevated highway deck, geometrically a fine roof, loses to a clear roof: the reference study's smaller
 models chose empty highways.
 
 **Confirm.** The close-up is judged in site mode (``analyse(image, site=True)``: the surface under the
-image centre). Descend only when the LiDAR check (when there is one) is clear and the image shows no
-veto on the site: water, vegetation, lane markings, a raised object (a person, a vehicle, clutter:
-``max_raised`` of them), pipes or rails, or a total hazard over ``max_hazard``. ``critical=True`` relaxes
-two things a little, never water, roads or people it can see against a clear LiDAR check: the total
-hazard limit rises from ``max_hazard`` to ``max_hazard_critical`` (flat patches, asphalt-like texture,
-busy edges), and when the LiDAR check is clear (nothing taller than 0.3 m inside the rotor disc) one
-raised object in view is tolerated (``max_raised_critical``): it stands outside the disc, or is a false
-sighting. Without a LiDAR check nothing is relaxed.
+image centre, within the middle two thirds of a square close-up cut around the site, as the recovery loop
+sends, or the middle 30 % of a whole camera frame; ``ConfirmParams.site_window`` overrides). Descend only
+when the LiDAR check (when there is one) is clear and the image shows no veto on the site: water,
+vegetation, lane markings, more than ``max_raised`` raised objects (people, vehicles, clutter, or their
+shadows), pipes or rails, or a total hazard over ``max_hazard``.
+``critical=True`` relaxes two things a little and never water or lane markings: the total hazard limit
+rises from ``max_hazard`` to ``max_hazard_critical`` (flat patches, asphalt-like texture, busy edges),
+and when the LiDAR check is clear (nothing taller than 0.3 m inside the rotor disc) one raised object
+in view is tolerated (``max_raised_critical``): it stands outside the disc, or is a false sighting.
+Without a LiDAR check nothing about raised objects is relaxed.
 
 Rationales name the chosen site and what was seen on it and on the runner-up, e.g. ``site 0: elevated
 flat roof 22 m up, 839 m2 landable, 14.3 m from its edge, no clutter, uniform gravel or tile texture
@@ -67,6 +70,7 @@ class GeometryWeights:
     elevated: float = 2.0  # a roof: away from traffic and people
     street_level: float = -1.0  # streets, plazas, car parks: traffic comes back
     extended: float = 0.5  # lost at measured_share 0 (area the image extended, no depth behind it)
+    crop_size: float = 0.3  # images only: for the largest crop of the request (sqrt of the pixel share)
 
 
 @dataclass(frozen=True, slots=True)
@@ -81,6 +85,7 @@ class ConfirmParams:
     max_vegetation: float = 0.15
     max_markings: float = 0.3  # total lane-marking length, in working-image diagonals (about one line)
     max_raised_lines: float = 0.3  # pipes, rails
+    site_window: float | None = None  # share of each side judged; None: by the image's shape (image_cues)
 
 
 @dataclass(frozen=True, slots=True)
@@ -154,11 +159,18 @@ class OnboardReasoner:
             ValueError: a crop that is not a non-empty (H, W, 3) uint8 image.
         """
         t0 = time.perf_counter()
+        all_cues = [analyse(crop) for crop in request.crops]  # validates every crop first
+        largest = max(c.size_px[0] * c.size_px[1] for c in all_cues)
         sites: list[_Site] = []
-        for k, crop in enumerate(request.crops):
-            cues = analyse(crop)
+        for k, cues in enumerate(all_cues):
             cand = None if request.candidates is None else request.candidates[k]
-            g, geometry = (0.0, "") if cand is None else geometry_score(cand, self.weights)
+            if cand is None:
+                # Images only: a crop's size is all there is to say about room to land (Surface ID's
+                # boxes of one frame share one scale); a light tie-breaker, not a reason.
+                share = cues.size_px[0] * cues.size_px[1] / largest
+                g, geometry = self.weights.crop_size * math.sqrt(share), ""
+            else:
+                g, geometry = geometry_score(cand, self.weights)
             fallback = cand is not None and cand.fallback
             sites.append(_Site(k, g - cues.hazard, fallback, geometry, cues))
         ranked = sorted(sites, key=lambda s: (s.fallback, -s.score, s.index))
@@ -183,7 +195,7 @@ class OnboardReasoner:
         """
         t0 = time.perf_counter()
         p = self.confirm_params
-        cues = analyse(request.image, site=True)
+        cues = analyse(request.image, site=True, window=p.site_window)
         check = request.check
         lidar_clear = check is not None and check.clear
         relax = request.critical

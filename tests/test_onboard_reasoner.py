@@ -1,0 +1,428 @@
+"""The onboard tier (companion/reasoning/onboard.py) on simbridge renders.
+
+Rank: a clear roof against a cluttered one, a road, the elevated highway, water and a roof with a
+person on it; every case in both candidate orders, with geometry (Surface ID's on a real LiDAR sweep,
+or candidates built from the scenario file's ground truth) and from images alone; clear, fog and rain.
+Confirm: close-ups of a clear roof (yes), a cluttered roof, a road, water and a person on a roof (no),
+with the LiDAR site check and without it, and what a critical alarm relaxes. Crop contents are checked
+against the renderer's per-pixel ground truth before they are used.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from companion.guidance.frames import PinholeCamera
+from companion.perception.depth import LidarDepth
+from companion.perception.site_check import SiteCheck, check_site
+from companion.perception.surface_id import Candidate, propose
+from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequest, Reasoner
+from companion.reasoning.onboard import ConfirmParams, GeometryWeights, OnboardReasoner, geometry_score
+from simbridge.world.camera import Frame
+from simbridge.world.live import LiveWorld
+from simbridge.world.model import SurfaceClass as C
+from tests.views import (
+    CLEAR_ROOF,
+    CLUTTERED_ROOF,
+    HIGHWAY,
+    HIGHWAY_CLASSES,
+    LAUNCH,
+    LEVEL,
+    ROAD,
+    ROAD_CLASSES,
+    WATER,
+    WEATHERS,
+    Box,
+    centre_window,
+    crop,
+    ground_box,
+    render,
+    share,
+)
+
+ONBOARD = OnboardReasoner()
+Rect = tuple[tuple[float, float], tuple[float, float], float]
+
+
+def truth_candidate(
+    box: Box, rect: Rect, *, up_m: float, edge_m: float, margin_m: float = 2.0, landable: bool = True
+) -> Candidate:
+    """A candidate as Surface ID would report the ground rectangle ``rect``: flat (0.3 deg, 1.5 cm),
+    ``up_m`` above its surroundings, its landable part ``margin_m`` in from each edge."""
+    (n0, n1), (e0, e1), _ = rect
+    area = (n1 - n0) * (e1 - e0)
+    land = max(n1 - n0 - 2 * margin_m, 0.0) * max(e1 - e0 - 2 * margin_m, 0.0) if landable else 0.0
+    centre = ((box[0] + box[2]) / 2, (box[1] + box[3]) / 2)
+    return Candidate(
+        0, box, centre, area_m2=area, landable_area_m2=land, roughness_m=0.015, height_above_m=up_m,
+        edge_distance_m=edge_m, slope_deg=0.3,
+    )  # fmt: skip
+
+
+def ranked_first(
+    crops: list[np.ndarray], cands: list[Candidate] | None, *, reverse: bool, critical: bool = False
+) -> tuple[int, Ranking]:
+    """Rank (optionally in reversed order); return the original index of the winner and the ranking."""
+    idx = list(range(len(crops)))[::-1] if reverse else list(range(len(crops)))
+    request = RankRequest(
+        tuple(crops[k] for k in idx),
+        None if cands is None else tuple(dataclasses.replace(cands[k], index=j) for j, k in enumerate(idx)),
+        critical=critical,
+    )
+    ranking = ONBOARD.rank_sync(request)
+    assert sorted(ranking.order) == list(range(len(crops)))  # every candidate, once
+    assert ranking.tier == "onboard"
+    assert ranking.latency_s > 0.0
+    return idx[ranking.order[0]], ranking
+
+
+def site_of(ranking: Ranking, original: int, reverse: bool, n: int) -> str:
+    """How the rationale calls the candidate that was ``original`` before reordering."""
+    return f"site {n - 1 - original if reverse else original}"
+
+
+# ------------------------------------------------------------------------------------------ rank
+@pytest.mark.parametrize("weather", WEATHERS)
+@pytest.mark.parametrize("reverse", [False, True])
+@pytest.mark.parametrize("geometry", [True, False], ids=["geometry", "images-only"])
+def test_onboard_rank_surface_id_candidates_clear_roof_first(
+    city: LiveWorld, launch: dict[str, Frame], weather: str, reverse: bool, geometry: bool
+) -> None:
+    """Surface ID on a real LiDAR sweep finds the clear roof and slivers between the clutter."""
+    frame = launch[weather]
+    lidar = city.lidar_sweep(LAUNCH, LEVEL, 0.0, np.random.default_rng(1))
+    cam = PinholeCamera.from_hfov(city.camera.width_px, city.camera.height_px, city.camera.hfov_deg)
+    cands, _ = propose(
+        LidarDepth(), cam, lidar_frd=lidar, quat_wxyz=LEVEL, pos_ned_m=LAUNCH, ground_up_m=LAUNCH[2]
+    )
+    clear = [
+        k for k, c in enumerate(cands) if share(frame, c.box_px, [C.ROOF_FLAT]) == 1.0 and c.box_px[2] < 480
+    ]
+    cluttered = [k for k, c in enumerate(cands) if c.box_px[0] > 480]
+    assert len(clear) == 1  # the clear roof, west of the street (left half of the image)
+    assert len(cluttered) >= 2  # slivers of the cluttered roof, east of it
+    x0, y0, x1, y1 = ground_box(city, LAUNCH, *CLUTTERED_ROOF)
+    assert all(x0 <= cands[k].centre_px[0] <= x1 and y0 <= cands[k].centre_px[1] <= y1 for k in cluttered)
+    crops = [crop(frame, c.box_px) for c in cands]
+    best, ranking = ranked_first(crops, cands if geometry else None, reverse=reverse)
+    assert best == clear[0]
+    assert ranking.rationale.startswith(site_of(ranking, clear[0], reverse, len(cands)) + ": ")
+    assert "no clutter" in ranking.rationale.split(";")[0]
+
+
+def _pair(frame: Frame, city: LiveWorld, rect: Rect, classes: tuple[C, ...]) -> tuple[np.ndarray, np.ndarray]:
+    roof_box = ground_box(city, LAUNCH, *CLEAR_ROOF)
+    other_box = ground_box(city, LAUNCH, *rect)
+    assert share(frame, roof_box, [C.ROOF_FLAT]) == 1.0
+    assert share(frame, other_box, classes) == 1.0
+    return crop(frame, roof_box), crop(frame, other_box)
+
+
+ROOF_GEOMETRY = {"up_m": 22.0, "edge_m": 13.0}  # the clear roof: 22 m up, 13 m from its parapet at most
+CASES = {
+    # name: (ground rectangle, its classes, its geometry as Surface ID would see it, word in the rationale)
+    "cluttered roof": (CLUTTERED_ROOF, (C.ROOF_FLAT, C.ROOF_CLUTTER), {"up_m": 18.0, "edge_m": 3.0}, "HVAC"),
+    "road": (ROAD, ROAD_CLASSES, {"up_m": 0.0, "edge_m": 5.0}, "lane markings|road texture"),
+    # the deck is 9 m up and 16 m wide: geometrically a roof, and the study's small models chose it
+    "highway": (HIGHWAY, HIGHWAY_CLASSES, {"up_m": 9.0, "edge_m": 6.0}, "lane markings"),
+    "water": (WATER, (C.WATER,), {"up_m": 0.0, "edge_m": 8.0}, "water"),
+}
+
+
+@pytest.mark.parametrize("case", list(CASES))
+@pytest.mark.parametrize("weather", WEATHERS)
+@pytest.mark.parametrize("reverse", [False, True])
+@pytest.mark.parametrize("geometry", [True, False], ids=["geometry", "images-only"])
+def test_onboard_rank_clear_roof_beats(
+    city: LiveWorld, launch: dict[str, Frame], case: str, weather: str, reverse: bool, geometry: bool
+) -> None:
+    rect, classes, geo, seen = CASES[case]
+    frame = launch[weather]
+    if case == "cluttered roof":
+        box = ground_box(city, LAUNCH, *rect)
+        assert share(frame, box, [C.ROOF_CLUTTER]) > 0.15
+    roof, other = _pair(frame, city, rect, classes)
+    cands = [
+        truth_candidate(ground_box(city, LAUNCH, *CLEAR_ROOF), CLEAR_ROOF, **ROOF_GEOMETRY),
+        truth_candidate(ground_box(city, LAUNCH, *rect), rect, **geo),
+    ]
+    best, ranking = ranked_first([roof, other], cands if geometry else None, reverse=reverse)
+    assert best == 0, ranking.rationale
+    chosen, rest = ranking.rationale.split(";", 1)
+    assert chosen.startswith(site_of(ranking, 0, reverse, 2))
+    assert site_of(ranking, 1, reverse, 2) in rest
+    assert any(word in rest for word in seen.split("|"))  # it names what it saw on the runner-up
+    if geometry:
+        assert "elevated flat roof 22 m up" in chosen
+    else:
+        assert ranking.rationale.endswith("(no geometry: image cues only)")
+
+
+def test_onboard_rank_the_highway_wins_on_geometry_alone_and_loses_on_sight(
+    city: LiveWorld, launch: dict[str, Frame]
+) -> None:
+    """Why the image cues matter: a highway deck next to a smaller clear roof is the better surface by
+    geometry; what it looks like (markings, traffic) puts it behind."""
+    small_roof = ((-8.0, 8.0), (-33.0, -21.0), 22.0)  # the middle of the clear roof, 16 x 12 m
+    roof_box, deck_box = ground_box(city, LAUNCH, *small_roof), ground_box(city, LAUNCH, *HIGHWAY)
+    roof = truth_candidate(roof_box, small_roof, up_m=22.0, edge_m=6.0, margin_m=0.0)
+    deck = truth_candidate(deck_box, HIGHWAY, **CASES["highway"][2])
+    assert geometry_score(deck)[0] > geometry_score(roof)[0]
+    frame = launch["clear"]
+    best, ranking = ranked_first([crop(frame, roof_box), crop(frame, deck_box)], [roof, deck], reverse=False)
+    assert best == 0
+    assert "lane markings" in ranking.rationale
+
+
+@pytest.mark.parametrize("reverse", [False, True])
+@pytest.mark.parametrize("geometry", [True, False], ids=["geometry", "images-only"])
+@pytest.mark.parametrize("weather", ["clear", "rain"])
+def test_onboard_rank_a_roof_with_a_person_on_it_comes_second(
+    scene: LiveWorld, reverse: bool, geometry: bool, weather: str
+) -> None:
+    cam = (0.0, 0.0, -80.0)  # both roofs of tests/onboard_scene.toml in view, 60 m above them
+    frame = render(scene, cam, weather)
+    clear_rect: Rect = ((-13.0, 13.0), (-48.0, -22.0), 20.0)
+    walked_rect: Rect = ((-13.0, 13.0), (22.0, 48.0), 20.0)
+    clear_box, walked_box = ground_box(scene, cam, *clear_rect), ground_box(scene, cam, *walked_rect)
+    assert share(frame, clear_box, [C.ROOF_FLAT]) == 1.0
+    assert share(frame, walked_box, [C.PEDESTRIAN]) > 0.0
+    assert share(frame, walked_box, [C.ROOF_FLAT, C.PEDESTRIAN]) == 1.0
+    # identical geometry: only the person tells them apart
+    pairs = ((clear_box, clear_rect), (walked_box, walked_rect))
+    cands = [truth_candidate(b, r, up_m=20.0, edge_m=13.0, margin_m=0.0) for b, r in pairs]
+    crops = [crop(frame, clear_box), crop(frame, walked_box)]
+    best, ranking = ranked_first(crops, cands if geometry else None, reverse=reverse)
+    assert best == 0, ranking.rationale
+
+
+def test_onboard_rank_fallback_candidates_come_last(city: LiveWorld, launch: dict[str, Frame]) -> None:
+    """Quadrant-fallback candidates (no geometry) rank after every measured one, whatever they show."""
+    frame = launch["clear"]
+    water_box = ground_box(city, LAUNCH, *WATER)
+    road_box = ground_box(city, LAUNCH, *ROAD)
+    roof_box = ground_box(city, LAUNCH, *CLEAR_ROOF)
+    cands = [
+        truth_candidate(water_box, WATER, up_m=0.0, edge_m=8.0),
+        Candidate(1, roof_box, (0.0, 0.0), fallback=True),
+        truth_candidate(road_box, ROAD, up_m=0.0, edge_m=5.0),
+    ]
+    crops = [crop(frame, b) for b in (water_box, roof_box, road_box)]
+    ranking = ONBOARD.rank_sync(RankRequest(tuple(crops), tuple(cands)))
+    assert ranking.order[-1] == 1
+    assert ranking.order[:2] == (2, 0)  # a road before water, both measured
+
+
+async def test_onboard_rank_async_matches_sync_and_fills_the_transcript(
+    city: LiveWorld, launch: dict[str, Frame]
+) -> None:
+    frame = launch["clear"]
+    crops = tuple(crop(frame, ground_box(city, LAUNCH, *r)) for r in (ROAD, CLEAR_ROOF, CLUTTERED_ROOF))
+    transcript: list[dict[str, object]] = []
+    tier: Reasoner = ONBOARD
+    ranking = await tier.rank(RankRequest(crops, transcript=transcript))
+    assert ranking.order == ONBOARD.rank_sync(RankRequest(crops)).order == (1, 0, 2)
+    assert tier.name == "onboard"
+    assert len(transcript) == 1
+    entry = transcript[0]
+    assert entry["tier"] == "onboard"
+    assert isinstance(entry["cues"], list)
+    assert len(entry["cues"]) == 3
+
+
+def test_onboard_rank_bad_crop_raises() -> None:
+    good = np.full((20, 20, 3), 128, np.uint8)
+    with pytest.raises(ValueError, match="dtype uint8"):
+        ONBOARD.rank_sync(RankRequest((good, good.astype(np.float32))))
+    with pytest.raises(ValueError, match="non-empty"):
+        ONBOARD.rank_sync(RankRequest((good, np.zeros((0, 4, 3), np.uint8))))
+
+
+def test_onboard_rank_blank_crops_keep_order_and_geometry_decides() -> None:
+    blank = tuple(np.zeros((16, 16, 3), np.uint8) for _ in range(3))
+    assert ONBOARD.rank_sync(RankRequest(blank)).order == (0, 1, 2)
+    cands = (
+        Candidate(0, (0, 0, 16, 16), (8.0, 8.0), area_m2=200.0, landable_area_m2=100.0, height_above_m=0.5,
+                  edge_distance_m=4.0, slope_deg=0.5, roughness_m=0.01),
+        Candidate(1, (0, 0, 16, 16), (8.0, 8.0), area_m2=900.0, landable_area_m2=700.0, height_above_m=15.0,
+                  edge_distance_m=12.0, slope_deg=0.5, roughness_m=0.01),
+        Candidate(2, (0, 0, 16, 16), (8.0, 8.0), area_m2=900.0, landable_area_m2=700.0, height_above_m=15.0,
+                  edge_distance_m=12.0, slope_deg=6.0, roughness_m=0.05),
+    )  # fmt: skip
+    ranking = ONBOARD.rank_sync(RankRequest(blank, cands))
+    assert ranking.order == (1, 2, 0)
+    assert "sloped 6 deg" in ranking.rationale
+    assert "rough 5 cm" in ranking.rationale
+
+
+def test_onboard_geometry_score_terms() -> None:
+    w = GeometryWeights()
+    base = Candidate(
+        0, (0, 0, 1, 1), (0.5, 0.5), area_m2=900.0, landable_area_m2=900.0, height_above_m=20.0,
+        edge_distance_m=20.0, slope_deg=0.0, roughness_m=0.0,
+    )  # fmt: skip
+    top, words = geometry_score(base, w)
+    assert top == pytest.approx(w.area + w.edge + w.elevated)
+    assert words.startswith("elevated flat roof 20 m up")
+    street, words = geometry_score(dataclasses.replace(base, height_above_m=0.0), w)
+    assert top - street == pytest.approx(w.elevated - w.street_level)
+    assert "at street level" in words
+    unknown = dict.fromkeys(
+        ("area_m2", "landable_area_m2", "height_above_m", "edge_distance_m", "slope_deg", "roughness_m"),
+        math.nan,
+    )
+    relative = dataclasses.replace(base, **unknown)
+    assert geometry_score(relative, w) == (0.0, "no metric geometry")
+    assert geometry_score(dataclasses.replace(base, fallback=True), w)[0] == 0.0
+
+
+# ------------------------------------------------------------------------------------------ confirm
+def close_up(
+    w: LiveWorld,
+    ne: tuple[float, float],
+    up_m: float,
+    height_m: float,
+    weather: str = "clear",
+    t_s: float = 0.0,
+) -> tuple[Frame, SiteCheck]:
+    """A close-up frame ``height_m`` above the surface at ``ne`` (``up_m`` high) and the LiDAR site check."""
+    pos = (ne[0], ne[1], -(up_m + height_m))
+    frame = render(w, pos, weather, t_s)
+    lidar = w.lidar_sweep(pos, LEVEL, t_s, np.random.default_rng(2))
+    return frame, check_site(lidar, pos, LEVEL, ne)
+
+
+def confirm(frame: Frame, check: SiteCheck | None, critical: bool = False) -> Decision:
+    decision = ONBOARD.confirm_sync(ConfirmRequest(frame.rgb, check, critical))
+    assert decision.tier == "onboard"
+    assert decision.latency_s > 0.0
+    return decision
+
+
+@pytest.mark.parametrize("weather", WEATHERS)
+@pytest.mark.parametrize("height_m", [10.0, 30.0, 66.0])
+def test_onboard_confirm_accepts_the_clear_roof(city: LiveWorld, weather: str, height_m: float) -> None:
+    frame, check = close_up(city, (0.0, -27.0), 22.0, height_m, weather)
+    assert share(frame, centre_window(frame, 0.1), [C.ROOF_FLAT]) == 1.0  # under the vehicle: the roof
+    assert share(frame, centre_window(frame), [C.ROOF_FLAT, C.PARAPET]) > 0.7  # around it: mostly
+    assert check.clear
+    for chk in (check, None):
+        decision = confirm(frame, chk)
+        assert decision.accept, decision.rationale
+        assert decision.rationale.startswith("site clear: ")
+        if height_m <= 30.0:  # higher up the site's rim takes in a parapet and a kerb line
+            assert "no clutter" in decision.rationale
+    assert "LiDAR" in confirm(frame, check).rationale
+    assert "no LiDAR" in confirm(frame, None).rationale
+
+
+@pytest.mark.parametrize("weather", WEATHERS)
+@pytest.mark.parametrize("height_m", [12.0, 30.0])
+@pytest.mark.parametrize(
+    ("name", "ne", "up_m", "classes", "seen"),
+    [
+        ("cluttered roof", (0.0, 29.0), 18.0, (C.ROOF_CLUTTER,), "HVAC-like"),
+        ("road", (0.0, 2.0), 0.0, (C.ROAD,), ""),
+        ("water", (0.0, 150.0), -0.8, (C.WATER,), "water"),
+    ],
+)
+def test_onboard_confirm_rejects(
+    city: LiveWorld,
+    weather: str,
+    height_m: float,
+    name: str,
+    ne: tuple[float, float],
+    up_m: float,
+    classes: tuple[C, ...],
+    seen: str,
+) -> None:
+    frame, check = close_up(city, ne, up_m, height_m, weather)
+    assert share(frame, centre_window(frame), classes) > 0.1
+    for chk in (None, check):
+        decision = confirm(frame, chk)
+        assert not decision.accept, f"{name}: {decision.rationale}"
+        assert decision.rationale.startswith("rejected: ")
+        assert seen in decision.rationale
+
+
+@pytest.mark.parametrize("height_m", [10.0, 20.0])
+@pytest.mark.parametrize("weather", ["clear", "rain"])
+@pytest.mark.parametrize("critical", [False, True])
+def test_onboard_confirm_rejects_a_person_on_the_roof(
+    scene: LiveWorld, height_m: float, weather: str, critical: bool
+) -> None:
+    frame, check = close_up(scene, (0.0, 35.0), 20.0, height_m, weather)
+    assert share(frame, centre_window(frame), [C.PEDESTRIAN]) > 0.0
+    assert not check.clear  # the person stands inside the rotor-clearance disc
+    without = confirm(frame, None, critical)  # no LiDAR: the image alone says no
+    assert not without.accept
+    assert "shadows" in without.rationale  # the person, or its shadow when its top looks like gravel
+    assert not confirm(frame, check, critical).accept
+    empty, empty_check = close_up(scene, (0.0, -35.0), 20.0, height_m, weather)  # the same roof, nobody on it
+    assert confirm(empty, empty_check, critical).accept
+    assert confirm(empty, None, critical).accept
+
+
+def site_cut(w: LiveWorld, frame: Frame, height_m: float, half_m: float = 6.0) -> np.ndarray:
+    """The square close-up the recovery loop sends: +-``half_m`` around the site under the camera
+    (companion/recovery.py, ``closeup_half_m``), at least 96 px, clamped to the frame."""
+    half = max(int(w.camera.focal_px * half_m / height_m), 48)
+    cx, cy = (round(v) for v in w.camera.principal_px)
+    return np.ascontiguousarray(frame.rgb[max(cy - half, 0) : cy + half, max(cx - half, 0) : cx + half])
+
+
+@pytest.mark.parametrize("height_m", [10.0, 30.0, 60.0])
+@pytest.mark.parametrize("weather", ["clear", "rain"])
+def test_onboard_confirm_on_the_recovery_loops_square_close_up(
+    city: LiveWorld, scene: LiveWorld, height_m: float, weather: str
+) -> None:
+    clear, _ = close_up(city, (0.0, -27.0), 22.0, height_m, weather)
+    cluttered, _ = close_up(city, (0.0, 29.0), 18.0, height_m, weather)
+    assert ONBOARD.confirm_sync(ConfirmRequest(site_cut(city, clear, height_m))).accept
+    assert not ONBOARD.confirm_sync(ConfirmRequest(site_cut(city, cluttered, height_m))).accept
+    if height_m <= 30.0:  # higher up a person is a few pixels of a 96 px cut: the LiDAR's to see
+        walked, _ = close_up(scene, (0.0, 35.0), 20.0, height_m, weather)
+        cut = site_cut(scene, walked, height_m)
+        assert (walked.hit_class == C.PEDESTRIAN).any()
+        assert not ONBOARD.confirm_sync(ConfirmRequest(cut)).accept
+
+
+def test_onboard_confirm_site_window_must_be_a_share() -> None:
+    grey = np.full((100, 100, 3), 140, np.uint8)
+    with pytest.raises(ValueError, match=r"\(0, 1\]"):
+        OnboardReasoner(confirm=ConfirmParams(site_window=1.5)).confirm_sync(ConfirmRequest(grey))
+    assert OnboardReasoner(confirm=ConfirmParams(site_window=1.0)).confirm_sync(ConfirmRequest(grey)).accept
+
+
+def test_onboard_confirm_critical_tolerates_one_object_outside_a_clear_rotor_disc(scene: LiveWorld) -> None:
+    """40 m above the HVAC roof's middle: its one HVAC unit is in view, 6 m from the site. Normally that
+    is a no; with a critical alarm and a clear LiDAR check it is tolerated; without a check it is not."""
+    frame, check = close_up(scene, (-55.0, 35.0), 18.0, 40.0)
+    assert share(frame, centre_window(frame), [C.ROOF_CLUTTER]) > 0.0
+    assert check.clear
+    assert not confirm(frame, check).accept
+    relaxed = confirm(frame, check, critical=True)
+    assert relaxed.accept
+    assert "critical" in relaxed.rationale
+    assert not confirm(frame, None, critical=True).accept
+
+
+def test_onboard_confirm_reports_a_geometric_veto(city: LiveWorld) -> None:
+    frame, _ = close_up(city, (0.0, -27.0), 22.0, 30.0)
+    veto = SiteCheck(80, 22.0, 0.01, 0.6, 5.0, ("object 0.6 m tall within 2 m",))
+    decision = confirm(frame, veto)
+    assert not decision.accept
+    assert "LiDAR: object 0.6 m tall within 2 m" in decision.rationale
+
+
+async def test_onboard_confirm_async_and_bad_image() -> None:
+    grey = np.full((540, 960, 3), 140, np.uint8)
+    tier: Reasoner = ONBOARD
+    decision = await tier.confirm(ConfirmRequest(grey))
+    assert decision.accept == ONBOARD.confirm_sync(ConfirmRequest(grey)).accept
+    with pytest.raises(ValueError, match=r"\(height, width, 3\)"):
+        ONBOARD.confirm_sync(ConfirmRequest(grey[..., 0]))
