@@ -29,7 +29,7 @@ from companion.control import (
 )
 from companion.guidance.frames import PinholeCamera, quat_to_matrix
 from companion.guidance.ipm import IpmError, LidarPixelIndex, pixel_to_ned, pixel_to_ned_flat
-from companion.perception.crops import crop
+from companion.perception.crops import crop, site_box
 from companion.perception.depth import DepthError, DepthSource, LidarDepth
 from companion.perception.site_check import check_site
 from companion.perception.surface_id import Candidate, SurfaceParams, propose, quadrant_fallback
@@ -428,18 +428,16 @@ class Recovery:
         return decision
 
     def _closeup(self, image: Any, frame: Any, target: tuple[float, float, float]) -> Any:
-        """The part of the frame within ``closeup_half_m`` of the site (the whole frame when the site is
-        not in view)."""
+        """The part of the frame within ``closeup_half_m`` of the site, centred on it (``site_box``), or
+        the whole frame when the site is not in view."""
         camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
         rel = np.asarray(target) - np.asarray(frame.pos_ned_m)
         uv, front = camera.project_frd((rel @ quat_to_matrix(frame.quat_wxyz))[None, :])
         dist = float(np.linalg.norm(rel))
         if not front[0] or not (0 <= uv[0, 0] < camera.width and 0 <= uv[0, 1] < camera.height) or dist <= 0:
             return image
-        half = max(int(camera.fx * self.p.closeup_half_m / dist), 48)
-        u, v = int(uv[0, 0]), int(uv[0, 1])
-        box = (max(u - half, 0), max(v - half, 0), min(u + half, camera.width), min(v + half, camera.height))
-        return crop(image, box)
+        half = int(camera.fx * self.p.closeup_half_m / dist)
+        return crop(image, site_box(uv[0, 0], uv[0, 1], half, camera.width, camera.height))
 
     def _near_rejected(self, c: Candidate) -> bool:
         if c.site_ned_m is None:

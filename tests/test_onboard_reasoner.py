@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from companion.guidance.frames import PinholeCamera
+from companion.perception.crops import site_box
 from companion.perception.depth import LidarDepth
 from companion.perception.site_check import SiteCheck, check_site
 from companion.perception.surface_id import Candidate, propose
@@ -368,11 +369,11 @@ def test_onboard_confirm_rejects_a_person_on_the_roof(
 
 
 def site_cut(w: LiveWorld, frame: Frame, height_m: float, half_m: float = 6.0) -> np.ndarray:
-    """The square close-up the recovery loop sends: +-``half_m`` around the site under the camera
-    (companion/recovery.py, ``closeup_half_m``), at least 96 px, clamped to the frame."""
-    half = max(int(w.camera.focal_px * half_m / height_m), 48)
-    cx, cy = (round(v) for v in w.camera.principal_px)
-    return np.ascontiguousarray(frame.rgb[max(cy - half, 0) : cy + half, max(cx - half, 0) : cx + half])
+    """The close-up the recovery loop sends: +-``half_m`` around the site under the camera
+    (companion/recovery.py, ``closeup_half_m``; companion/perception/crops.py, ``site_box``)."""
+    h, wd = frame.rgb.shape[:2]
+    half = int(w.camera.focal_px * half_m / height_m)
+    return crop(frame, site_box(*w.camera.principal_px, half, wd, h))
 
 
 @pytest.mark.parametrize("height_m", [10.0, 30.0, 60.0])

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from companion.guidance.frames import PinholeCamera
-from companion.perception.crops import PAD_LEVELS, context_crops, crop, pad_box
+from companion.perception.crops import MIN_SITE_HALF_PX, PAD_LEVELS, context_crops, crop, pad_box, site_box
 from companion.perception.depth import ArrayDepth, DepthError, DepthMap, LidarDepth, make_source
 from companion.perception.surface_id import SurfaceParams, propose, quadrant_fallback, surface_id
 
@@ -234,6 +234,18 @@ def test_padding_grows_a_box_by_its_share_and_clamps_at_the_border() -> None:
         pad_box((0, 0, 961, 10), 0.2, 960, 540)
     with pytest.raises(ValueError, match=">= 0"):
         pad_box((0, 0, 10, 10), -0.1, 960, 540)
+
+
+def test_site_box_keeps_the_site_in_the_middle_near_a_border() -> None:
+    assert site_box(480, 270, 100, 960, 540) == (380, 170, 580, 370)
+    # 60 px from the left edge: the box shrinks to +-60 px on every side, the site stays centred
+    assert site_box(60, 270, 100, 960, 540) == (0, 210, 120, 330)
+    # low over the site the box would be taller than the frame: square, as high as the frame
+    assert site_box(480, 270, 400, 960, 540) == (210, 0, 750, 540)
+    # closer than MIN_SITE_HALF_PX to a corner it keeps its minimum size and is clamped instead
+    assert site_box(10, 530, 100, 960, 540) == (0, 530 - MIN_SITE_HALF_PX, 10 + MIN_SITE_HALF_PX, 540)
+    with pytest.raises(ValueError, match="outside the 960 x 540"):
+        site_box(960, 10, 50, 960, 540)
 
 
 def test_context_crops_cover_every_level_and_the_full_frame() -> None:

@@ -12,9 +12,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-__all__ = ["PAD_LEVELS", "context_crops", "crop", "pad_box"]
+__all__ = ["MIN_SITE_HALF_PX", "PAD_LEVELS", "context_crops", "crop", "pad_box", "site_box"]
 
 PAD_LEVELS = (0.2, 0.3, 0.4, 0.5, 0.6)  # the study's context variants
+MIN_SITE_HALF_PX = 48  # a confirm close-up is at least 96 px wide where the frame allows
 
 
 def pad_box(box: Sequence[int], pad: float, width: int, height: int) -> tuple[int, int, int, int]:
@@ -31,6 +32,23 @@ def pad_box(box: Sequence[int], pad: float, width: int, height: int) -> tuple[in
         min(int(np.ceil(x1 + dx)), width),
         min(int(np.ceil(y1 + dy)), height),
     )
+
+
+def site_box(u: float, v: float, half_px: int, width: int, height: int) -> tuple[int, int, int, int]:
+    """The square box of half-side ``half_px`` centred on pixel (u, v) of a width x height image (the
+    close-up the confirm stage judges). Near a border it shrinks on every side rather than being cut on
+    one, so (u, v) stays in its middle; it never shrinks below ``MIN_SITE_HALF_PX``, where it is clamped
+    instead.
+
+    Raises:
+        ValueError: (u, v) outside the image.
+    """
+    if not (0 <= u < width and 0 <= v < height):
+        raise ValueError(f"site pixel ({u:.0f}, {v:.0f}) is outside the {width} x {height} image")
+    cu, cv = int(u), int(v)
+    room = min(cu, cv, width - cu, height - cv)
+    half = max(min(int(half_px), room), MIN_SITE_HALF_PX)
+    return max(cu - half, 0), max(cv - half, 0), min(cu + half, width), min(cv + half, height)
 
 
 def crop(image: np.ndarray, box: Sequence[int], pad: float = 0.0) -> np.ndarray:
