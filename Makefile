@@ -12,11 +12,12 @@ $(STAMP): pyproject.toml
 	$(VENV)/bin/pip install --quiet -e '.[dev]'
 	touch $(STAMP)
 
-# Tests also exercise the optional monocular-depth extra. torch 2.13.0 is pinned first so pip takes the
-# CPU build (a plain "torch" would pull a multi-GB CUDA build); the demo does not need it.
+# Tests also exercise the optional monocular-depth and bench (report figures, rationale clusters) extras.
+# torch 2.13.0 is pinned first so pip takes the CPU build (a plain "torch" would pull a multi-GB CUDA
+# build); the demo does not need it.
 $(DEPTH_STAMP): $(STAMP)
 	$(VENV)/bin/pip install --quiet 'torch==2.13.0'
-	$(VENV)/bin/pip install --quiet -e '.[dev,depth]'
+	$(VENV)/bin/pip install --quiet -e '.[dev,depth,bench]'
 	touch $(DEPTH_STAMP)
 
 demo: $(STAMP)

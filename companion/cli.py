@@ -49,6 +49,7 @@ def params_from(cfg: CompanionConfig) -> RecoveryParams:
         move_timeout_s=r.move_timeout_s,
         explore_climb_m=r.explore_climb_m,
         explore_max_alt_m=r.explore_max_alt_m,
+        blind_descent_agl_m=r.blind_descent_agl_m,
         surface=SurfaceParams(
             cell_px=pc.cell_px,
             window_cells=pc.window_cells,

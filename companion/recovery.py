@@ -29,7 +29,7 @@ from companion.control import (
 )
 from companion.guidance.frames import PinholeCamera, quat_to_matrix
 from companion.guidance.ipm import IpmError, LidarPixelIndex, pixel_to_ned, pixel_to_ned_flat
-from companion.perception.crops import crop, site_box
+from companion.perception.crops import crop, pad_of, rank_crops, site_box
 from companion.perception.depth import DepthError, DepthSource, LidarDepth
 from companion.perception.site_check import check_site
 from companion.perception.surface_id import Candidate, SurfaceParams, propose, quadrant_fallback
@@ -65,6 +65,7 @@ class RecoveryParams:
     move_timeout_s: float = 60.0
     explore_climb_m: float = 15.0
     explore_max_alt_m: float = 150.0
+    blind_descent_agl_m: float = 70.0  # no LiDAR return at all and the ground farther: descend to this
     surface: SurfaceParams = field(default_factory=SurfaceParams)
     depth_source: DepthSource = field(default_factory=LidarDepth)
     rejected_radius_m: float = 4.0  # a rejected site rules out candidates this close to it
@@ -201,7 +202,7 @@ class Recovery:
         if frame.image_rgb is not None:
             self.record.save_image(f"round{self.round:02d}-acquire", frame.image_rgb)
         if not candidates or all(c.fallback for c in candidates):
-            await self._explore()
+            await self._explore(blind=_lidar_silent(frame.lidar_frd))
             return False
         self._set(State.RANK)
         ranking = await self._rank(candidates, frame)
@@ -307,12 +308,22 @@ class Recovery:
         await self._land()
         return Outcome(State.LANDED, self.round, self._site_ned(), "round budget spent")
 
-    async def _explore(self) -> None:
-        """Nothing survived screening: climb for a wider view, then step outward on a spiral."""
+    async def _explore(self, blind: bool = False) -> None:
+        """Nothing survived screening: climb for a wider view, then step outward on a spiral.
+
+        ``blind``: the LiDAR returned nothing at all. When the rangefinder agrees that the ground is
+        far (beyond ``blind_descent_agl_m``), everything below is out of the LiDAR's range: climbing
+        or moving would not help, so descend to ``blind_descent_agl_m`` first. The LiDAR's silence
+        says nothing stands within its range below, so the descent has nothing to hit. A silent
+        LiDAR with the ground near is a failed LiDAR: no blind descent then."""
         self._set(State.EXPLORE)
         n, e, d = self.tm.state.pos_ned_m
         alt = self.tm.state.rangefinder_m
-        if math.isfinite(alt) and alt + self.p.explore_climb_m <= self.p.explore_max_alt_m:
+        if blind and math.isfinite(alt) and alt > self.p.blind_descent_agl_m + 5.0:
+            drop = alt - self.p.blind_descent_agl_m
+            target = (n, e, d + drop)
+            self._say(6, f"LiDAR sees nothing, ground {alt:.0f} m below: descending {drop:.0f} m")
+        elif math.isfinite(alt) and alt + self.p.explore_climb_m <= self.p.explore_max_alt_m:
             target = (n, e, d - self.p.explore_climb_m)
             self._say(6, f"no flat site in view: climbing {self.p.explore_climb_m:.0f} m")
         else:
@@ -355,8 +366,7 @@ class Recovery:
                 0.0,
             )
         else:
-            pad = int(self.p.context[3:]) / 100 if self.p.context.startswith("pad") else 0.0
-            crops = tuple(crop(image, c.box_px, pad) for c in candidates)
+            crops, cores = rank_crops(image, [c.box_px for c in candidates], self.p.context)
             for k, c in enumerate(crops):
                 path = self.record.save_image(f"round{self.round:02d}-rank-crop{k}", c)
                 names.append(str(getattr(path, "name", path)) if path is not None else "")
@@ -365,6 +375,7 @@ class Recovery:
                 None if all(c.fallback for c in candidates) else tuple(candidates),
                 context=image if self.p.context == "full" else None,
                 critical=self.criticality == Criticality.CRITICAL,
+                cores=cores if pad_of(self.p.context) > 0 else None,
             )
             ranking = await self.reasoner.rank(request)
         self.record.record_event(
@@ -428,16 +439,8 @@ class Recovery:
         return decision
 
     def _closeup(self, image: Any, frame: Any, target: tuple[float, float, float]) -> Any:
-        """The part of the frame within ``closeup_half_m`` of the site, centred on it (``site_box``), or
-        the whole frame when the site is not in view."""
         camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
-        rel = np.asarray(target) - np.asarray(frame.pos_ned_m)
-        uv, front = camera.project_frd((rel @ quat_to_matrix(frame.quat_wxyz))[None, :])
-        dist = float(np.linalg.norm(rel))
-        if not front[0] or not (0 <= uv[0, 0] < camera.width and 0 <= uv[0, 1] < camera.height) or dist <= 0:
-            return image
-        half = int(camera.fx * self.p.closeup_half_m / dist)
-        return crop(image, site_box(uv[0, 0], uv[0, 1], half, camera.width, camera.height))
+        return site_closeup(image, camera, frame.pos_ned_m, frame.quat_wxyz, target, self.p.closeup_half_m)
 
     def _near_rejected(self, c: Candidate) -> bool:
         if c.site_ned_m is None:
@@ -457,6 +460,33 @@ class Recovery:
             )
             p = pixel_to_ned_flat(u, v, camera, frame.pos_ned_m, frame.quat_wxyz, ground_d)
         return (float(p[0]), float(p[1]), float(p[2]))
+
+
+def site_closeup(
+    image: np.ndarray,
+    camera: PinholeCamera,
+    pos_ned_m: Any,
+    quat_wxyz: Any,
+    target_ned_m: Any,
+    half_m: float,
+) -> np.ndarray:
+    """The part of a camera frame within ``half_m`` of the site, centred on it (``site_box``), or the
+    whole frame when the site is not in view: what the confirm stage judges."""
+    rel = np.asarray(target_ned_m, dtype=float) - np.asarray(pos_ned_m, dtype=float)
+    uv, front = camera.project_frd((rel @ quat_to_matrix(quat_wxyz))[None, :])
+    dist = float(np.linalg.norm(rel))
+    if not front[0] or not (0 <= uv[0, 0] < camera.width and 0 <= uv[0, 1] < camera.height) or dist <= 0:
+        return image
+    half = int(camera.fx * half_m / dist)
+    return crop(image, site_box(uv[0, 0], uv[0, 1], half, camera.width, camera.height))
+
+
+def _lidar_silent(lidar_frd: Any) -> bool:
+    """A LiDAR sweep came and has no return with a finite position (a missing sweep is not silence)."""
+    if lidar_frd is None:
+        return False
+    pts = np.asarray(lidar_frd, dtype=float)
+    return pts.ndim != 2 or pts.shape[0] == 0 or not bool(np.isfinite(pts[:, :3]).all(axis=1).any())
 
 
 def _compass(bearing_deg: float) -> str:

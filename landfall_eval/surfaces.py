@@ -75,6 +75,26 @@ HOVER_TILT_SIGMA_DEG = 1.5  # roll and pitch scatter while holding position in l
 HOVER_YAW_SIGMA_DEG = 3.0
 
 
+def hover_pose(
+    rng: np.random.Generator,
+    ne_m: tuple[float, float],
+    down_m: float,
+    yaw_rad: float,
+    *,
+    scatter: bool = True,
+) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
+    """A hovering drone's pose about (north, east, down) and heading: position, roll, pitch and yaw
+    drawn about it (six normal draws from ``rng``, made even without ``scatter``, so the stream that
+    follows is the same either way)."""
+    dn, de, dd, roll, pitch, yaw = (
+        np.array([HOVER_SIGMA_M] * 3 + [HOVER_TILT_SIGMA_DEG] * 2 + [HOVER_YAW_SIGMA_DEG])
+        * rng.standard_normal(6)
+        * scatter
+    ).tolist()
+    pos = (ne_m[0] + dn, ne_m[1] + de, down_m + dd)
+    return pos, euler_to_quat(math.radians(roll), math.radians(pitch), yaw_rad + math.radians(yaw))
+
+
 def launch_frame(
     scenario: str, seed: int, weather: str = "clear", t_s: float = 0.0, hover: bool = True
 ) -> LaunchFrame:
@@ -88,13 +108,9 @@ def launch_frame(
         raise ValueError(f"scenario {scenario!r} has no ground-truth safe zone")
     n, e = sc.launch_ne_m
     rng = np.random.default_rng(seed)
-    dn, de, dd, roll, pitch, yaw = (
-        np.array([HOVER_SIGMA_M] * 3 + [HOVER_TILT_SIGMA_DEG] * 2 + [HOVER_YAW_SIGMA_DEG])
-        * rng.standard_normal(6)
-        * hover
+    pos, quat = hover_pose(
+        rng, (n, e), -(world.height_m(n, e) + sc.launch_height_m), sc.launch_yaw_rad, scatter=hover
     )
-    pos = (n + dn, e + de, -(world.height_m(n, e) + sc.launch_height_m) + dd)
-    quat = euler_to_quat(math.radians(roll), math.radians(pitch), sc.launch_yaw_rad + math.radians(yaw))
     frame = world.camera_frame(pos, quat, t_s, weather, rng)
     lidar = world.lidar_sweep(pos, quat, t_s, rng)
     cm = world.camera

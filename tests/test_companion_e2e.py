@@ -215,6 +215,35 @@ def test_nothing_flat_explores_then_lands_when_the_budget_runs_out(
     assert td["safe"] is False  # and the ground truth agrees that a gable roof was no place to land
 
 
+OPEN_FIELD = """
+name = "open_field"
+description = "a bare flat field and nothing else"
+extent = { north = [-250.0, 250.0], east = [-250.0, 250.0] }
+resolution_m = 0.5
+ground = "soil"
+launch = { north = 0.0, east = 0.0, height_m = 125.0, yaw_deg = 0.0 }
+"""
+
+
+def test_out_of_lidar_range_descends_into_it_instead_of_climbing(
+    start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """125 m above a bare field the 100 m LiDAR returns nothing; the rangefinder (200 m) sees the
+    ground. Climbing or moving would keep it blind: the companion descends to 70 m, then finds the
+    field flat and lands on it."""
+    scenario = tmp_path / "open_field.toml"
+    scenario.write_text(OPEN_FIELD)
+    rig = start_rig(["--scenario", str(scenario), "--autopilot", "px4", "--speed", "8"])
+    _wait_for_companion(rig)
+    out = rig.alarm_accepted("--reason", "GPS spoofing", "--criticality", "high")
+    assert out.returncode == 0, out.stdout + out.stderr
+    td = _wait_touchdown(rig, timeout_s=200)
+    log = rig.log_text()
+    assert "LiDAR sees nothing, ground 125 m below: descending 55 m" in log
+    assert "climbing" not in log
+    assert td["safe"] is True, td
+
+
 def test_an_lvlm_tier_flies_the_loop_and_a_lone_no_is_overridden(
     start_rig: Callable[..., Rig], tmp_path: Path
 ) -> None:

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from companion.guidance.frames import PinholeCamera
-from companion.perception.crops import site_box
+from companion.perception.crops import rank_crops, site_box
 from companion.perception.depth import LidarDepth
 from companion.perception.site_check import SiteCheck, check_site
 from companion.perception.surface_id import Candidate, propose
@@ -113,6 +113,32 @@ def test_onboard_rank_surface_id_candidates_clear_roof_first(
     assert best == clear[0]
     assert ranking.rationale.startswith(site_of(ranking, clear[0], reverse, len(cands)) + ": ")
     assert "no clutter" in ranking.rationale.split(";")[0]
+
+
+@pytest.mark.parametrize("context", ["pad20", "pad40", "pad60"])
+def test_onboard_rank_judges_the_candidate_not_its_context_padding(
+    city: LiveWorld, launch: dict[str, Frame], context: str
+) -> None:
+    """Padded crops of the clear roof take in the street beside it (cars, lane markings). With the
+    cores given, the onboard tier judges each candidate's own box, so its order is that of the exact
+    crops; the padding is context for a model that can reason about surroundings."""
+    frame = launch["clear"]
+    lidar = city.lidar_sweep(LAUNCH, LEVEL, 0.0, np.random.default_rng(1))
+    cam = PinholeCamera.from_hfov(city.camera.width_px, city.camera.height_px, city.camera.hfov_deg)
+    cands, _ = propose(
+        LidarDepth(), cam, lidar_frd=lidar, quat_wxyz=LEVEL, pos_ned_m=LAUNCH, ground_up_m=LAUNCH[2]
+    )
+    boxes = [c.box_px for c in cands]
+    exact, _ = rank_crops(frame.rgb, boxes, "crop")
+    padded, cores = rank_crops(frame.rgb, boxes, context)
+    assert all(p.shape[0] > e.shape[0] for p, e in zip(padded, exact, strict=True))
+    for p_img, e_img, (x0, y0, x1, y1) in zip(padded, exact, cores, strict=True):
+        assert np.array_equal(p_img[y0:y1, x0:x1], e_img)
+    by_exact = ONBOARD.rank_sync(RankRequest(exact, tuple(cands)))
+    by_core = ONBOARD.rank_sync(RankRequest(padded, tuple(cands), cores=cores))
+    assert by_core.order == by_exact.order
+    with pytest.raises(ValueError, match="is not a box inside its"):
+        RankRequest(padded, tuple(cands), cores=((0, 0, 10_000, 10),) * len(padded))
 
 
 def _pair(frame: Frame, city: LiveWorld, rect: Rect, classes: tuple[C, ...]) -> tuple[np.ndarray, np.ndarray]:

@@ -15,7 +15,15 @@ import numpy as np
 import pytest
 
 from companion.guidance.frames import PinholeCamera
-from companion.perception.crops import MIN_SITE_HALF_PX, PAD_LEVELS, context_crops, crop, pad_box, site_box
+from companion.perception.crops import (
+    MIN_SITE_HALF_PX,
+    PAD_LEVELS,
+    context_crops,
+    crop,
+    pad_box,
+    pad_of,
+    site_box,
+)
 from companion.perception.depth import ArrayDepth, DepthError, DepthMap, LidarDepth, make_source
 from companion.perception.surface_id import SurfaceParams, propose, quadrant_fallback, surface_id
 
@@ -246,6 +254,13 @@ def test_site_box_keeps_the_site_in_the_middle_near_a_border() -> None:
     assert site_box(10, 530, 100, 960, 540) == (0, 530 - MIN_SITE_HALF_PX, 10 + MIN_SITE_HALF_PX, 540)
     with pytest.raises(ValueError, match="outside the 960 x 540"):
         site_box(960, 10, 50, 960, 540)
+
+
+def test_context_variants_name_their_padding() -> None:
+    assert [pad_of(c) for c in ("crop", "pad20", "pad35", "pad60", "full")] == [0.0, 0.2, 0.35, 0.6, 0.0]
+    for bad in ("pad", "padxx", "pad0", "zoom"):
+        with pytest.raises(ValueError, match="unknown context variant"):
+            pad_of(bad)
 
 
 def test_context_crops_cover_every_level_and_the_full_frame() -> None:

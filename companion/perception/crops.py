@@ -12,7 +12,16 @@ from collections.abc import Sequence
 
 import numpy as np
 
-__all__ = ["MIN_SITE_HALF_PX", "PAD_LEVELS", "context_crops", "crop", "pad_box", "site_box"]
+__all__ = [
+    "MIN_SITE_HALF_PX",
+    "PAD_LEVELS",
+    "context_crops",
+    "crop",
+    "pad_box",
+    "pad_of",
+    "rank_crops",
+    "site_box",
+]
 
 PAD_LEVELS = (0.2, 0.3, 0.4, 0.5, 0.6)  # the study's context variants
 MIN_SITE_HALF_PX = 48  # a confirm close-up is at least 96 px wide where the frame allows
@@ -56,6 +65,35 @@ def crop(image: np.ndarray, box: Sequence[int], pad: float = 0.0) -> np.ndarray:
     h, w = image.shape[:2]
     x0, y0, x1, y1 = pad_box(box, pad, w, h)
     return np.ascontiguousarray(image[y0:y1, x0:x1])
+
+
+def pad_of(context: str) -> float:
+    """The padding share of a context variant: ``crop`` and ``full`` 0, ``padNN`` NN %.
+
+    Raises:
+        ValueError: an unknown variant.
+    """
+    if context in ("crop", "full"):
+        return 0.0
+    if context.startswith("pad") and context[3:].isdigit() and 0 < int(context[3:]) <= 100:
+        return int(context[3:]) / 100
+    raise ValueError(f"unknown context variant {context!r}: crop, pad20 .. pad60, or full")
+
+
+def rank_crops(
+    image: np.ndarray, boxes: Sequence[Sequence[int]], context: str
+) -> tuple[tuple[np.ndarray, ...], tuple[tuple[int, int, int, int], ...]]:
+    """What the reasoner is shown for one context variant: per box, its crop (padded as the variant
+    says) and the box itself in that crop's pixels (its *core*: the whole crop when unpadded)."""
+    h, w = image.shape[:2]
+    pad = pad_of(context)
+    crops, cores = [], []
+    for box in boxes:
+        x0, y0, x1, y1 = pad_box(box, pad, w, h)
+        crops.append(np.ascontiguousarray(image[y0:y1, x0:x1]))
+        bx0, by0, bx1, by1 = (int(v) for v in box)
+        cores.append((bx0 - x0, by0 - y0, bx1 - x0, by1 - y0))
+    return tuple(crops), tuple(cores)
 
 
 def context_crops(image: np.ndarray, box: Sequence[int]) -> dict[str, np.ndarray]:

@@ -48,12 +48,15 @@ class RankRequest:
     ``candidates`` carries Surface ID's geometry for the same indices, or is ``None`` when only images are
     known (degraded mode: no depth, or ``companion-eval rank`` on image files). ``context`` is the whole
     frame when the configured context variant sends it. ``critical`` is set for a critical alarm.
+    ``cores``, with padded crops, gives each candidate's own box inside its crop (x0, y0, x1, y1 pixels):
+    the padding is context around the site, not part of it.
     """
 
     crops: tuple[np.ndarray, ...]
     candidates: tuple[Candidate, ...] | None = None
     context: np.ndarray | None = None
     critical: bool = False
+    cores: tuple[tuple[int, int, int, int], ...] | None = None
     deadline: float | None = None  # time.monotonic() by which the answer is needed (set by the cascade)
     transcript: list[dict[str, Any]] | None = field(default=None, compare=False)  # exchanges are appended
 
@@ -62,6 +65,13 @@ class RankRequest:
             raise ValueError("a rank request needs at least one candidate crop")
         if self.candidates is not None and len(self.candidates) != len(self.crops):
             raise ValueError(f"{len(self.crops)} crops but {len(self.candidates)} candidates")
+        if self.cores is not None:
+            if len(self.cores) != len(self.crops):
+                raise ValueError(f"{len(self.crops)} crops but {len(self.cores)} cores")
+            for k, (img, (x0, y0, x1, y1)) in enumerate(zip(self.crops, self.cores, strict=True)):
+                h, w = np.shape(img)[:2]
+                if not (0 <= x0 < x1 <= w and 0 <= y0 < y1 <= h):
+                    raise ValueError(f"core {k} {(x0, y0, x1, y1)} is not a box inside its {w} x {h} crop")
 
 
 @dataclass(frozen=True, slots=True)

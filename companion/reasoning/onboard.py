@@ -37,6 +37,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 from companion.perception.site_check import SiteCheck
 from companion.perception.surface_id import Candidate
@@ -159,7 +160,7 @@ class OnboardReasoner:
             ValueError: a crop that is not a non-empty (H, W, 3) uint8 image.
         """
         t0 = time.perf_counter()
-        all_cues = [analyse(crop) for crop in request.crops]  # validates every crop first
+        all_cues = [analyse(_core(request, k)) for k in range(len(request.crops))]  # validates them first
         largest = max(c.size_px[0] * c.size_px[1] for c in all_cues)
         sites: list[_Site] = []
         for k, cues in enumerate(all_cues):
@@ -258,3 +259,12 @@ def _rank_rationale(ranked: list[_Site], images_only: bool) -> str:
     if images_only:
         text += " (no geometry: image cues only)"
     return text
+
+
+def _core(request: RankRequest, k: int) -> Any:
+    """Crop ``k`` without its context padding: the onboard tier judges where it would land."""
+    crop = request.crops[k]
+    if request.cores is None:
+        return crop
+    x0, y0, x1, y1 = request.cores[k]
+    return crop[y0:y1, x0:x1]

@@ -1,0 +1,273 @@
+"""``companion-bench``: the study's experiments on simbridge, graded from ground truth, with a report.
+
+    companion-bench modules [--iterations 20] [--reasoner NAME] --out DIR
+    companion-bench curated --scenario scenario1|scenario2 --runs N [--weather W] [--context C]
+                            [--reasoner NAME] --out DIR
+    companion-bench city --seeds N [--start-index K] [--city-seed S] [--weather W] [--context C]
+                         [--reasoner NAME] --out DIR
+
+Every command writes DIR/results.json (schema: docs/bench.md) and DIR/report.html with its figures.
+Episodes run in parallel (``--workers``, default: the number of cores), each as its own simbridge and
+companion processes; results.json is rewritten after every episode, and a rerun into the same DIR
+skips the episodes already in it (resumption). Exit status: 0 done; 1 some episode could not be run
+(``outcome`` ``error``: a process failed, not a landing that went wrong); 2 bad arguments; 4 the
+report could not be written (results.json is).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import threading
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor, as_completed
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from landfall_eval.episode import EpisodeSpec, EpisodeTimes, run_episode
+from landfall_eval.grading import summarise
+from landfall_eval.launches import halton_launches
+
+__all__ = ["SCHEMA", "load_results", "main", "save_results"]
+
+SCHEMA = "landfall-bench/1"
+CONTEXTS = ("crop", "pad20", "pad30", "pad40", "pad50", "pad60", "full")
+WEATHERS = ("clear", "fog", "rain")
+RESULTS = "results.json"
+
+
+def load_results(out: Path) -> dict[str, Any]:
+    """DIR/results.json, or a fresh skeleton. Raises ValueError on a file that is not ours."""
+    path = out / RESULTS
+    if not path.exists():
+        return {"schema": SCHEMA, "episodes": []}
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path} is not valid JSON ({exc}); move it away to start afresh") from None
+    if not isinstance(data, dict) or data.get("schema") != SCHEMA:
+        raise ValueError(f"{path} is not a companion-bench results file (schema {SCHEMA!r})")
+    data.setdefault("episodes", [])
+    return data
+
+
+def save_results(out: Path, results: dict[str, Any]) -> None:
+    """Write results.json atomically (a crash leaves the old file or the new one, never half of one)."""
+    results["summary"] = summarise(results.get("episodes", []))
+    tmp = out / f".{RESULTS}.tmp"
+    tmp.write_text(json.dumps(results, indent=1) + "\n")
+    os.replace(tmp, out / RESULTS)
+
+
+def _positive(kind: type, what: str) -> Callable[[str], Any]:
+    def parse(text: str) -> Any:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{what} must be a number, got {text!r}") from None
+        if value <= 0:
+            raise argparse.ArgumentTypeError(f"{what} must be > 0, got {text}")
+        return value
+
+    return parse
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog="companion-bench",
+        description="The study's experiments on simbridge: DIR/results.json and DIR/report.html.",
+    )
+    sub = ap.add_subparsers(dest="command", required=True)
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument(
+        "--out", type=Path, required=True, metavar="DIR", help="results.json and report.html go here"
+    )
+    common.add_argument("--reasoner", default="onboard", help="first reasoning tier (default: onboard)")
+    common.add_argument("--config", type=Path, help="companion TOML config (LVLM profiles, fallbacks)")
+    common.add_argument("--quiet", action="store_true", help="no progress display")
+    flying = argparse.ArgumentParser(add_help=False)
+    flying.add_argument("--weather", choices=WEATHERS, default="clear")
+    flying.add_argument(
+        "--context", choices=CONTEXTS, default="crop", help="what the reasoner sees per candidate"
+    )
+    flying.add_argument("--autopilot", choices=("px4", "ardupilot"), default="px4")
+    flying.add_argument(
+        "--workers", type=_positive(int, "--workers"), default=os.cpu_count() or 1,
+        help="episodes at once (default: the number of cores)",
+    )  # fmt: skip
+    flying.add_argument(
+        "--speed", type=_positive(float, "--speed"), default=4.0,
+        help="simulation speed (simulated s per wall s; decisions do not depend on it)",
+    )  # fmt: skip
+    flying.add_argument(
+        "--time-limit", type=_positive(float, "--time-limit"), default=600.0, metavar="SIM_S",
+        help="simulated seconds after the alarm before an episode is a timeout (no landing)",
+    )  # fmt: skip
+    m = sub.add_parser(
+        "modules", parents=[common], help="Surface ID Jaccard, IPM landing distance, stage success"
+    )
+    m.add_argument("--iterations", type=_positive(int, "--iterations"), default=20)
+    m.add_argument("--scenario", action="append", choices=("scenario1", "scenario2"), help="default: both")
+    c = sub.add_parser("curated", parents=[common, flying], help="full pipeline in a curated scenario")
+    c.add_argument("--scenario", required=True, choices=("scenario1", "scenario2"))
+    c.add_argument("--runs", type=_positive(int, "--runs"), default=10)
+    y = sub.add_parser("city", parents=[common, flying], help="full pipeline from Halton launch points")
+    y.add_argument("--seeds", type=_positive(int, "--seeds"), default=20, help="number of launch points")
+    y.add_argument("--start-index", type=int, default=0, metavar="K", help="first Halton index (default 0)")
+    y.add_argument("--city-seed", type=int, default=0, help="seed of the procedural city")
+    return ap
+
+
+def episode_specs(args: argparse.Namespace) -> list[EpisodeSpec]:
+    """The episodes a curated or city command asks for, in order."""
+    base = dict(reasoner=args.reasoner, context=args.context, weather=args.weather, autopilot=args.autopilot)
+    if args.command == "curated":
+        return [EpisodeSpec("curated", args.scenario, k, run=k, **base) for k in range(args.runs)]
+    if args.start_index < 0:
+        raise ValueError(f"--start-index must be >= 0, got {args.start_index}")
+    return [
+        EpisodeSpec(
+            "city",
+            "city",
+            launch.index,
+            launch=launch.as_tuple(),
+            launch_index=launch.index,
+            city_seed=args.city_seed,
+            **base,
+        )
+        for launch in halton_launches(args.seeds, args.start_index)
+    ]
+
+
+def _line(entry: dict[str, Any]) -> str:
+    verdict = "SAFE" if entry.get("safe") else "UNSAFE"
+    if entry.get("outcome") != "landed":
+        verdict = str(entry.get("outcome")).upper()
+    extra = f" ({entry['error']})" if entry.get("error") else ""
+    reasons = "; ".join(entry.get("reasons") or [])
+    ttd = entry.get("time_to_touchdown_s")
+    took = f", {ttd:.0f} s" if isinstance(ttd, (int, float)) else ""
+    return (
+        f"{entry['id']}: {verdict} on {entry.get('surface')}, {entry.get('rounds')} round(s){took}"
+        f"{' - ' + reasons if reasons and not entry.get('safe') else ''}{extra}"
+    )
+
+
+def run_episodes(
+    args: argparse.Namespace, results: dict[str, Any], specs: Sequence[EpisodeSpec], out: Path
+) -> int:
+    done = {e["id"] for e in results["episodes"]}
+    todo = [s for s in specs if s.id not in done]
+    skipped = len(specs) - len(todo)
+    if skipped:
+        print(f"resuming: {skipped} of {len(specs)} episodes already in {out / RESULTS}", file=sys.stderr)
+    times = EpisodeTimes(speed=args.speed, sim_s=args.time_limit)
+    lock = threading.Lock()
+    errors = 0
+    bar = tqdm(
+        total=len(todo), unit="episode", disable=args.quiet or not todo, file=sys.stderr, dynamic_ncols=True
+    )
+    with ThreadPoolExecutor(max_workers=args.workers) as pool:
+        futures = {
+            pool.submit(run_episode, s, out / "episodes" / s.id, times=times, config_path=args.config): s
+            for s in todo
+        }
+        for fut in as_completed(futures):
+            entry = fut.result()
+            with lock:
+                results["episodes"].append(entry)
+                results["episodes"].sort(key=lambda e: str(e["id"]))
+                save_results(out, results)
+            errors += entry.get("outcome") == "error"
+            safe = sum(bool(e.get("safe")) for e in results["episodes"])
+            bar.set_postfix_str(f"safe {safe}/{len(results['episodes'])}")
+            if args.quiet:
+                continue
+            bar.write(_line(entry), file=sys.stderr)
+            bar.update(1)
+    bar.close()
+    return errors
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    ap = build_parser()
+    args = ap.parse_args(argv)
+    out: Path = args.out
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        results = load_results(out)
+        specs = episode_specs(args) if args.command != "modules" else []
+    except (OSError, ValueError) as exc:
+        ap.error(str(exc))
+    config = {
+        "reasoner": args.reasoner,
+        "config": str(args.config) if args.config else None,
+    }
+    for key in (
+        "context",
+        "weather",
+        "autopilot",
+        "speed",
+        "workers",
+        "city_seed",
+        "scenario",
+        "runs",
+        "seeds",
+    ):
+        if hasattr(args, key):
+            config[key] = getattr(args, key)
+    if args.command == "city":
+        config["start_index"] = args.start_index
+    results["command"] = args.command
+    results["created_unix_s"] = round(time.time(), 3)
+    results.setdefault("runs", []).append(config)
+    results["config"] = config
+    t0 = time.monotonic()
+    errors = 0
+    if args.command == "modules":
+        from landfall_eval.modules import run_modules
+
+        scenarios = tuple(args.scenario or ("scenario1", "scenario2"))
+        bar = tqdm(total=None, disable=args.quiet, file=sys.stderr, unit="step", dynamic_ncols=True)
+
+        def progress(text: str) -> None:
+            bar.set_postfix_str(text[:80])
+            bar.update(1)
+
+        results["modules"] = run_modules(
+            args.reasoner, args.iterations, scenarios=scenarios, progress=progress, config_path=args.config
+        )
+        bar.close()
+        save_results(out, results)
+    else:
+        errors = run_episodes(args, results, specs, out)
+        save_results(out, results)
+    s = results["summary"]
+    if s["episodes"]:
+        rate = s["safe_rate"]
+        rounds = s["mean_rounds_safe"]
+        print(
+            f"{s['episodes']} episodes: {s['safe']} safe ({100 * rate:.0f} %), "
+            f"mean rounds per safe landing {rounds if rounds is not None else '-'}, "
+            f"median kinematic ratio {s['median_kinematic_ratio']}",
+            file=sys.stderr,
+        )
+    print(f"results: {out / RESULTS} ({time.monotonic() - t0:.0f} s)", file=sys.stderr)
+    try:
+        from landfall_eval.report import write_report
+
+        html = write_report(results, out)
+    except Exception as exc:  # the figures are a convenience: results.json is what counts
+        print(f"companion-bench: the report could not be written: {exc}", file=sys.stderr)
+        return 4
+    print(f"report:  {html}", file=sys.stderr)
+    return 1 if errors else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

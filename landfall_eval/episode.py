@@ -1,0 +1,370 @@
+"""One full-pipeline episode through the real processes: simbridge + companion over MAVLink.
+
+:func:`run_episode` starts ``simbridge`` (the scenario, seed, weather, launch point and speed of the
+:class:`EpisodeSpec`) and the ``companion`` daemon (the spec's reasoner and context) as separate
+processes wired over loopback UDP and the sensor socket, sends the alarm with ``trigger_alarm.py``,
+waits for simbridge's touchdown event (or the time limit), and grades the episode from simbridge's
+ground truth (:mod:`landfall_eval.grading`) and the companion's flight record (rounds, every reasoner
+call with its tier and latency, the rationales). Everything the processes wrote stays in the episode's
+directory: ``episode.jsonl`` (simbridge), ``companion.log``, ``record/``.
+
+Times are simulated seconds from simbridge's episode log: ``time_to_touchdown_s`` runs from the moment
+the companion took control (the vehicle's switch to OFFBOARD or GUIDED, milliseconds after the alarm)
+to the touchdown. The companion's peak RSS and CPU time are sampled from ``/proc`` every poll (Linux).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TextIO
+
+from landfall_eval.grading import kinematic_lower_bound_s, surface_class
+
+__all__ = ["EpisodeSpec", "EpisodeTimes", "ProcessSample", "run_episode"]
+
+ROOT = Path(__file__).resolve().parent.parent
+TRAJECTORY_STEP_S = 1.0  # one trajectory point per simulated second
+CONTROL_MODES = ("OFFBOARD", "GUIDED")
+
+
+@dataclass(frozen=True, slots=True)
+class EpisodeSpec:
+    """What one episode flies. ``seed`` seeds the world's traffic, the sensors' noise and the wind.
+
+    ``launch`` (north, east, height above ground) overrides the scenario's launch point (the city);
+    ``launch_index`` is its index in the Halton sequence, ``run`` the repetition of a curated scenario.
+    """
+
+    kind: str  # "curated" or "city"
+    scenario: str
+    seed: int
+    reasoner: str = "onboard"
+    context: str = "crop"
+    weather: str = "clear"
+    autopilot: str = "px4"
+    launch: tuple[float, float, float] | None = None
+    launch_index: int | None = None
+    run: int | None = None
+    city_seed: int | None = None
+    criticality: str = "high"
+    reason: str = "GPS spoofing detected"
+
+    @property
+    def id(self) -> str:
+        """Stable name: what resumption matches episodes by."""
+        where = (
+            f"city{self.city_seed}-i{self.launch_index}"
+            if self.kind == "city"
+            else f"{self.scenario}-r{self.run}"
+        )
+        return f"{where}-{self.reasoner}-{self.context}-{self.weather}-{self.autopilot}"
+
+
+@dataclass(frozen=True, slots=True)
+class EpisodeTimes:
+    """Limits: ``sim_s`` simulated seconds after the alarm; ``wall_s`` a hard stop whatever happens."""
+
+    speed: float = 4.0
+    sim_s: float = 600.0
+    start_wall_s: float = 90.0  # simbridge and the companion must be up and talking by then
+    settle_wall_s: float = 10.0  # after the touchdown, for the companion to close its record
+
+    @property
+    def wall_s(self) -> float:
+        return self.start_wall_s + 3.0 * self.sim_s / self.speed + 60.0
+
+
+@dataclass(slots=True)
+class ProcessSample:
+    """Peak resident memory and CPU time of a process, sampled from /proc (zeros elsewhere)."""
+
+    pid: int
+    peak_rss_mb: float = 0.0
+    cpu_s: float = 0.0
+    _tick: float = field(default_factory=lambda: float(os.sysconf("SC_CLK_TCK")))
+
+    def sample(self) -> None:
+        try:
+            status = Path(f"/proc/{self.pid}/status").read_text()
+            stat = Path(f"/proc/{self.pid}/stat").read_text()
+        except OSError:
+            return
+        for line in status.splitlines():
+            if line.startswith("VmRSS:"):
+                self.peak_rss_mb = max(self.peak_rss_mb, int(line.split()[1]) / 1024)
+        fields = stat.rsplit(")", 1)[1].split()
+        self.cpu_s = (int(fields[11]) + int(fields[12])) / self._tick  # utime + stime
+
+
+class _Tail:
+    """Reads the JSON lines another process appends to a file, as they come (no line read twice)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._fh: TextIO | None = None
+        self._partial = ""
+
+    def lines(self) -> list[dict[str, Any]]:
+        if self._fh is None:
+            if not self.path.exists():
+                return []
+            self._fh = self.path.open("r", encoding="utf-8")
+        text = self._partial + self._fh.read()
+        rows, _, self._partial = text.rpartition("\n")
+        out = []
+        for line in rows.splitlines():
+            if line.strip():
+                try:
+                    out.append(json.loads(line))
+                except json.JSONDecodeError:
+                    continue  # a torn line from a killed writer: nothing to grade in it
+        return out
+
+    def close(self) -> None:
+        if self._fh is not None:
+            self._fh.close()
+
+
+def _free_port(kind: int) -> int:
+    with socket.socket(socket.AF_INET, kind) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _stop(proc: subprocess.Popen[bytes]) -> None:
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def _record_events(record_dir: Path) -> list[dict[str, Any]]:
+    events: list[dict[str, Any]] = []
+    for path in sorted(record_dir.glob("*/events.jsonl")):
+        events += [json.loads(x) for x in path.read_text().splitlines() if x.strip()]
+    return events
+
+
+def _send_alarm(spec: EpisodeSpec, udp_port: int, deadline: float) -> subprocess.CompletedProcess[str]:
+    cmd = [
+        sys.executable, str(ROOT / "trigger_alarm.py"), "--mavlink", f"udpout:127.0.0.1:{udp_port}",
+        "--reason", spec.reason, "--criticality", spec.criticality,
+    ]  # fmt: skip
+    while True:  # the first telemetry may still be on its way: "refused for now" until it is in
+        res = subprocess.run(cmd, capture_output=True, text=True, timeout=30, cwd=ROOT)
+        if res.returncode == 0 or time.monotonic() > deadline:
+            return res
+        time.sleep(0.5)
+
+
+def run_episode(
+    spec: EpisodeSpec,
+    workdir: Path,
+    *,
+    times: EpisodeTimes | None = None,
+    config_path: Path | None = None,
+    on_line: Callable[[str, str], None] | None = None,
+) -> dict[str, Any]:
+    """Fly one episode; returns its results.json entry (``episodes[]`` in docs/bench.md).
+
+    ``on_line(source, text)`` sees the alarm tool's answer (source ``alarm``) and every line of the
+    companion's log (``companion``) as they come. Never raises for what happens in the episode: a
+    process that dies, an alarm that is refused or a landing that never comes is an ``outcome`` of
+    ``error`` or ``timeout`` with the ``error`` text.
+    """
+    times = times or EpisodeTimes()
+    workdir.mkdir(parents=True, exist_ok=True)
+    episode_log, comp_log, record_dir = (
+        workdir / "episode.jsonl",
+        workdir / "companion.log",
+        workdir / "record",
+    )
+    for stale in (episode_log, comp_log):
+        stale.unlink(missing_ok=True)
+    udp, tcp = _free_port(socket.SOCK_DGRAM), _free_port(socket.SOCK_STREAM)
+    sim_cmd = [
+        sys.executable, "-m", "simbridge", "--scenario", spec.scenario, "--seed", str(spec.seed),
+        "--autopilot", spec.autopilot, "--weather", spec.weather, "--speed", f"{times.speed:g}",
+        "--mavlink", f"udpout:127.0.0.1:{udp}", "--sensors", f"127.0.0.1:{tcp}",
+        "--episode-log", str(episode_log), "--log-level", "WARNING",
+    ]  # fmt: skip
+    if spec.launch is not None:
+        sim_cmd.append("--launch=" + ",".join(f"{v:.2f}" for v in spec.launch))  # "=": it may start with "-"
+    comp_cmd = [
+        sys.executable, "-m", "companion", "--mavlink", f"udp:{udp}", "--sensors", f"127.0.0.1:{tcp}",
+        "--record", str(record_dir), "--reasoner", spec.reasoner,
+    ]  # fmt: skip
+    if config_path is not None:
+        comp_cmd += ["--config", str(config_path)]
+    env = dict(os.environ, LANDFALL_REASONER_CONTEXT=spec.context)
+    entry: dict[str, Any] = {
+        "id": spec.id,
+        "kind": spec.kind,
+        "scenario": spec.scenario,
+        "seed": spec.seed,
+        "launch_index": spec.launch_index,
+        "run": spec.run,
+        "reasoner": spec.reasoner,
+        "context": spec.context,
+        "weather": spec.weather,
+        "autopilot": spec.autopilot,
+        "criticality": spec.criticality,
+        "launch_height_m": spec.launch[2] if spec.launch is not None else None,
+    }
+    t_wall = time.monotonic()
+    sim_err = (workdir / "simbridge.log").open("wb")
+    sim = subprocess.Popen(sim_cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=sim_err)
+    with comp_log.open("wb") as fh:
+        comp = subprocess.Popen(comp_cmd, cwd=ROOT, env=env, stdout=fh, stderr=subprocess.STDOUT)
+    usage = ProcessSample(comp.pid)
+    tail = _Tail(episode_log)
+    states: list[dict[str, Any]] = []
+    touchdown: dict[str, Any] | None = None
+    takeover: dict[str, Any] | None = None
+    outcome, error = "landed", None
+    shown = 0
+    try:
+        while "sensor stream connected" not in comp_log.read_text(errors="replace"):
+            if comp.poll() is not None or sim.poll() is not None:
+                raise _EpisodeError("simbridge or the companion exited before the sensor stream was up")
+            if time.monotonic() - t_wall > times.start_wall_s:
+                raise _EpisodeError(f"no sensor stream after {times.start_wall_s:.0f} s")
+            time.sleep(0.2)
+        res = _send_alarm(spec, udp, time.monotonic() + 30.0)
+        if on_line is not None:
+            on_line("alarm", (res.stdout or res.stderr).strip())
+        if res.returncode != 0:
+            raise _EpisodeError(f"alarm not accepted: {(res.stdout or res.stderr).strip()[:200]}")
+        t_alarm = time.monotonic()
+        ended = None
+        while True:
+            usage.sample()
+            for row in tail.lines():
+                kind = row.get("event")
+                if kind == "state":
+                    states.append(row)
+                elif kind == "mode" and takeover is None and row.get("mode") in CONTROL_MODES:
+                    takeover = row
+                elif kind == "touchdown" and touchdown is None:
+                    touchdown = row
+            if on_line is not None:
+                lines = comp_log.read_text(errors="replace").splitlines()
+                for line in lines[shown:]:
+                    on_line("companion", line)
+                shown = len(lines)
+            if touchdown is not None:
+                if ended is None:
+                    ended = time.monotonic()
+                if "recovery ended" in comp_log.read_text(errors="replace"):
+                    break
+                if time.monotonic() - ended > times.settle_wall_s:
+                    break
+            t0 = float(takeover["t_s"]) if takeover is not None else None
+            if t0 is not None and states and float(states[-1]["t_s"]) - t0 > times.sim_s:
+                outcome, error = "timeout", f"no touchdown within {times.sim_s:.0f} simulated seconds"
+                break
+            if time.monotonic() - t_alarm > times.wall_s:
+                outcome, error = "timeout", f"no touchdown within {times.wall_s:.0f} wall seconds"
+                break
+            if sim.poll() is not None or comp.poll() is not None:
+                who = "simbridge" if sim.poll() is not None else "the companion"
+                outcome, error = "error", f"{who} exited during the episode"
+                break
+            time.sleep(0.25)
+    except _EpisodeError as exc:
+        outcome, error = "error", str(exc)
+    finally:
+        usage.sample()
+        for proc in (comp, sim):
+            _stop(proc)
+        if on_line is not None:
+            for line in comp_log.read_text(errors="replace").splitlines()[shown:]:
+                on_line("companion", line)
+        sim_err.close()
+        tail.close()
+    entry.update(_grade(states, takeover, touchdown, record_dir))
+    entry["outcome"] = outcome if touchdown is None or outcome != "timeout" else "landed"
+    entry["error"] = error if touchdown is None else None
+    entry["companion"] = {"peak_rss_mb": round(usage.peak_rss_mb, 1), "cpu_s": round(usage.cpu_s, 2)}
+    entry["wall_s"] = round(time.monotonic() - t_wall, 2)
+    return entry
+
+
+class _EpisodeError(Exception):
+    pass
+
+
+def _grade(
+    states: list[dict[str, Any]],
+    takeover: dict[str, Any] | None,
+    touchdown: dict[str, Any] | None,
+    record_dir: Path,
+) -> dict[str, Any]:
+    """Ground-truth grade, times, trajectory and the reasoner's calls for one episode."""
+    t0 = float(takeover["t_s"]) if takeover is not None else None
+    flown = [s for s in states if t0 is None or float(s["t_s"]) >= t0 - 1e-6]
+    start = flown[0]["pos_ned_m"] if flown else (states[0]["pos_ned_m"] if states else None)
+    trajectory: list[list[float]] = []
+    next_t = -1.0
+    for s in flown:
+        if float(s["t_s"]) >= next_t:
+            trajectory.append([round(s["pos_ned_m"][0], 2), round(s["pos_ned_m"][1], 2)])
+            next_t = float(s["t_s"]) + TRAJECTORY_STEP_S
+    out: dict[str, Any] = {
+        "launch_ned_m": [round(v, 2) for v in start] if start is not None else None,
+        "touchdown_ned_m": None,
+        "surface": surface_class(touchdown),
+        "sim_surface": None,
+        "safe": False,
+        "reasons": ["no touchdown"],
+        "time_to_touchdown_s": None,
+        "kinematic_lower_bound_s": None,
+        "kinematic_ratio": None,
+        "trajectory_ne_m": trajectory,
+    }
+    if touchdown is not None:
+        td = [float(v) for v in touchdown["pos_ned_m"]]
+        trajectory.append([round(td[0], 2), round(td[1], 2)])
+        out.update(
+            touchdown_ned_m=[round(v, 2) for v in td],
+            sim_surface=touchdown.get("surface"),
+            safe=bool(touchdown.get("safe")),
+            reasons=list(touchdown.get("reasons", [])),
+        )
+        if t0 is not None and start is not None:
+            took = float(touchdown["t_s"]) - t0
+            bound = kinematic_lower_bound_s(start, td)
+            out.update(
+                time_to_touchdown_s=round(took, 2),
+                kinematic_lower_bound_s=round(bound, 2),
+                kinematic_ratio=round(took / bound, 3) if bound > 0 else None,
+            )
+    events = _record_events(record_dir)
+    calls, rationales, rounds = [], [], 0
+    for ev in events:
+        kind = ev.get("kind")
+        if kind in ("rank", "confirm"):
+            rnd = int(ev.get("round", 0))
+            calls.append(
+                {"stage": kind, "tier": ev.get("tier"), "latency_s": ev.get("latency_s"), "round": rnd}
+            )
+            rationales.append(
+                {"stage": kind, "round": rnd, "tier": ev.get("tier"), "text": ev.get("rationale", "")}
+            )
+        if kind == "outcome":
+            rounds = int(ev.get("rounds", rounds))
+        elif kind in ("state", "rank", "confirm"):
+            rounds = max(rounds, int(ev.get("round", 0)))
+    out.update(calls=calls, rationales=rationales, rounds=rounds)
+    return out

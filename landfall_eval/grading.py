@@ -1,0 +1,150 @@
+"""Grading a landing from simbridge's ground truth, the kinematic lower bound, and run summaries.
+
+Nothing here reads the companion's beliefs: the surface and the verdict come from simbridge's touchdown
+event (``simbridge/world/grader.py`` on the world grid at touchdown time).
+
+**Surface classes** (``SURFACES``): simbridge's own class names, with one refinement: a touchdown on a
+clear flat roof that the grader failed for an object within the rotor-clearance disc (clutter, a
+parapet, a person, a vehicle, a tree, a rail or any object taller than 0.3 m) is ``rooftop_obstructed``,
+which is what the study counted as a "cluttered roof". An episode that never touched down is
+``no_landing``.
+
+**Kinematic lower bound**: the shortest time in which the vehicle could have gone from where it was
+when the companion took control to where it touched down, at its limits (simbridge's ``ControlLimits``:
+5 m/s and 3 m/s^2 horizontally, 1.5 m/s down): a straight flight to above the site, accelerating and
+braking at the limit, plus the descent at the maximum sink rate. No real landing can beat it; the ratio
+of the real time to it (``kinematic_ratio``) measures what rounds, confirmations and hovering cost.
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+from collections import Counter
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
+
+from simbridge.control import ControlLimits
+
+__all__ = [
+    "SURFACES",
+    "kinematic_lower_bound_s",
+    "summarise",
+    "surface_class",
+    "trapezoid_time_s",
+]
+
+SURFACES = (
+    "rooftop_clear",
+    "rooftop_obstructed",
+    "road",
+    "highway",
+    "sidewalk",
+    "parking",
+    "park",
+    "water",
+    "pier",
+    "ground",
+    "no_landing",
+)
+_OBSTRUCTION_WORDS = ("within", "rooftop object", "parapet", "person", "vehicle", "tree", "guard rail")
+
+
+def surface_class(touchdown: Mapping[str, Any] | None) -> str:
+    """The graded surface class of a touchdown event (``None``: no touchdown, ``no_landing``)."""
+    if touchdown is None:
+        return "no_landing"
+    surface = str(touchdown.get("surface", "no_landing"))
+    if surface not in SURFACES:
+        raise ValueError(f"unknown touchdown surface {surface!r}; known: {', '.join(SURFACES)}")
+    reasons = [str(r) for r in touchdown.get("reasons", ())]
+    if surface == "rooftop_clear" and any(w in r for r in reasons for w in _OBSTRUCTION_WORDS):
+        return "rooftop_obstructed"
+    return surface
+
+
+def trapezoid_time_s(dist_m: float, v_max: float, a_max: float) -> float:
+    """Shortest time to cover ``dist_m`` from rest to rest at speed <= v_max and |acceleration| <= a_max."""
+    if dist_m < 0 or v_max <= 0 or a_max <= 0:
+        raise ValueError(f"need dist >= 0 and positive limits, got {dist_m}, {v_max}, {a_max}")
+    ramp_m = v_max * v_max / a_max  # accelerate to v_max and brake again
+    if dist_m <= ramp_m:
+        return 2.0 * math.sqrt(dist_m / a_max)
+    return 2.0 * v_max / a_max + (dist_m - ramp_m) / v_max
+
+
+def kinematic_lower_bound_s(
+    start_ned_m: Sequence[float], touchdown_ned_m: Sequence[float], limits: ControlLimits | None = None
+) -> float:
+    """Straight flight to above the touchdown point plus the descent, both at the vehicle's limits."""
+    lim = limits or ControlLimits()
+    horiz = math.hypot(touchdown_ned_m[0] - start_ned_m[0], touchdown_ned_m[1] - start_ned_m[1])
+    down = max(touchdown_ned_m[2] - start_ned_m[2], 0.0)
+    return trapezoid_time_s(horiz, lim.max_speed_xy_m_s, lim.max_accel_xy_m_s2) + trapezoid_time_s(
+        down, lim.max_speed_down_m_s, lim.max_accel_z_m_s2
+    )
+
+
+def _median(values: Iterable[float | None]) -> float | None:
+    got = [v for v in values if v is not None]
+    return round(statistics.median(got), 3) if got else None
+
+
+def summarise(episodes: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """``summary`` of results.json: safe rate, rounds, times, surfaces, per group and per weather."""
+    n = len(episodes)
+    safe = [e for e in episodes if e.get("safe")]
+    by_surface = Counter(str(e.get("surface", "no_landing")) for e in episodes)
+    calls: dict[str, dict[str, list[float]]] = {}
+    for e in episodes:
+        for c in e.get("calls", ()):
+            calls.setdefault(str(c["stage"]), {}).setdefault(str(c["tier"]), []).append(float(c["latency_s"]))
+    groups: dict[tuple[str, str, str], list[Mapping[str, Any]]] = {}
+    for e in episodes:
+        key = (str(e.get("reasoner")), str(e.get("context")), str(e.get("weather")))
+        groups.setdefault(key, []).append(e)
+
+    def rate(items: Sequence[Mapping[str, Any]]) -> float | None:
+        return round(sum(bool(e.get("safe")) for e in items) / len(items), 4) if items else None
+
+    def mean_rounds(items: Sequence[Mapping[str, Any]]) -> float | None:
+        got = [int(e["rounds"]) for e in items if e.get("safe")]
+        return round(statistics.fmean(got), 3) if got else None
+
+    rss = [float(e["companion"]["peak_rss_mb"]) for e in episodes if e.get("companion")]
+    return {
+        "episodes": n,
+        "safe": len(safe),
+        "safe_rate": rate(episodes),
+        "mean_rounds_safe": mean_rounds(episodes),
+        "within_2_rounds_safe": (
+            round(sum(int(e["rounds"]) <= 2 for e in safe) / len(safe), 4) if safe else None
+        ),
+        "outcomes": dict(Counter(str(e.get("outcome")) for e in episodes)),
+        "by_surface": {s: by_surface[s] for s in SURFACES if by_surface[s]},
+        "median_time_to_touchdown_s": _median(e.get("time_to_touchdown_s") for e in episodes),
+        "median_kinematic_ratio": _median(e.get("kinematic_ratio") for e in episodes),
+        "companion_peak_rss_mb": round(max(rss), 1) if rss else None,
+        "latency_s": {
+            stage: {
+                tier: {
+                    "calls": len(v),
+                    "median": round(statistics.median(v), 4),
+                    "p90": round(sorted(v)[min(len(v) - 1, math.ceil(0.9 * len(v)) - 1)], 4),
+                }
+                for tier, v in sorted(tiers.items())
+            }
+            for stage, tiers in sorted(calls.items())
+        },
+        "groups": [
+            {
+                "reasoner": r,
+                "context": c,
+                "weather": w,
+                "episodes": len(items),
+                "safe_rate": rate(items),
+                "mean_rounds_safe": mean_rounds(items),
+            }
+            for (r, c, w), items in sorted(groups.items())
+        ],
+    }

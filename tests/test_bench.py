@@ -1,0 +1,241 @@
+"""companion-bench: grading, the kinematic bound, Halton launches, and small real runs (2 episodes of
+simbridge + companion processes) that check the results schema, the report and resumption."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from landfall_eval.episode import _grade
+from landfall_eval.grading import (
+    SURFACES,
+    kinematic_lower_bound_s,
+    summarise,
+    surface_class,
+    trapezoid_time_s,
+)
+from landfall_eval.launches import halton_launches
+
+EPISODE_KEYS = {
+    "id", "kind", "scenario", "seed", "launch_index", "run", "reasoner", "context", "weather", "autopilot",
+    "launch_ned_m", "touchdown_ned_m", "surface", "safe", "reasons", "outcome", "error", "rounds",
+    "time_to_touchdown_s", "kinematic_lower_bound_s", "kinematic_ratio", "calls", "rationales",
+    "trajectory_ne_m", "companion", "wall_s",
+}  # fmt: skip
+
+
+# ------------------------------------------------------------------------------------------ grading
+def test_surface_class_refines_a_cluttered_roof_and_passes_the_rest_through() -> None:
+    assert surface_class(None) == "no_landing"
+    assert surface_class({"surface": "rooftop_clear", "safe": True, "reasons": []}) == "rooftop_clear"
+    near_hvac = {"surface": "rooftop_clear", "safe": False, "reasons": ["rooftop object within 1.2 m"]}
+    assert surface_class(near_hvac) == "rooftop_obstructed"
+    # an edge is not an obstruction: the class stays, the verdict says unsafe
+    edge = {"surface": "rooftop_clear", "safe": False, "reasons": ["0.6 m from an edge (20 m drop)"]}
+    assert surface_class(edge) == "rooftop_clear"
+    assert surface_class({"surface": "highway", "safe": False, "reasons": ["landed on highway"]}) == "highway"
+    with pytest.raises(ValueError, match="unknown touchdown surface 'lava'"):
+        surface_class({"surface": "lava"})
+
+
+def test_trapezoid_time_is_the_bang_bang_optimum() -> None:
+    assert trapezoid_time_s(0.0, 5.0, 3.0) == 0.0
+    # too short to reach the speed limit: accelerate half way, brake the other half
+    assert trapezoid_time_s(3.0, 5.0, 3.0) == pytest.approx(2.0)
+    # long: 5/3 s up, 5/3 s down, the rest at 5 m/s (25/3 m used by the ramps)
+    assert trapezoid_time_s(100.0, 5.0, 3.0) == pytest.approx(10 / 3 + (100 - 25 / 3) / 5)
+    with pytest.raises(ValueError, match="dist >= 0"):
+        trapezoid_time_s(-1.0, 5.0, 3.0)
+
+
+def test_kinematic_bound_adds_the_straight_flight_and_the_descent() -> None:
+    start, end = (0.0, 0.0, -110.0), (30.0, 40.0, -22.0)
+    expect = trapezoid_time_s(50.0, 5.0, 3.0) + trapezoid_time_s(88.0, 1.5, 3.0)
+    assert kinematic_lower_bound_s(start, end) == pytest.approx(expect)
+    assert kinematic_lower_bound_s(end, end) == 0.0
+
+
+def test_grade_reads_the_episode_log_and_the_flight_record(tmp_path: Path) -> None:
+    session = tmp_path / "record" / "s1"
+    session.mkdir(parents=True)
+    events = [
+        {"kind": "state", "state": "rank", "round": 1},
+        {"kind": "rank", "round": 1, "tier": "onboard", "latency_s": 0.01, "rationale": "site 0: clear"},
+        {"kind": "confirm", "round": 1, "tier": "gpt-5", "latency_s": 4.2, "rationale": "no: <birds>"},
+        {"kind": "state", "state": "rank", "round": 2},
+        {"kind": "confirm", "round": 2, "tier": "onboard", "latency_s": 0.02, "rationale": "site clear"},
+        {"kind": "outcome", "state": "landed", "rounds": 2, "reason": "landed"},
+    ]
+    (session / "events.jsonl").write_text("".join(json.dumps(e) + "\n" for e in events))
+    states = [
+        {"t_s": t, "event": "state", "pos_ned_m": [0.5 * t, 0.0, -110.0 + t]}
+        for t in (0.0, 0.5, 1.0, 2.0, 10.0)
+    ]
+    takeover = {"t_s": 1.0, "event": "mode", "mode": "OFFBOARD"}
+    touchdown = {
+        "t_s": 40.0,
+        "pos_ned_m": [20.0, 0.0, -22.0],
+        "surface": "rooftop_clear",
+        "safe": True,
+        "reasons": [],
+    }
+    got = _grade(states, takeover, touchdown, tmp_path / "record")
+    assert got["launch_ned_m"] == [0.5, 0.0, -109.0]  # where the companion took control
+    assert got["rounds"] == 2
+    assert [c["tier"] for c in got["calls"]] == ["onboard", "gpt-5", "onboard"]
+    assert got["rationales"][1] == {"stage": "confirm", "round": 1, "tier": "gpt-5", "text": "no: <birds>"}
+    assert got["time_to_touchdown_s"] == 39.0
+    bound = kinematic_lower_bound_s((0.5, 0.0, -109.0), (20.0, 0.0, -22.0))
+    assert got["kinematic_ratio"] == pytest.approx(39.0 / bound, abs=1e-3)
+    assert got["trajectory_ne_m"][0] == [0.5, 0.0]
+    assert got["trajectory_ne_m"][-1] == [20.0, 0.0]
+    none = _grade(states, takeover, None, tmp_path / "nothing")
+    assert none["surface"] == "no_landing"
+    assert not none["safe"]
+    assert none["time_to_touchdown_s"] is None
+
+
+def test_summary_counts_safe_landings_rounds_and_latency() -> None:
+    def ep(safe: bool, rounds: int, surface: str, weather: str = "clear") -> dict[str, Any]:
+        return {
+            "safe": safe, "rounds": rounds, "surface": surface, "outcome": "landed", "reasoner": "onboard",
+            "context": "crop", "weather": weather, "time_to_touchdown_s": 80.0, "kinematic_ratio": 1.2,
+            "calls": [{"stage": "rank", "tier": "onboard", "latency_s": 0.01 * rounds}],
+            "companion": {"peak_rss_mb": 100.0 + rounds, "cpu_s": 2.0},
+        }  # fmt: skip
+
+    s = summarise(
+        [ep(True, 1, "rooftop_clear"), ep(True, 3, "rooftop_clear"), ep(False, 2, "highway", "fog")]
+    )
+    assert s["episodes"] == 3
+    assert s["safe"] == 2
+    assert s["safe_rate"] == pytest.approx(2 / 3, abs=1e-4)
+    assert s["mean_rounds_safe"] == 2.0
+    assert s["within_2_rounds_safe"] == 0.5
+    assert s["by_surface"] == {"rooftop_clear": 2, "highway": 1}
+    assert s["latency_s"]["rank"]["onboard"]["calls"] == 3
+    assert s["companion_peak_rss_mb"] == 103.0
+    assert {(g["weather"], g["episodes"]) for g in s["groups"]} == {("clear", 2), ("fog", 1)}
+    empty = summarise([])
+    assert empty["episodes"] == 0
+    assert empty["safe_rate"] is None
+    assert empty["mean_rounds_safe"] is None
+    assert set(SURFACES) >= set(s["by_surface"])
+
+
+# ------------------------------------------------------------------------------------------ launches
+def test_halton_launches_are_spread_stable_and_continue_from_an_index() -> None:
+    first = halton_launches(20)
+    assert [p.index for p in first] == list(range(20))
+    assert all(-500 <= p.north_m <= 500 and -500 <= p.east_m <= 500 for p in first)
+    assert all(100 <= p.height_m <= 120 for p in first)
+    assert halton_launches(5, 15) == first[15:]  # --start-index continues the same sequence
+    assert len({(p.north_m, p.east_m) for p in first}) == 20
+    # quasi-random: every quadrant of the city gets its share of 20 points
+    quadrants = [
+        sum((p.north_m > 0) == n and (p.east_m > 0) == e for p in first) for n in (0, 1) for e in (0, 1)
+    ]
+    assert min(quadrants) >= 4
+    with pytest.raises(ValueError, match=">= 0"):
+        halton_launches(3, -1)
+
+
+# ------------------------------------------------------------------------------------------ real runs
+def bench(*args: str, timeout: float = 600) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "landfall_eval.cli", *args],
+        capture_output=True, text=True, timeout=timeout,
+    )  # fmt: skip
+
+
+@pytest.mark.slow
+def test_curated_run_writes_results_and_report_then_resumes(tmp_path: Path) -> None:
+    out = tmp_path / "bench"
+    res = bench("curated", "--scenario", "scenario1", "--runs", "2", "--workers", "2", "--out", str(out))
+    assert res.returncode == 0, res.stderr[-3000:]
+    results = json.loads((out / "results.json").read_text())
+    assert results["schema"] == "landfall-bench/1"
+    assert results["command"] == "curated"
+    episodes = results["episodes"]
+    assert [e["id"] for e in episodes] == [
+        "scenario1-r0-onboard-crop-clear-px4",
+        "scenario1-r1-onboard-crop-clear-px4",
+    ]
+    for e in episodes:
+        assert set(e) >= EPISODE_KEYS, EPISODE_KEYS - set(e)
+        assert e["outcome"] == "landed"
+        assert e["error"] is None
+        assert e["surface"] == "rooftop_clear", e["reasons"]  # the gravel roof
+        assert e["safe"], e["reasons"]
+        assert e["rounds"] >= 1
+        assert e["calls"]
+        assert e["rationales"]
+        assert e["calls"][0] == {
+            "stage": "rank",
+            "tier": "onboard",
+            "latency_s": e["calls"][0]["latency_s"],
+            "round": 1,
+        }
+        assert e["kinematic_ratio"] >= 1.0  # nothing beats the vehicle's limits
+        assert e["time_to_touchdown_s"] > e["kinematic_lower_bound_s"] > 0
+        assert math.dist(e["trajectory_ne_m"][-1], e["touchdown_ned_m"][:2]) < 1e-6
+        assert e["companion"]["peak_rss_mb"] > 20
+        assert e["companion"]["cpu_s"] > 0
+        assert (out / "episodes" / e["id"] / "episode.jsonl").exists()
+    s = results["summary"]
+    assert s["episodes"] == 2
+    assert s["safe_rate"] == 1.0
+    assert s["mean_rounds_safe"] == pytest.approx(sum(e["rounds"] for e in episodes) / 2)
+    html = (out / "report.html").read_text()
+    assert "scenario1" in html
+    assert "figures/" in html
+    assert all((out / src).exists() for src in _images(html))
+
+    # the same command again: nothing to fly, the file keeps its episodes
+    again = bench("curated", "--scenario", "scenario1", "--runs", "2", "--out", str(out))
+    assert again.returncode == 0, again.stderr[-2000:]
+    assert "resuming: 2 of 2 episodes" in again.stderr
+    assert json.loads((out / "results.json").read_text())["episodes"] == episodes
+
+
+def _images(html: str) -> list[str]:
+    return [part.split('"', 1)[0] for part in html.split('src="')[1:]]
+
+
+@pytest.mark.slow
+def test_city_episode_starts_at_its_halton_point(tmp_path: Path) -> None:
+    out = tmp_path / "city"
+    res = bench("city", "--seeds", "1", "--start-index", "3", "--workers", "1", "--out", str(out))
+    assert res.returncode == 0, res.stderr[-3000:]
+    (e,) = json.loads((out / "results.json").read_text())["episodes"]
+    launch = halton_launches(1, 3)[0]
+    assert e["id"] == "city0-i3-onboard-crop-clear-px4"
+    assert e["kind"] == "city"
+    assert e["launch_index"] == 3
+    assert math.dist(e["launch_ned_m"][:2], (launch.north_m, launch.east_m)) < 2.0
+    assert e["outcome"] == "landed"
+    assert e["surface"] in SURFACES
+    assert e["surface"] != "no_landing"
+    assert isinstance(e["safe"], bool)
+    assert e["rounds"] >= 1
+
+
+def test_bad_arguments_and_a_foreign_results_file_are_refused(tmp_path: Path) -> None:
+    res = bench("curated", "--scenario", "scenario1", "--runs", "0", "--out", str(tmp_path))
+    assert res.returncode == 2
+    assert "--runs must be > 0" in res.stderr
+    (tmp_path / "results.json").write_text('{"something": "else"}')
+    res = bench("city", "--seeds", "1", "--out", str(tmp_path))
+    assert res.returncode == 2
+    assert "not a companion-bench results file" in res.stderr
+    (tmp_path / "results.json").write_text("{broken")
+    res = bench("city", "--seeds", "1", "--out", str(tmp_path))
+    assert res.returncode == 2
+    assert "is not valid JSON" in res.stderr
+    assert (tmp_path / "results.json").read_text() == "{broken"  # never overwritten
