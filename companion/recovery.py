@@ -64,7 +64,7 @@ class RecoveryParams:
     arrival_speed_m_s: float = 0.3
     move_timeout_s: float = 60.0
     explore_climb_m: float = 15.0
-    explore_max_alt_m: float = 150.0
+    explore_max_alt_m: float = 90.0  # below the LiDAR's range (100 m): higher up it sees nothing
     blind_descent_agl_m: float = 70.0  # no LiDAR return at all and the ground farther: descend to this
     surface: SurfaceParams = field(default_factory=SurfaceParams)
     depth_source: DepthSource = field(default_factory=LidarDepth)
@@ -241,7 +241,7 @@ class Recovery:
             check = await asyncio.to_thread(
                 check_site, frame.lidar_frd, frame.pos_ned_m, frame.quat_wxyz, (target[0], target[1])
             )
-            decision = await self._confirm(check, frame, target)
+            decision = await self._confirm(check, frame, target, choice)
             if not decision.accept and decision.contested:
                 # a lone "no" on a clear site: ask again next round (the cascade's lone-"no" rule)
                 self._say(4, f"site {choice.index} contested: {decision.rationale[:110]}")
@@ -393,7 +393,9 @@ class Recovery:
         )
         return ranking
 
-    async def _confirm(self, check: Any, frame: Any, target: tuple[float, float, float]) -> Decision:
+    async def _confirm(
+        self, check: Any, frame: Any, target: tuple[float, float, float], choice: Candidate
+    ) -> Decision:
         """Reasoner and geometric veto on a close-up of the site (the cascade arbitrates)."""
         image = frame.image_rgb
         if image is None:
@@ -415,6 +417,7 @@ class Recovery:
                     check if check.points > 0 else None,
                     critical=self.criticality == Criticality.CRITICAL,
                     site_ne_m=(target[0], target[1]),
+                    site_up_m=choice.height_above_m if math.isfinite(choice.height_above_m) else None,
                 )
             )
         self.record.record_event(

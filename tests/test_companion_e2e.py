@@ -185,7 +185,7 @@ description = "one vast gable roof pitched about 25 deg: no flat surface anywher
 extent = { north = [-250.0, 250.0], east = [-250.0, 250.0] }
 resolution_m = 0.5
 ground = "soil"
-launch = { north = 0.0, east = 20.0, height_m = 100.0, yaw_deg = 0.0 }
+launch = { north = 0.0, east = 20.0, height_m = 70.0, yaw_deg = 0.0 }
 
 [[buildings]]
 id = "gable"
@@ -202,8 +202,8 @@ def test_nothing_flat_explores_then_lands_when_the_budget_runs_out(
 ) -> None:
     scenario = tmp_path / "nothing_flat.toml"
     scenario.write_text(PITCHED_WORLD)
-    env = {"LANDFALL_RECOVERY_EXPLORE_MAX_ALT_M": "120"}  # room for one 15 m climb from 100 m
-    rig = start_rig(["--scenario", str(scenario), "--autopilot", "ardupilot", "--speed", "8"], env=env)
+    # 70 m up: room for one 15 m climb below the 90 m ceiling (recovery.explore_max_alt_m), then outward
+    rig = start_rig(["--scenario", str(scenario), "--autopilot", "ardupilot", "--speed", "8"])
     _wait_for_companion(rig)
     out = rig.alarm_accepted("--reason", "storm", "--criticality", "critical")
     assert out.returncode == 0, out.stdout + out.stderr

@@ -66,7 +66,7 @@ def test_load_config_defaults_match_the_brief() -> None:
         0.5,
         0.3,
     )
-    assert (r.move_timeout_s, r.explore_climb_m, r.explore_max_alt_m) == (60.0, 15.0, 150.0)
+    assert (r.move_timeout_s, r.explore_climb_m, r.explore_max_alt_m) == (60.0, 15.0, 90.0)
     pc = cfg.perception
     assert (pc.depth, pc.depth_model, pc.cell_px, pc.window_cells) == ("lidar", None, 4, 5)
     assert (pc.max_slope_deg, pc.max_roughness_m, pc.min_area_m2, pc.edge_margin_m, pc.max_candidates) == (

@@ -453,3 +453,24 @@ async def test_onboard_confirm_async_and_bad_image() -> None:
     assert decision.accept == ONBOARD.confirm_sync(ConfirmRequest(grey)).accept
     with pytest.raises(ValueError, match=r"\(height, width, 3\)"):
         ONBOARD.confirm_sync(ConfirmRequest(grey[..., 0]))
+
+
+@pytest.mark.parametrize("height_m", [10.0, 30.0, 60.0])
+@pytest.mark.parametrize("weather", WEATHERS)
+def test_onboard_confirm_takes_a_measured_roof_for_a_tar_roof_not_a_road(
+    scene: LiveWorld, city: LiveWorld, height_m: float, weather: str
+) -> None:
+    """A clear tar roof is dark, even asphalt to the image cues. Surface ID measured it 20 m above its
+    surroundings (``site_up_m``): no road runs there, so its asphalt look is no reason to refuse. An
+    elevated highway deck keeps its lane markings, which still veto."""
+    frame, check = close_up(scene, (70.0, -35.0), 20.0, height_m, weather)
+    assert share(frame, centre_window(frame, 0.15), [C.ROOF_FLAT]) == 1.0
+    cut = site_cut(scene, frame, height_m)
+    elevated = ONBOARD.confirm_sync(ConfirmRequest(cut, check, site_up_m=20.0))
+    assert elevated.accept, elevated.rationale
+    if height_m == 60.0 and weather == "clear":  # from high up the grain reads as a road's
+        assert not ONBOARD.confirm_sync(ConfirmRequest(cut, check)).accept
+        assert "a tar roof, not a road" in elevated.rationale
+    deck, deck_check = close_up(city, (0.0, -80.0), 9.0, height_m, weather)
+    deck_cut = site_cut(city, deck, height_m)
+    assert not ONBOARD.confirm_sync(ConfirmRequest(deck_cut, deck_check, site_up_m=9.0)).accept

@@ -90,6 +90,7 @@ class ConfirmRequest:
     check: SiteCheck | None = None
     critical: bool = False
     site_ne_m: tuple[float, float] | None = None  # where the site is, for the lone-"no" rule
+    site_up_m: float | None = None  # the site's height above its surroundings (Surface ID), if measured
     deadline: float | None = None
     transcript: list[dict[str, Any]] | None = field(default=None, compare=False)
 

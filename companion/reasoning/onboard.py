@@ -19,7 +19,9 @@ image centre, within the middle two thirds of a square close-up cut around the s
 sends, or the middle 30 % of a whole camera frame; ``ConfirmParams.site_window`` overrides). Descend only
 when the LiDAR check (when there is one) is clear and the image shows no veto on the site: water,
 vegetation, lane markings, more than ``max_raised`` raised objects (people, vehicles, clutter, or their
-shadows), pipes or rails, or a total hazard over ``max_hazard``.
+shadows), pipes or rails, or a total hazard over ``max_hazard``. When Surface ID measured the site
+``roof_height_m`` or more above its surroundings (``ConfirmRequest.site_up_m``), its asphalt look and
+road texture do not count: a dark, even tar roof looks like a road, but no road runs on a roof.
 ``critical=True`` relaxes two things a little and never water or lane markings: the total hazard limit
 rises from ``max_hazard`` to ``max_hazard_critical`` (flat patches, asphalt-like texture, busy edges),
 and when the LiDAR check is clear (nothing taller than 0.3 m inside the rotor disc) one raised object
@@ -215,14 +217,22 @@ class OnboardReasoner:
         if cues.raised_line_length > p.max_raised_lines:
             vetoes.append(cues.phrase("lines_raised"))
         limit = p.max_hazard_critical if relax else p.max_hazard
-        if not vetoes and cues.hazard > limit:
-            seen = ", ".join(cues.phrase(name) for name, _v in cues.terms[:3])
-            vetoes.append(f"hazard {cues.hazard:.1f} over {limit:.1f}: {seen}")
+        # A surface measured well above its surroundings is a roof: a dark, even tar roof looks like
+        # asphalt, but no road runs there. (Lane markings still veto: an elevated highway deck.)
+        elevated = request.site_up_m is not None and request.site_up_m >= self.weights.roof_height_m
+        street = ("asphalt", "road_texture") if elevated else ()
+        terms = [(name, v) for name, v in cues.terms if name not in street]
+        hazard = sum(v for _name, v in terms)
+        if not vetoes and hazard > limit:
+            seen = ", ".join(cues.phrase(name) for name, _v in terms[:3])
+            vetoes.append(f"hazard {hazard:.1f} over {limit:.1f}: {seen}")
         accept = not vetoes
         if accept:
             why = f"site clear: {_geometry_phrase(check)}; image: {', '.join(cues.observations()[:3])}"
             if relax and cues.raised_blobs:
                 why += " (critical: one object in view tolerated, LiDAR finds the rotor disc clear)"
+            if elevated and any(name in street for name, _v in cues.terms):
+                why += f" (dark asphalt-like surface {request.site_up_m:.0f} m up: a tar roof, not a road)"
         else:
             why = "rejected: " + "; ".join(vetoes)
             if check is None:
