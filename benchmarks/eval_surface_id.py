@@ -22,7 +22,7 @@ import statistics
 import sys
 from pathlib import Path
 
-from landfall_eval.modules import STUDY_JACCARD as STUDY
+from landfall_eval.study import STUDY_JACCARD as STUDY
 from landfall_eval.surfaces import best_jaccard, launch_frame
 
 GOAL = 0.90

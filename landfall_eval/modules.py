@@ -54,6 +54,7 @@ from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequ
 from companion.reasoning.cascade import Cascade
 from companion.reasoning.tiers import build_cascade
 from companion.recovery import RecoveryParams, site_closeup
+from landfall_eval.study import STUDY_JACCARD, STUDY_LANDING_DISTANCE_M
 from landfall_eval.surfaces import (
     LaunchFrame,
     best_jaccard,
@@ -74,8 +75,6 @@ from simbridge.world.world import SafeZone
 
 __all__ = [
     "CONTEXTS",
-    "STUDY_JACCARD",
-    "STUDY_LANDING_M",
     "FlightError",
     "Roofs",
     "fly_and_land",
@@ -86,8 +85,6 @@ __all__ = [
 ]
 
 CONTEXTS = ("crop", "pad20", "pad30", "pad40", "full")
-STUDY_JACCARD = {"scenario1": 0.871, "scenario2": 0.596}
-STUDY_LANDING_M = {"scenario1": 0.80, "scenario2": 1.15}
 CLOSEUP_HEIGHT_M = 30.0  # the confirm close-ups are taken this far above the roof
 STREAM_EVERY_STEPS = 6  # the companion streams setpoints at 20 Hz; physics runs at 120 Hz
 ENGAGE_STREAM_S = 1.2  # PX4 accepts OFFBOARD after about 1 s of setpoints (companion.control.engage)
@@ -432,7 +429,7 @@ def _summary(its: Sequence[Iteration], scenario: str, contexts: Sequence[str]) -
         "max_m": round(max(dist), 3) if dist else None,
         "ipm_error_mean_m": _mean(ipm),
         "iterations": len(dist),
-        "study": STUDY_LANDING_M.get(scenario),
+        "study": STUDY_LANDING_DISTANCE_M.get(scenario),
         "failures": [it.landing.failure for it in its if it.landing.failure is not None],
     }
     n = len(its)

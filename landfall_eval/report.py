@@ -29,7 +29,15 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from landfall_eval.basemap import CLASS_LABEL, CLASS_RGB, BaseMap, basemap
+from landfall_eval.grading import SURFACES
 from landfall_eval.rationales import Clusters, EmbeddingsUnavailable, cluster_rationales
+from landfall_eval.study import (
+    STUDY_JACCARD,
+    STUDY_LANDING_DISTANCE_M,
+    STUDY_PEAK_RSS_MB,
+    STUDY_ROUNDS_PER_SAFE,
+    STUDY_SAFE_RATE,
+)
 from simbridge.world.model import SurfaceClass
 
 if TYPE_CHECKING:
@@ -37,17 +45,6 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 log = logging.getLogger(__name__)
-
-SURFACE_CLASSES = (
-    "rooftop_clear", "rooftop_obstructed", "road", "highway", "sidewalk", "parking", "park", "water",
-    "pier", "ground", "no_landing",
-)  # fmt: skip
-# The reference study's figures, shown beside ours.
-STUDY_SAFE_RATE = 0.75  # city-wide, its best model
-STUDY_ROUNDS_PER_SAFE = 2.2
-STUDY_JACCARD = {"scenario1": 0.871, "scenario2": 0.596}
-STUDY_LANDING_DISTANCE_M = {"scenario1": 0.80, "scenario2": 1.15}
-STUDY_PEAK_RSS_MB = 716.0
 
 VERDICT_COLOUR = {"safe": "#12a150", "unsafe": "#e02424", "none": "#6b7280"}
 VERDICT_LABEL = {"safe": "safe landing", "unsafe": "unsafe landing", "none": "no landing / timeout / error"}
@@ -661,7 +658,7 @@ def _surface_figure(eps: list[_Episode], path: Path) -> None:
     groups: dict[tuple[str, str], list[_Episode]] = defaultdict(list)
     for e in eps:
         groups[e.group].append(e)
-    classes = list(SURFACE_CLASSES) + sorted({e.surface for e in eps} - set(SURFACE_CLASSES))
+    classes = list(SURFACES) + sorted({e.surface for e in eps} - set(SURFACES))
     fig = _figure(11.0, 4.8)
     ax = fig.add_subplot()
     x = np.arange(len(classes))

@@ -41,7 +41,9 @@ class SimProcess:
     def events(self, name: str | None = None) -> list[dict[str, object]]:
         if not self.episode_log.exists():
             return []
-        rows = [json.loads(line) for line in self.episode_log.read_text().splitlines() if line.strip()]
+        text = self.episode_log.read_text()
+        complete = text[: text.rfind("\n") + 1]  # simbridge may be writing the last line right now
+        rows = [json.loads(line) for line in complete.splitlines() if line.strip()]
         return [r for r in rows if name is None or r.get("event") == name]
 
     def stop(self) -> int:
