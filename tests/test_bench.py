@@ -154,6 +154,13 @@ def bench(*args: str, timeout: float = 600) -> subprocess.CompletedProcess[str]:
     )  # fmt: skip
 
 
+def _log_tail(path: Path, lines: int = 60) -> str:
+    """The end of an episode's companion log, for a failure message (CI keeps nothing else)."""
+    if not path.exists():
+        return f"({path} missing)"
+    return "\n".join(path.read_text(errors="replace").splitlines()[-lines:])
+
+
 @pytest.mark.slow
 def test_curated_run_writes_results_and_report_then_resumes(tmp_path: Path) -> None:
     out = tmp_path / "bench"
@@ -169,9 +176,10 @@ def test_curated_run_writes_results_and_report_then_resumes(tmp_path: Path) -> N
     ]
     for e in episodes:
         assert set(e) >= EPISODE_KEYS, EPISODE_KEYS - set(e)
-        assert e["outcome"] == "landed"
+        why = f"{e['error']}\n{_log_tail(out / 'episodes' / e['id'] / 'companion.log')}"
+        assert e["outcome"] == "landed", why
         assert e["error"] is None
-        assert e["surface"] == "rooftop_clear", e["reasons"]  # the gravel roof
+        assert e["surface"] == "rooftop_clear", why  # the gravel roof
         assert e["safe"], e["reasons"]
         assert e["rounds"] >= 1
         assert e["calls"]
@@ -219,7 +227,9 @@ def test_city_episode_starts_at_its_halton_point(tmp_path: Path) -> None:
     assert e["kind"] == "city"
     assert e["launch_index"] == 3
     assert math.dist(e["launch_ned_m"][:2], (launch.north_m, launch.east_m)) < 2.0
-    assert e["outcome"] == "landed"
+    assert e["outcome"] == "landed", (
+        f"{e['error']}\n{_log_tail(out / 'episodes' / e['id'] / 'companion.log')}"
+    )
     assert e["surface"] in SURFACES
     assert e["surface"] != "no_landing"
     assert isinstance(e["safe"], bool)
