@@ -87,6 +87,7 @@ class VehicleController:
         self._mode_set_at = 0.0
         self.takeover: OperatorTakeover | None = None
         self.failsafe: AutopilotFailsafe | None = None
+        self.longest_stream_gap_s = 0.0  # wall seconds between two setpoints: the event loop's health
 
     # ------------------------------------------------------------------ basics
     @property
@@ -165,10 +166,14 @@ class VehicleController:
 
     async def _stream(self) -> None:
         period = 1.0 / STREAM_HZ
+        last = time.monotonic()
         while True:
             self._check_takeover()
             self._send_target()
             await asyncio.sleep(period)
+            now = time.monotonic()
+            self.longest_stream_gap_s = max(self.longest_stream_gap_s, now - last)
+            last = now
 
     def _check_takeover(self) -> None:
         if self._engaged_mode is None or self.takeover is not None or self.failsafe is not None:

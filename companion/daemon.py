@@ -15,7 +15,7 @@ from companion.control import VehicleController
 from companion.reasoning.base import Reasoner
 from companion.reasoning.cascade import Cascade
 from companion.reasoning.onboard import OnboardReasoner
-from companion.recovery import Outcome, Record, Recovery, RecoveryParams
+from companion.recovery import FrameUnavailable, Outcome, Record, Recovery, RecoveryParams
 from companion.telemetry import TelemetryCache
 from simbridge.link import MavlinkUdpLink
 
@@ -37,6 +37,7 @@ class Companion:
         signing_key: bytes | None = None,
         sensors: tuple[str, int] | None = None,
         frame_timeout_s: float = 10.0,
+        max_frame_age_s: float = 2.0,
         reasoner: Reasoner | None = None,
         params: RecoveryParams | None = None,
         record: Record | None = None,
@@ -64,6 +65,7 @@ class Companion:
         self.record = record
         self._sensors = sensors
         self._frame_timeout_s = frame_timeout_s
+        self._max_frame_age_s = max_frame_age_s
         self._watch_battery_pct = watch_battery_pct
         self._watch_failsafe = watch_failsafe_text
         self._watch_gps = watch_gps
@@ -163,14 +165,38 @@ class Companion:
         self.outcomes.append(outcome)
         if self.record is not None:
             self.record.record_event(
-                "outcome", {"state": outcome.state.value, "rounds": outcome.rounds, "reason": outcome.reason}
+                "outcome",
+                {
+                    "state": outcome.state.value,
+                    "rounds": outcome.rounds,
+                    "reason": outcome.reason,
+                    "longest_setpoint_gap_s": round(self.ctl.longest_stream_gap_s, 3),
+                },
             )
         self.log.info(
-            "recovery ended: %s after %d rounds (%s)", outcome.state.value, outcome.rounds, outcome.reason
+            "recovery ended: %s after %d rounds (%s); longest setpoint gap %.0f ms",
+            outcome.state.value,
+            outcome.rounds,
+            outcome.reason,
+            1000 * self.ctl.longest_stream_gap_s,
         )
 
     async def _frame(self) -> Any:
-        return await self._client.frame(want=("image", "lidar"), image_encoding="raw")
+        """A fresh frame for the recovery, or ``FrameUnavailable`` saying why there is none."""
+        from simbridge.sensorstream import SensorStreamError
+
+        if self._client is None:
+            raise FrameUnavailable("sensor stream not connected")
+        try:
+            frame = await self._client.frame(want=("image", "lidar"), image_encoding="raw")
+        except SensorStreamError as exc:
+            raise FrameUnavailable(str(exc)) from exc
+        age_s = self.tm.state.t_boot_s - frame.time_boot_ms / 1000.0
+        if age_s > self._max_frame_age_s:
+            raise FrameUnavailable(
+                f"frame captured {age_s:.1f} s ago (sensors.max_frame_age_s {self._max_frame_age_s:g})"
+            )
+        return frame
 
     # ------------------------------------------------------------------ MAVLink out
     def announce(self, severity: int, text: str) -> None:

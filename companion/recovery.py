@@ -11,8 +11,10 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import enum
+import itertools
 import logging
 import math
+import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -37,6 +39,16 @@ from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequ
 from companion.telemetry import TelemetryCache
 
 MAX_REENGAGE = 2
+SENSOR_RETRY_S = 1.0  # between two asks for a frame after one failed
+
+
+class FrameUnavailable(Exception):
+    """No usable sensor frame this time (timed out, disconnected, too old): the round holds and asks
+    again. What a ``FrameSource`` raises; anything else it raises is a defect and ends the recovery."""
+
+
+class SensorsLost(Exception):
+    """No usable frame for ``sensor_loss_s``: the recovery lands without its sensors."""
 
 
 class State(enum.Enum):
@@ -72,6 +84,7 @@ class RecoveryParams:
     context: str = "crop"  # what the reasoner sees per candidate: crop, pad20..pad60, or full (+ frame)
     closeup_half_m: float = 6.0  # the confirmation close-up shows this far around the site
     land_timeout_s: float = 120.0
+    sensor_loss_s: float = 30.0  # wall seconds without a usable frame before landing without sensors
 
 
 class Record(Protocol):
@@ -102,7 +115,7 @@ class Outcome:
     reason: str
 
 
-FrameSource = Callable[[], Awaitable[Any]]  # -> simbridge.sensorstream.SensorFrame-like
+FrameSource = Callable[[], Awaitable[Any]]  # -> SensorFrame-like; raises FrameUnavailable
 
 
 class Recovery:
@@ -172,9 +185,14 @@ class Recovery:
                     self._say(4, f"{exc}: re-engaging")
                     await self.ctl.engage()
                     continue
+                except SensorsLost as exc:
+                    # policy: no sensors, no new site; the alarm still stands, so come down: at the
+                    # best site measured so far (flown to on the autopilot's position hold), else here
+                    self._say(3, f"{exc}: landing without them")
+                    return await self._land_at_best("sensors lost")
                 if landed:
                     return Outcome(State.LANDED, self.round, self._site_ned(), "landed")
-            return await self._land_at_best()
+            return await self._land_at_best("round budget spent")
         except OperatorTakeover as exc:
             self._set(State.ABORTED)
             self._say(4, "operator took over: stopped commanding")
@@ -190,8 +208,25 @@ class Recovery:
         return self.best.ned_m if self.best is not None else None
 
     async def _acquire(self) -> Any:
+        """A frame; while none comes, the vehicle holds on its current setpoint and the request is
+        repeated every ``SENSOR_RETRY_S``, each failure recorded. Raises ``SensorsLost`` after
+        ``sensor_loss_s`` without one."""
         self._set(State.ACQUIRE)
-        return await self._frames()
+        since = time.monotonic()
+        for attempt in itertools.count():
+            try:
+                return await self._frames()
+            except FrameUnavailable as exc:
+                waited = time.monotonic() - since
+                self.record.record_event(
+                    "sensor_fault", {"round": self.round, "error": str(exc), "waited_s": round(waited, 2)}
+                )
+                if waited >= self.p.sensor_loss_s:
+                    raise SensorsLost(f"no usable sensor frame for {waited:.0f} s ({exc})") from exc
+                if attempt == 0:
+                    self._say(4, f"no sensor frame ({exc}): holding, asking again")
+                await asyncio.sleep(SENSOR_RETRY_S)
+        raise AssertionError("unreachable")
 
     async def _round(self) -> bool:
         frame = await self._acquire()
@@ -199,8 +234,8 @@ class Recovery:
         camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
         candidates = await asyncio.to_thread(self._surface_id, frame, camera)
         candidates = [c for c in candidates if not self._near_rejected(c)]
-        if frame.image_rgb is not None:
-            self.record.save_image(f"round{self.round:02d}-acquire", frame.image_rgb)
+        if frame.image_rgb is not None:  # JPEG encoding off the event loop: the setpoint stream runs there
+            await asyncio.to_thread(self.record.save_image, f"round{self.round:02d}-acquire", frame.image_rgb)
         if not candidates or all(c.fallback for c in candidates):
             await self._explore(blind=_lidar_silent(frame.lidar_frd))
             return False
@@ -286,13 +321,13 @@ class Recovery:
         self._say(5, "landed")
         return True
 
-    async def _land_at_best(self) -> Outcome:
+    async def _land_at_best(self, reason: str) -> Outcome:
         if self.best is None:
             n, e, _ = self.tm.state.pos_ned_m
-            self._say(4, "round budget spent with no site: landing here")
+            self._say(4, f"{reason} with no site: landing here")
         else:
             n, e, _ = self.best.ned_m
-            self._say(4, f"round budget spent: landing at the best site seen, {self.best.candidate.index}")
+            self._say(4, f"{reason}: landing at the best site seen, {self.best.candidate.index}")
             _, _, d = self.tm.state.pos_ned_m
             try:
                 await self.ctl.goto(
@@ -306,7 +341,7 @@ class Recovery:
             except TargetTimeout:
                 self._say(4, "best site not reached: landing here")
         await self._land()
-        return Outcome(State.LANDED, self.round, self._site_ned(), "round budget spent")
+        return Outcome(State.LANDED, self.round, self._site_ned(), reason)
 
     async def _explore(self, blind: bool = False) -> None:
         """Nothing survived screening: climb for a wider view, then step outward on a spiral.
@@ -366,10 +401,7 @@ class Recovery:
                 0.0,
             )
         else:
-            crops, cores = rank_crops(image, [c.box_px for c in candidates], self.p.context)
-            for k, c in enumerate(crops):
-                path = self.record.save_image(f"round{self.round:02d}-rank-crop{k}", c)
-                names.append(str(getattr(path, "name", path)) if path is not None else "")
+            crops, cores, names = await asyncio.to_thread(self._rank_crops, image, candidates)
             request = RankRequest(
                 crops,
                 None if all(c.fallback for c in candidates) else tuple(candidates),
@@ -408,9 +440,7 @@ class Recovery:
             )
             closeup_name = ""
         else:
-            closeup = self._closeup(image, frame, target)
-            path = self.record.save_image(f"round{self.round:02d}-confirm", closeup)
-            closeup_name = str(getattr(path, "name", path)) if path is not None else ""
+            closeup, closeup_name = await asyncio.to_thread(self._closeup_saved, image, frame, target)
             decision = await self.reasoner.confirm(
                 ConfirmRequest(
                     closeup,
@@ -440,6 +470,25 @@ class Recovery:
             },
         )
         return decision
+
+    def _rank_crops(
+        self, image: Any, candidates: list[Candidate]
+    ) -> tuple[tuple[Any, ...], tuple[tuple[int, int, int, int], ...], list[str]]:
+        """The crops the reasoner ranks (and their cores), saved to the record: a worker-thread job."""
+        crops, cores = rank_crops(image, [c.box_px for c in candidates], self.p.context)
+        names = [
+            self._saved_name(self.record.save_image(f"round{self.round:02d}-rank-crop{k}", c))
+            for k, c in enumerate(crops)
+        ]
+        return crops, cores, names
+
+    def _closeup_saved(self, image: Any, frame: Any, target: tuple[float, float, float]) -> tuple[Any, str]:
+        closeup = self._closeup(image, frame, target)
+        return closeup, self._saved_name(self.record.save_image(f"round{self.round:02d}-confirm", closeup))
+
+    @staticmethod
+    def _saved_name(path: Any) -> str:
+        return str(getattr(path, "name", path)) if path is not None else ""
 
     def _closeup(self, image: Any, frame: Any, target: tuple[float, float, float]) -> Any:
         camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)

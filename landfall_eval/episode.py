@@ -207,7 +207,12 @@ def run_episode(
     ]  # fmt: skip
     if config_path is not None:
         comp_cmd += ["--config", str(config_path)]
-    env = dict(os.environ, LANDFALL_REASONER_CONTEXT=spec.context)
+    env = dict(
+        os.environ,
+        LANDFALL_REASONER_CONTEXT=spec.context,
+        # a frame's age is counted in simulated seconds: at speed s, 2 s of wall-clock tolerance
+        LANDFALL_SENSORS_MAX_FRAME_AGE_S=str(2.0 * times.speed),
+    )
     entry: dict[str, Any] = {
         "id": spec.id,
         "kind": spec.kind,

@@ -7,6 +7,7 @@ import asyncio
 import contextlib
 import logging
 import signal
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -145,11 +146,32 @@ class SimBridge:
             with contextlib.suppress(NotImplementedError, RuntimeError):  # not the main thread
                 loop.add_signal_handler(sig, self._stop.set)
         cfg = self.config
+        if cfg.sensors is not None:
+            self._warm_up_sensors()
         async with contextlib.AsyncExitStack() as stack:
             await stack.enter_async_context(self.link)
             if cfg.sensors is not None:
                 await stack.enter_async_context(self._sensor_server(*cfg.sensors))
             await self._loop(loop)
+
+    def _warm_up_sensors(self) -> None:
+        """Render one camera frame and one sweep before the link opens. The ray caster and the shader
+        are compiled on first use (numba; about 10 s on one core with no cache, seconds more on a busy
+        computer), and that compilation holds the interpreter: done mid-flight, it would stall the
+        physics, the telemetry and the first frame a companion asks for. Afterwards they load from
+        numba's cache. Its own random generator: the sensor noise stream stays as seeded."""
+        from simbridge.world.live import LiveWorld
+
+        world = self.scenario.terrain
+        if not isinstance(world, LiveWorld):
+            return
+        t0 = time.perf_counter()
+        s = self.vehicle.state
+        rng = np.random.default_rng(0)
+        world.camera_frame(s.pos_ned_m, s.quat, s.t_s, self.config.weather, rng)
+        world.lidar_sweep(s.pos_ned_m, s.quat, s.t_s, rng)
+        world.rangefinder_m(s.pos_ned_m, s.quat)
+        self.log.info("sensors ready (%.1f s to warm up the renderer)", time.perf_counter() - t0)
 
     def _sensor_server(self, host: str, port: int) -> contextlib.AbstractAsyncContextManager[object]:
         from simbridge.sensorstream import SensorStreamServer

@@ -148,18 +148,25 @@ def start_rig(start_sim: Callable[..., SimProcess], tmp_path: Path) -> Iterator[
     procs: list[subprocess.Popen[bytes]] = []
 
     def start(
-        sim_args: list[str], companion_args: list[str] | None = None, env: dict[str, str] | None = None
+        sim_args: list[str],
+        companion_args: list[str] | None = None,
+        env: dict[str, str] | None = None,
+        sensors_via: Callable[[int], int] | None = None,
     ) -> Rig:
+        """``sensors_via(port)``: the port the companion should use for simbridge's sensor ``port``
+        (a relay's)."""
         port = free_udp_port()
         sensors = free_tcp_port()
         sim = start_sim(*sim_args, "--sensors", f"127.0.0.1:{sensors}", port=port)
         log = tmp_path / f"companion-{len(procs)}.log"
+        to = sensors_via(sensors) if sensors_via is not None else sensors
         cmd = [sys.executable, "-m", "companion", "--mavlink", f"udp:{port}", "--sensors",
-               f"127.0.0.1:{sensors}", *(companion_args or [])]  # fmt: skip
+               f"127.0.0.1:{to}", *(companion_args or [])]  # fmt: skip
+        speed = float(sim_args[sim_args.index("--speed") + 1]) if "--speed" in sim_args else 1.0
+        # frame age is measured in simulated seconds: the same wall-clock tolerance at any speed
+        env = {"LANDFALL_SENSORS_MAX_FRAME_AGE_S": str(2.0 * speed), **(env or {})}
         with log.open("wb") as fh:
-            proc = subprocess.Popen(
-                cmd, stdout=fh, stderr=subprocess.STDOUT, env={**os.environ, **(env or {})}
-            )
+            proc = subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT, env={**os.environ, **env})
         procs.append(proc)
         return Rig(sim, proc, port, log)
 

@@ -4,6 +4,7 @@ trigger_alarm.py, and the verdict from simbridge's ground truth (its episode log
 from __future__ import annotations
 
 import json
+import math
 import re
 import time
 from collections.abc import Callable
@@ -290,3 +291,76 @@ def test_an_lvlm_tier_flies_the_loop_and_a_lone_no_is_overridden(
     assert any(c["accept"] and "accepted over 2 lone no" in c["rationale"] for c in confirms)
     ranks = [e for e in events if e["kind"] == "rank"]
     assert all(r["tier"] == "edge" and r["images"] for r in ranks)
+
+
+def _events(record: Path) -> list[dict[str, object]]:
+    (events_file,) = record.glob("*/events.jsonl")
+    return [json.loads(line) for line in events_file.read_text().splitlines()]
+
+
+def test_a_cut_sensor_stream_holds_then_lands_at_the_best_site_measured(
+    start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """The sensor stream dies once the first site is chosen (a relay between the companion and
+    simbridge drops every connection and accepts none). The vehicle holds while the companion asks
+    again every second; after recovery.sensor_loss_s it flies to the site it measured and lands
+    there: the clear roof."""
+    from tests.relay import TcpRelay
+
+    relays: list[TcpRelay] = []
+
+    def via(port: int) -> int:
+        relays.append(TcpRelay(port))
+        return relays[-1].port
+
+    record = tmp_path / "record"
+    env = {"LANDFALL_RECOVERY_SENSOR_LOSS_S": "6", "LANDFALL_SENSORS_FRAME_TIMEOUT_S": "2"}
+    try:
+        rig = start_rig(
+            ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "4"],
+            ["--record", str(record)],
+            env=env,
+            sensors_via=via,
+        )
+        _wait_for_companion(rig)
+        out = rig.alarm_accepted("--reason", "camera driver crashed", "--criticality", "high")
+        assert out.returncode == 0, out.stdout + out.stderr
+        rig.wait_log("site 0 roof")
+        relays[0].cut()
+        td = _wait_touchdown(rig, timeout_s=200)
+    finally:
+        for r in relays:
+            r.close()
+    assert td["surface"] == "rooftop_clear", (td, rig.log_text()[-2000:])
+    assert td["safe"] is True
+    log = rig.wait_log("recovery ended", timeout_s=60)
+    assert "no sensor frame (" in log
+    assert "sensors lost: landing at the best site seen, 0" in log
+    assert "recovery ended: landed after 1 rounds (sensors lost)" in log
+    faults = [e for e in _events(record) if e["kind"] == "sensor_fault"]
+    assert len(faults) >= 2  # one per failed ask, each with its reason
+    assert all(isinstance(f["error"], str) and f["error"] for f in faults)
+
+
+def test_stale_frames_are_discarded_and_a_vehicle_with_no_fresh_frame_lands_where_it_is(
+    start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """Every frame arrives older than sensors.max_frame_age_s (set to 10 ms, less than any frame's
+    trip): none is used; after recovery.sensor_loss_s the vehicle lands where it is, having measured
+    no site."""
+    record = tmp_path / "record"
+    env = {"LANDFALL_SENSORS_MAX_FRAME_AGE_S": "0.01", "LANDFALL_RECOVERY_SENSOR_LOSS_S": "3"}
+    rig = start_rig(["--scenario", "scenario1", "--speed", "4"], ["--record", str(record)], env=env)
+    _wait_for_companion(rig)
+    out = rig.alarm_accepted("--reason", "sensor failure", "--criticality", "high")
+    assert out.returncode == 0, out.stdout + out.stderr
+    td = _wait_touchdown(rig, timeout_s=200)
+    log = rig.wait_log("recovery ended", timeout_s=60)
+    assert "no sensor frame (frame captured" in log
+    assert "sensors lost with no site: landing here" in log
+    assert "recovery ended: landed after 1 rounds (sensors lost)" in log
+    n, e, _ = td["pos_ned_m"]  # type: ignore[misc]
+    assert math.hypot(n, e) < 3  # where the alarm found it (the launch point)
+    events = _events(record)
+    assert not [ev for ev in events if ev["kind"] == "rank"]  # nothing was judged on a stale frame
+    assert any(ev["kind"] == "sensor_fault" and "captured" in str(ev["error"]) for ev in events)
