@@ -4,7 +4,7 @@ PYTHON ?= python3
 STAMP := $(VENV)/.installed
 DEPTH_STAMP := $(VENV)/.installed-depth
 
-.PHONY: demo test lint bench clean
+.PHONY: demo test lint bench clean mosquitto
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -23,7 +23,16 @@ $(DEPTH_STAMP): $(STAMP)
 demo: $(STAMP)
 	$(VENV)/bin/python -m companion.demo
 
-test: $(DEPTH_STAMP)
+# The MQTT tests talk to a real broker: mosquitto from Debian's packages (installed when missing and
+# we are root; otherwise say how).
+mosquitto:
+	@command -v mosquitto >/dev/null || test -x /usr/sbin/mosquitto || \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	    (apt-get install -y -q mosquitto >/dev/null 2>&1 || \
+	     (apt-get update -q >/dev/null && apt-get install -y -q mosquitto >/dev/null)); \
+	  else echo "the MQTT tests need mosquitto: sudo apt-get install mosquitto" >&2; exit 1; fi
+
+test: $(DEPTH_STAMP) mosquitto
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/mypy
 	$(VENV)/bin/pytest

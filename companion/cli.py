@@ -16,6 +16,7 @@ from typing import Any
 from companion.alarms import Criticality
 from companion.config import CompanionConfig, ConfigError, load_config
 from companion.daemon import Companion
+from companion.ground import GroundFeed, GroundParams
 from companion.perception.depth import DepthError, DepthSource, make_source
 from companion.perception.surface_id import SurfaceParams
 from companion.reasoning.tiers import BUILTIN_PROFILES, ONBOARD, build_cascade
@@ -75,6 +76,28 @@ def _depth_source(cfg: CompanionConfig) -> DepthSource:
         raise ConfigError(f"perception.depth = {pc.depth!r}", str(exc)) from exc
 
 
+def _ground_feed(cfg: CompanionConfig) -> GroundFeed | None:
+    m = cfg.mqtt
+    if not m.enabled:
+        return None
+    return GroundFeed(
+        GroundParams(
+            host=m.host,
+            port=m.port,
+            username=m.username or None,
+            password=cfg.mqtt_password(os.environ),
+            tls=m.tls,
+            topic_prefix=m.topic_prefix,
+            vehicle_id=m.vehicle_id,
+            telemetry_hz=m.telemetry_hz,
+            queue_size=m.queue_size,
+            alarm_intake=m.alarm_intake,
+            keepalive_s=m.keepalive_s,
+            thumbnail_width_px=m.thumbnail_width_px,
+        )
+    )
+
+
 def build_companion(cfg: CompanionConfig) -> Companion:
     from simbridge.sensorstream import parse_endpoint
 
@@ -96,6 +119,7 @@ def build_companion(cfg: CompanionConfig) -> Companion:
         reasoner=reasoner,
         params=params_from(cfg),
         record=record,
+        ground=_ground_feed(cfg),
         watch_battery_pct=a.battery_critical_pct if a.watch_battery else None,
         watch_failsafe_text=a.watch_failsafe_text,
         watch_gps=a.watch_gps,

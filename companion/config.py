@@ -21,7 +21,8 @@ Errors are :class:`ConfigError` and name the option the way the user wrote it::
 
 Unknown options in the file, unknown ``LANDFALL_<SECTION>_*`` variables for a known section and unknown
 override keys are rejected with the allowed names listed. Variables named by a ``*_env`` option (the
-signing key's) are exempt, as is any ``LANDFALL_*`` name whose second word is not a section.
+signing key's and the MQTT password's) are exempt, as is any ``LANDFALL_*`` name whose second word is
+not a section.
 """
 
 from __future__ import annotations
@@ -302,6 +303,38 @@ class RecordConfig(_Section):
         return None if value == "" else value
 
 
+class MqttConfig(_Section):
+    """The ground-station feed (companion/ground.py): an MQTT broker the ground station also reads."""
+
+    enabled: bool = False
+    host: str = "127.0.0.1"
+    port: int = Field(default=1883, ge=1, le=65535)
+    username: str = ""
+    password_env: str = "LANDFALL_MQTT_PASSWORD"
+    tls: bool = False
+    topic_prefix: str = "landfall"
+    vehicle_id: str = "drone1"
+    telemetry_hz: float = Field(default=1.0, ge=0.1, le=10)
+    queue_size: int = Field(default=256, ge=1)
+    alarm_intake: bool = False
+    keepalive_s: int = Field(default=30, ge=5, le=3600)
+    thumbnail_width_px: int = Field(default=320, ge=32, le=1920)
+
+    @field_validator("topic_prefix", "vehicle_id")
+    @classmethod
+    def _topic_part(cls, text: str) -> str:
+        if not text or any(c in text for c in "+#\0") or text.startswith("/") or text.endswith("/"):
+            raise ValueError(f"must be a non-empty topic part without '+', '#' or outer '/' (got {text!r})")
+        return text
+
+    @field_validator("password_env")
+    @classmethod
+    def _check_env_name(cls, name: str) -> str:
+        if _ENV_NAME_RE.fullmatch(name) is None:
+            raise ValueError(f"must be an environment variable name (got {name!r})")
+        return name
+
+
 class LogConfig(_Section):
     level: str = "INFO"
 
@@ -323,12 +356,17 @@ class CompanionConfig(_Section):
     alarms: AlarmsConfig = AlarmsConfig()
     reasoner: ReasonerConfig = ReasonerConfig()
     record: RecordConfig = RecordConfig()
+    mqtt: MqttConfig = MqttConfig()
     log: LogConfig = LogConfig()
 
     def signing_key(self) -> bytes | None:
         """The 32-byte MAVLink 2 signing key, or ``None`` to run unsigned (validated at load)."""
         key = self.mavlink.signing_key
         return None if key is None else bytes.fromhex(key.get_secret_value())
+
+    def mqtt_password(self, env: Mapping[str, str]) -> str | None:
+        """The broker password from the variable named by ``mqtt.password_env`` (never from the file)."""
+        return env.get(self.mqtt.password_env) or None
 
     def rounds_for(self, criticality: Literal["low", "high", "critical"]) -> int:
         """Round budget for an alarm: the criticality's budget, capped by ``recovery.max_rounds``."""
@@ -636,8 +674,10 @@ def load_config(
         mavlink = merged.setdefault("mavlink", {})
         mavlink["signing_key"] = env[key_env]
         origins[("mavlink", "signing_key")] = _Origin("env", key_env, ("mavlink", "signing_key"))
+    mqtt = merged.get("mqtt", {})
+    password_env = mqtt.get("password_env", MqttConfig.model_fields["password_env"].default)
     for var in unknown_env:
-        if var != key_env:
+        if var not in (key_env, password_env):
             section = var[len(ENV_PREFIX) :].split("_", 1)[0].lower()
             model = _model_at((section,))
             allowed = ", ".join(env_var_name(f"{section}.{k}") for k in (model.model_fields if model else ()))

@@ -12,6 +12,7 @@ from typing import Any
 
 from companion.alarms import ALARM_TEXT_PREFIX, MAV_CMD_USER_1, Alarm, Criticality, ReasonCode
 from companion.control import VehicleController
+from companion.ground import GroundFeed, TeeRecord, telemetry_snapshot
 from companion.reasoning.base import Reasoner
 from companion.reasoning.cascade import Cascade
 from companion.reasoning.onboard import OnboardReasoner
@@ -41,6 +42,7 @@ class Companion:
         reasoner: Reasoner | None = None,
         params: RecoveryParams | None = None,
         record: Record | None = None,
+        ground: GroundFeed | None = None,
         watch_battery_pct: float | None = 15.0,
         watch_failsafe_text: bool = True,
         watch_gps: bool = True,
@@ -62,7 +64,11 @@ class Companion:
         self.ctl = VehicleController(self.tm, self.link.send_to, self.link.mav, logger=self.log)
         self.reasoner: Reasoner = reasoner or Cascade([], [], OnboardReasoner())
         self.params = params or RecoveryParams()
-        self.record = record
+        self.ground = ground
+        # the recovery's events go to the flight record and to the ground feed alike
+        self.record: Record | None = (
+            TeeRecord(record, ground) if record is not None and ground is not None else record or ground
+        )
         self._sensors = sensors
         self._frame_timeout_s = frame_timeout_s
         self._max_frame_age_s = max_frame_age_s
@@ -119,7 +125,14 @@ class Companion:
         self._ack(msg, self.raise_alarm(alarm))
 
     def raise_alarm(self, alarm: Alarm) -> int:
-        """Start a recovery (ACCEPTED), merge into the running one (IN_PROGRESS), or refuse."""
+        """Start a recovery (ACCEPTED), merge into the running one (IN_PROGRESS), or refuse; the
+        ground feed hears of each alarm and of what became of it."""
+        result = self._take_alarm(alarm)
+        if self.ground is not None:
+            self.ground.alarm(alarm, result)
+        return result
+
+    def _take_alarm(self, alarm: Alarm) -> int:
         if self._accept_from and alarm.source[0] not in self._accept_from and alarm.source != (0, 0):
             self.alarms_refused += 1
             self.log.warning("alarm from system %d refused: not in accept_from_system_ids", alarm.source[0])
@@ -274,6 +287,9 @@ class Companion:
             ]
             if self._sensors is not None:
                 tasks.append(asyncio.create_task(self._connect_sensors(stack, SensorClient), name="sensors"))
+            if self.ground is not None:
+                feed = self.ground.run(lambda: telemetry_snapshot(self.tm.state), self.raise_alarm)
+                tasks.append(asyncio.create_task(feed, name="ground-feed"))
             self.log.info("companion up on %s (component %d)", self.link.url, self.component_id)
             try:
                 await self._stop.wait()
@@ -298,3 +314,11 @@ class Companion:
                     st.rejected_bad_signature,
                     self.alarms_refused,
                 )
+                if self.ground is not None:
+                    g = self.ground
+                    self.log.info(
+                        "MQTT: %d messages published, %d dropped (queue full), %d unbuildable",
+                        g.published,
+                        g.dropped,
+                        g.failed,
+                    )

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import shutil
 import socket
 import subprocess
 import sys
@@ -195,3 +197,45 @@ def scene() -> LiveWorld:
 @pytest.fixture(scope="module")
 def launch(city: LiveWorld) -> dict[str, Frame]:
     return {weather: render(city, LAUNCH, weather) for weather in WEATHERS}
+
+
+# A real MQTT broker (mosquitto, from Debian's packages; .ci/run installs it when missing).
+class Broker:
+    def __init__(self, tmp: Path, port: int | None = None) -> None:
+        exe = shutil.which("mosquitto") or next(
+            (p for p in ("/usr/sbin/mosquitto", "/usr/local/sbin/mosquitto") if Path(p).exists()), None
+        )
+        if exe is None:
+            pytest.fail("mosquitto is not installed: apt-get install mosquitto (.ci/run does it)")
+        self.port = port or free_tcp_port()
+        conf = tmp / f"mosquitto-{self.port}.conf"
+        conf.write_text(f"listener {self.port} 127.0.0.1\nallow_anonymous true\npersistence false\n")
+        self.log = tmp / f"mosquitto-{self.port}.log"
+        with self.log.open("wb") as fh:
+            self.proc = subprocess.Popen([exe, "-c", str(conf)], stdout=fh, stderr=subprocess.STDOUT)
+        deadline = time.monotonic() + 10
+        while True:  # until it accepts connections
+            with contextlib.suppress(OSError), socket.create_connection(("127.0.0.1", self.port), 0.5):
+                break
+            if self.proc.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError(f"mosquitto did not start: {self.log.read_text()}")
+            time.sleep(0.05)
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            self.proc.wait(timeout=10)
+
+
+@pytest.fixture
+def broker(tmp_path: Path) -> Iterator[Callable[..., Broker]]:
+    """Start mosquitto brokers on loopback (a fresh port, or the one given); stopped after the test."""
+    started: list[Broker] = []
+
+    def start(port: int | None = None) -> Broker:
+        started.append(Broker(tmp_path, port))
+        return started[-1]
+
+    yield start
+    for b in started:
+        b.stop()
