@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Annotated, Any, Literal, get_args, get_origin
 
 from pydantic import (
+    AfterValidator,
     BaseModel,
     ConfigDict,
     Field,
@@ -109,13 +110,22 @@ def _host_port(text: str) -> str:
     return text
 
 
+def _env_name(name: str) -> str:
+    if _ENV_NAME_RE.fullmatch(name) is None:
+        raise ValueError(f"must be an environment variable name (got {name!r})")
+    return name
+
+
+EnvName = Annotated[str, AfterValidator(_env_name)]  # the name of a variable that holds a secret
+
+
 class MavlinkConfig(_Section):
     """The MAVLink endpoint and our identity on it."""
 
     url: str = "udp:14550"
     component_id: int = Field(default=191, ge=1, le=255)
     vehicle_system_id: int = Field(default=0, ge=0, le=255)  # 0: learn from the first autopilot heartbeat
-    signing_key_env: str = "LANDFALL_SIGNING_KEY"
+    signing_key_env: EnvName = "LANDFALL_SIGNING_KEY"
     signing_key: SecretStr | None = None  # hex text; resolved from signing_key_env when that is set
     heartbeat_hz: float = Field(default=1.0, gt=0, le=50)
 
@@ -130,12 +140,6 @@ class MavlinkConfig(_Section):
             raise ValueError(f"port must be in 1..65535 (got {url!r})")
         return url
 
-    @field_validator("signing_key_env")
-    @classmethod
-    def _check_env_name(cls, name: str) -> str:
-        if _ENV_NAME_RE.fullmatch(name) is None:
-            raise ValueError(f"must be an environment variable name (got {name!r})")
-        return name
 
     @field_validator("signing_key")
     @classmethod
@@ -310,7 +314,7 @@ class MqttConfig(_Section):
     host: str = "127.0.0.1"
     port: int = Field(default=1883, ge=1, le=65535)
     username: str = ""
-    password_env: str = "LANDFALL_MQTT_PASSWORD"
+    password_env: EnvName = "LANDFALL_MQTT_PASSWORD"
     tls: bool = False
     topic_prefix: str = "landfall"
     vehicle_id: str = "drone1"
@@ -327,12 +331,6 @@ class MqttConfig(_Section):
             raise ValueError(f"must be a non-empty topic part without '+', '#' or outer '/' (got {text!r})")
         return text
 
-    @field_validator("password_env")
-    @classmethod
-    def _check_env_name(cls, name: str) -> str:
-        if _ENV_NAME_RE.fullmatch(name) is None:
-            raise ValueError(f"must be an environment variable name (got {name!r})")
-        return name
 
 
 class LogConfig(_Section):
