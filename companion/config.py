@@ -140,7 +140,6 @@ class MavlinkConfig(_Section):
             raise ValueError(f"port must be in 1..65535 (got {url!r})")
         return url
 
-
     @field_validator("signing_key")
     @classmethod
     def _check_key(cls, key: SecretStr | None) -> SecretStr | None:
@@ -330,7 +329,6 @@ class MqttConfig(_Section):
         if not text or any(c in text for c in "+#\0") or text.startswith("/") or text.endswith("/"):
             raise ValueError(f"must be a non-empty topic part without '+', '#' or outer '/' (got {text!r})")
         return text
-
 
 
 class LogConfig(_Section):

