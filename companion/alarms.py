@@ -10,6 +10,7 @@ watches (battery critical, failsafe STATUSTEXT, GPS fix lost).
 from __future__ import annotations
 
 import enum
+import math
 import time
 from dataclasses import dataclass
 
@@ -51,8 +52,8 @@ class Alarm:
     @staticmethod
     def from_command(param1: float, param2: float, text: str, source: tuple[int, int]) -> Alarm:
         """Decode a USER_1 command; ValueError with the problem if the params are not an alarm."""
-        if not (param1 == param1 and param2 == param2):  # NaN
-            raise ValueError("alarm params must be numbers")
+        if not (math.isfinite(param1) and math.isfinite(param2)):  # NaN or infinity (found by fuzzing)
+            raise ValueError(f"alarm params must be finite numbers, got {param1}, {param2}")
         try:
             code = ReasonCode(int(param1))
         except ValueError:
