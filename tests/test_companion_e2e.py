@@ -413,3 +413,56 @@ def test_a_model_taken_in_by_land_here_painted_on_the_cluttered_roof_cannot_land
     _, e, d = td["pos_ned_m"]  # type: ignore[misc]
     assert e > 10  # on the painted (east) roof: the model's choice, where it was clear
     assert -d > 15  # a roof, not the street
+
+
+def test_an_lvlm_fault_storm_falls_back_to_the_onboard_tier_and_lands(
+    start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """The model's endpoint fails every way it can short of hanging: 500, 429 with Retry-After, an
+    answer that is not one, a ranking of candidates that do not exist; confirmations refused, then
+    503 for good. Each call falls back to the onboard tier within its deadline, the landing completes
+    on the clear roof, and the flight record keeps every fault with its kind."""
+    from tests.lvlm_server import Reply, ScriptedServer, answer, completion
+
+    server = ScriptedServer()
+    try:
+        server.script(
+            "vlm",
+            Reply(status=500, body={"error": {"message": "internal error"}}),
+            Reply(status=429, body={"error": {"message": "slow down"}}, headers={"Retry-After": "1"}),
+            Reply(body=completion("I think the second one looks nice.")),
+            answer({"explanation": "candidates 7 and 9", "ranking": [7, 9]}),
+            stage="rank",
+        )
+        server.script(
+            "vlm",
+            Reply(body=completion(None, refusal="I can't help with that.")),
+            Reply(status=503, body={"error": {"message": "overloaded"}}),
+            stage="confirm",
+        )
+        config = tmp_path / "companion.toml"
+        config.write_text(
+            f'[reasoner]\nname = "edge"\n[reasoner.profiles.edge]\nbase_url = "{server.base_url}"\n'
+            'model = "vlm"\napi_key_env = ""\n'
+        )
+        record = tmp_path / "record"
+        rig = start_rig(
+            ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "4"],
+            ["--config", str(config), "--record", str(record)],
+        )
+        _wait_for_companion(rig)
+        out = rig.alarm_accepted("--reason", "GPS spoofing", "--criticality", "high")
+        assert out.returncode == 0, out.stdout + out.stderr
+        td = _wait_touchdown(rig, timeout_s=300)
+        rig.wait_log("recovery ended", timeout_s=60)
+    finally:
+        server.close()
+    assert td["surface"] == "rooftop_clear", (td, rig.log_text()[-3000:])
+    assert td["safe"] is True
+    events = _events(record)
+    faults = [e["error"]["kind"] for e in events if e["kind"] == "exchange" and "error" in e]
+    assert len(faults) >= 2, faults
+    assert len(set(faults)) >= 2, faults  # told apart by kind
+    decisions = [e for e in events if e["kind"] in ("rank", "confirm")]
+    assert decisions
+    assert all(d["tier"] == "onboard" for d in decisions)  # every answer came from the fallback
