@@ -9,11 +9,12 @@ import logging
 import os
 import signal
 import sys
+import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from companion.alarms import Criticality
+from companion.alarms import Alarm, Criticality, ReasonCode
 from companion.config import CompanionConfig, ConfigError, load_config
 from companion.daemon import Companion
 from companion.ground import GroundFeed, GroundParams
@@ -76,6 +77,20 @@ def _depth_source(cfg: CompanionConfig) -> DepthSource:
         raise ConfigError(f"perception.depth = {pc.depth!r}", str(exc)) from exc
 
 
+def _interrupted(record: Any) -> Alarm | None:
+    """The alarm whose recovery the previous session never finished (see Companion._resume)."""
+    pending = record.interrupted_alarm() if record is not None else None
+    if pending is None:
+        return None
+    try:
+        code = ReasonCode[str(pending.get("code", "other")).upper()]
+        criticality = Criticality[str(pending.get("criticality", "high")).upper()]
+    except KeyError:
+        code, criticality = ReasonCode.OTHER, Criticality.HIGH
+    reason = str(pending.get("reason") or code.name.lower())[:50]
+    return Alarm(code, criticality, reason, (0, 0), time.monotonic())
+
+
 def _ground_feed(cfg: CompanionConfig) -> GroundFeed | None:
     m = cfg.mqtt
     if not m.enabled:
@@ -120,6 +135,7 @@ def build_companion(cfg: CompanionConfig) -> Companion:
         params=params_from(cfg),
         record=record,
         ground=_ground_feed(cfg),
+        resume=_interrupted(record),
         watch_battery_pct=a.battery_critical_pct if a.watch_battery else None,
         watch_failsafe_text=a.watch_failsafe_text,
         watch_gps=a.watch_gps,

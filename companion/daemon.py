@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import logging
 import time
 from typing import Any
@@ -24,6 +25,7 @@ MAV_TYPE_ONBOARD_CONTROLLER = 18
 MAV_AUTOPILOT_INVALID = 8
 MAV_STATE_STANDBY, MAV_STATE_ACTIVE = 3, 4
 RESULT_ACCEPTED, RESULT_TEMP_REJECTED, RESULT_DENIED, RESULT_UNSUPPORTED, RESULT_IN_PROGRESS = 0, 1, 2, 3, 5
+RESUME_WAIT_S = 60.0  # after a restart mid-recovery: how long to wait for telemetry and sensors
 
 
 class Companion:
@@ -43,6 +45,7 @@ class Companion:
         params: RecoveryParams | None = None,
         record: Record | None = None,
         ground: GroundFeed | None = None,
+        resume: Alarm | None = None,
         watch_battery_pct: float | None = 15.0,
         watch_failsafe_text: bool = True,
         watch_gps: bool = True,
@@ -65,6 +68,7 @@ class Companion:
         self.reasoner: Reasoner = reasoner or Cascade([], [], OnboardReasoner())
         self.params = params or RecoveryParams()
         self.ground = ground
+        self._resume_alarm = resume
         # the recovery's events go to the flight record and to the ground feed alike
         self.record: Record | None = (
             TeeRecord(record, ground) if record is not None and ground is not None else record or ground
@@ -130,7 +134,39 @@ class Companion:
         result = self._take_alarm(alarm)
         if self.ground is not None:
             self.ground.alarm(alarm, result)
+        if result == RESULT_ACCEPTED and self.record is not None:
+            # what a restarted daemon resumes when this recovery never records its outcome
+            self.record.record_event(
+                "alarm",
+                {
+                    "reason": alarm.reason,
+                    "code": alarm.code.name.lower(),
+                    "criticality": alarm.criticality.name.lower(),
+                    "source": list(alarm.source),
+                },
+            )
         return result
+
+    async def _resume(self, alarm: Alarm) -> None:
+        """Policy after a restart mid-recovery (the previous session recorded an alarm but no outcome):
+        once telemetry and the sensor stream are up, a vehicle still flying gets the recovery again
+        from where it is (the autopilot held it meanwhile: PX4's offboard-loss failsafe, ArduPilot's
+        GUIDED hold); a vehicle on the ground is left alone. Gives up after ``RESUME_WAIT_S``."""
+        self.log.warning("the previous session ended mid-recovery (alarm %r): resuming it", alarm.reason)
+        deadline = time.monotonic() + RESUME_WAIT_S
+        while time.monotonic() < deadline:
+            await asyncio.sleep(0.5)
+            s = self.tm.state
+            if s.system_id == 0 or self.tm.age_s("position") > 3.0 or self._client is None:
+                continue
+            if not s.armed or s.landed_state == 1:
+                self.log.info("the vehicle is on the ground: nothing to resume")
+                return
+            result = self.raise_alarm(dataclasses.replace(alarm, received_monotonic=time.monotonic()))
+            if result in (RESULT_ACCEPTED, RESULT_IN_PROGRESS):
+                self.log.info("recovery resumed after a restart")
+                return
+        self.log.warning("could not resume the interrupted recovery within %.0f s", RESUME_WAIT_S)
 
     def _take_alarm(self, alarm: Alarm) -> int:
         if self._accept_from and alarm.source[0] not in self._accept_from and alarm.source != (0, 0):
@@ -287,6 +323,8 @@ class Companion:
             ]
             if self._sensors is not None:
                 tasks.append(asyncio.create_task(self._connect_sensors(stack, SensorClient), name="sensors"))
+            if self._resume_alarm is not None:
+                tasks.append(asyncio.create_task(self._resume(self._resume_alarm), name="resume"))
             if self.ground is not None:
                 feed = self.ground.run(lambda: telemetry_snapshot(self.tm.state), self.raise_alarm)
                 tasks.append(asyncio.create_task(feed, name="ground-feed"))

@@ -218,6 +218,30 @@ class FlightRecord:
             return name, self.root / name
         raise FileExistsError(f"no free session name under {self.root} for {base}")
 
+    def interrupted_alarm(self) -> dict[str, Any] | None:
+        """The alarm of the previous session's recovery when that session ended without its outcome
+        (the daemon was killed mid-recovery), else ``None``. The previous session is the newest other
+        one under ``root`` that recorded anything (session names start with their UTC start time);
+        torn lines are skipped."""
+        others = sorted(
+            p for p in self.root.iterdir() if p.name != self.session and (p / EVENTS_FILE).is_file()
+        )
+        if not others:
+            return None
+        pending: dict[str, Any] | None = None
+        for line in (others[-1] / EVENTS_FILE).read_text(encoding="utf-8", errors="replace").splitlines():
+            try:
+                row = json.loads(line)
+            except json.JSONDecodeError:
+                continue
+            if not isinstance(row, dict):
+                continue
+            if row.get("kind") == "alarm":
+                pending = row
+            elif row.get("kind") == "outcome":
+                pending = None
+        return pending
+
     # --- public API ------------------------------------------------------------------------------
 
     def record_event(self, kind: str, fields: Mapping[str, Any]) -> None:

@@ -108,11 +108,27 @@ def free_tcp_port() -> int:
 class Rig:
     """simbridge + companion as real processes wired over loopback UDP and the sensor socket."""
 
-    def __init__(self, sim: SimProcess, companion: subprocess.Popen[bytes], port: int, log: Path) -> None:
+    def __init__(
+        self,
+        sim: SimProcess,
+        companion: subprocess.Popen[bytes],
+        port: int,
+        log: Path,
+        launch: Callable[[], tuple[subprocess.Popen[bytes], Path]] | None = None,
+    ) -> None:
         self.sim = sim
         self.companion = companion
         self.port = port
         self.companion_log = log
+        self._launch = launch
+
+    def kill_and_restart_companion(self) -> None:
+        """SIGKILL the companion (no clean-up of any kind) and start it again with the same
+        arguments, as systemd's Restart=on-failure would; its new log replaces ``companion_log``."""
+        assert self._launch is not None
+        self.companion.kill()
+        self.companion.wait()
+        self.companion, self.companion_log = self._launch()
 
     def alarm(self, *args: str, timeout_s: float = 10.0) -> subprocess.CompletedProcess[str]:
         cmd = [sys.executable, "trigger_alarm.py", "--mavlink", f"udpout:127.0.0.1:{self.port}",
@@ -160,17 +176,22 @@ def start_rig(start_sim: Callable[..., SimProcess], tmp_path: Path) -> Iterator[
         port = free_udp_port()
         sensors = free_tcp_port()
         sim = start_sim(*sim_args, "--sensors", f"127.0.0.1:{sensors}", port=port)
-        log = tmp_path / f"companion-{len(procs)}.log"
         to = sensors_via(sensors) if sensors_via is not None else sensors
         cmd = [sys.executable, "-m", "companion", "--mavlink", f"udp:{port}", "--sensors",
                f"127.0.0.1:{to}", *(companion_args or [])]  # fmt: skip
         speed = float(sim_args[sim_args.index("--speed") + 1]) if "--speed" in sim_args else 1.0
         # frame age is measured in simulated seconds: the same wall-clock tolerance at any speed
         env = {"LANDFALL_SENSORS_MAX_FRAME_AGE_S": str(2.0 * speed), **(env or {})}
-        with log.open("wb") as fh:
-            proc = subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT, env={**os.environ, **env})
-        procs.append(proc)
-        return Rig(sim, proc, port, log)
+
+        def launch() -> tuple[subprocess.Popen[bytes], Path]:
+            log = tmp_path / f"companion-{len(procs)}.log"
+            with log.open("wb") as fh:
+                proc = subprocess.Popen(cmd, stdout=fh, stderr=subprocess.STDOUT, env={**os.environ, **env})
+            procs.append(proc)
+            return proc, log
+
+        proc, log = launch()
+        return Rig(sim, proc, port, log, launch)
 
     yield start
     for p in procs:

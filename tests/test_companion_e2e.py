@@ -466,3 +466,39 @@ def test_an_lvlm_fault_storm_falls_back_to_the_onboard_tier_and_lands(
     decisions = [e for e in events if e["kind"] in ("rank", "confirm")]
     assert decisions
     assert all(d["tier"] == "onboard" for d in decisions)  # every answer came from the fallback
+
+
+def test_a_companion_killed_mid_recovery_resumes_it_after_a_restart(
+    start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """SIGKILL during the move to the chosen site (no goodbye, no outcome in the record). PX4's
+    offboard-loss failsafe holds the vehicle; the restarted daemon finds the unfinished alarm in the
+    flight record, sees the vehicle still flying and runs the recovery again: it lands on the clear
+    roof. The killed session's record stays readable."""
+    record = tmp_path / "record"
+    rig = start_rig(
+        ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "4"], ["--record", str(record)]
+    )
+    _wait_for_companion(rig)
+    out = rig.alarm_accepted("--reason", "GPS spoofing", "--criticality", "high")
+    assert out.returncode == 0, out.stdout + out.stderr
+    rig.wait_log("site 0 roof")
+    rig.kill_and_restart_companion()
+    log = rig.wait_log("recovery resumed after a restart", timeout_s=90)
+    assert "the previous session ended mid-recovery (alarm 'GPS spoofing')" in log
+    td = _wait_touchdown(rig, timeout_s=200)
+    assert td["surface"] == "rooftop_clear", (td, rig.log_text()[-2000:])
+    assert td["safe"] is True
+    assert any(e.get("reason") == "offboard_loss" for e in rig.sim.events("failsafe"))  # held meanwhile
+    rig.wait_log("recovery ended: landed", timeout_s=60)
+    first, second = sorted(p.parent for p in record.glob("*/events.jsonl"))
+    killed = [json.loads(line) for line in (first / "events.jsonl").read_text().splitlines()]
+    assert [e["kind"] for e in killed].count("alarm") == 1
+    assert "outcome" not in [e["kind"] for e in killed]
+    resumed = _events_in(second)
+    assert resumed[-1]["kind"] == "outcome"
+    assert resumed[-1]["state"] == "landed"
+
+
+def _events_in(session: Path) -> list[dict[str, object]]:
+    return [json.loads(line) for line in (session / "events.jsonl").read_text().splitlines()]

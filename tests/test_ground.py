@@ -280,5 +280,8 @@ async def test_a_landing_is_told_to_the_ground_station(
     states = [s["state"] for s in inbox.of("state")]
     assert states[-1] == "landed"
     assert {"rank", "move", "confirm", "land"} <= set(states)
-    assert len(inbox.of("telemetry")) >= 5
-    assert inbox.of("telemetry")[-1]["landed"] is True or inbox.of("telemetry")[-1]["agl_m"] < 1.0
+    telemetry = inbox.of("telemetry")
+    assert len(telemetry) >= 5
+    heights = [t["agl_m"] for t in telemetry if t["agl_m"] is not None]
+    assert max(heights) > 50  # from the launch height ...
+    assert min(heights) < 5  # ... down to the roof (1 Hz: the last sample may precede touchdown)

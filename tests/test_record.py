@@ -362,3 +362,20 @@ def test_open_record_without_dir_gives_null_record(tmp_path: Path) -> None:
     assert isinstance(rec, FlightRecord)
     assert rec.session_dir == tmp_path / "rec" / "s1"
     assert list((tmp_path / "rec" / "s1").iterdir()) == []
+
+
+def test_interrupted_alarm_is_the_previous_sessions_alarm_without_an_outcome(tmp_path: Path) -> None:
+    def session(name: str, lines: list[str]) -> None:
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "events.jsonl").write_text("\n".join(lines) + "\n")
+
+    alarm = json.dumps({"kind": "alarm", "reason": "GPS spoofing", "criticality": "high"})
+    outcome = json.dumps({"kind": "outcome", "state": "landed"})
+    assert FlightRecord(tmp_path / "empty", 10).interrupted_alarm() is None  # no earlier session
+    session("20261123T100000Z-1", [alarm])  # older: not the previous one
+    session("20261123T110000Z-2", [alarm, outcome])  # finished
+    assert FlightRecord(tmp_path, 10).interrupted_alarm() is None
+    session("20261123T120000Z-3", [outcome, alarm, '{"kind": "state", "sta'])  # killed mid-write
+    found = FlightRecord(tmp_path, 10).interrupted_alarm()
+    assert found is not None
+    assert found["reason"] == "GPS spoofing"
