@@ -170,12 +170,15 @@ def start_rig(start_sim: Callable[..., SimProcess], tmp_path: Path) -> Iterator[
         companion_args: list[str] | None = None,
         env: dict[str, str] | None = None,
         sensors_via: Callable[[int], int] | None = None,
+        mavlink_via: Callable[[int], int] | None = None,
     ) -> Rig:
         """``sensors_via(port)``: the port the companion should use for simbridge's sensor ``port``
-        (a relay's)."""
+        (a relay's); ``mavlink_via(port)``: the port simbridge should send to for the companion's
+        MAVLink ``port`` (a relay's)."""
         port = free_udp_port()
         sensors = free_tcp_port()
-        sim = start_sim(*sim_args, "--sensors", f"127.0.0.1:{sensors}", port=port)
+        sim_to = mavlink_via(port) if mavlink_via is not None else port
+        sim = start_sim(*sim_args, "--sensors", f"127.0.0.1:{sensors}", port=sim_to)
         to = sensors_via(sensors) if sensors_via is not None else sensors
         cmd = [sys.executable, "-m", "companion", "--mavlink", f"udp:{port}", "--sensors",
                f"127.0.0.1:{to}", *(companion_args or [])]  # fmt: skip

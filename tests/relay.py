@@ -69,3 +69,82 @@ class TcpRelay:
     def close(self) -> None:
         self.cut()
         self._listener.close()
+
+
+class LossyUdpRelay:
+    """A UDP relay between simbridge and the companion that misbehaves like a bad radio link: it
+    drops, duplicates, reorders and corrupts datagrams in both directions, from a seeded generator.
+
+    simbridge sends to ``port``; the relay forwards to ``target_port`` (the companion) from the same
+    socket, and forwards what comes back to simbridge's last address.
+    """
+
+    def __init__(
+        self,
+        target_port: int,
+        *,
+        drop: float = 0.2,
+        duplicate: float = 0.05,
+        reorder: float = 0.05,
+        corrupt: float = 0.02,
+        seed: int = 0,
+    ) -> None:
+        import random
+
+        self.target = ("127.0.0.1", target_port)
+        self.rates = (drop, duplicate, reorder, corrupt)
+        self.counts = {"in": 0, "dropped": 0, "duplicated": 0, "reordered": 0, "corrupted": 0}
+        self._rng = random.Random(seed)
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._sock.bind(("127.0.0.1", 0))
+        self._sock.settimeout(0.2)
+        self.port = int(self._sock.getsockname()[1])
+        self._sim: tuple[str, int] | None = None
+        self._held: dict[tuple[str, int], bytes] = {}
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        drop, duplicate, reorder, corrupt = self.rates
+        while not self._stop.is_set():
+            try:
+                data, addr = self._sock.recvfrom(65535)
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            if addr == self.target:
+                dest = self._sim
+            else:
+                self._sim, dest = addr, self.target
+            if dest is None:
+                continue
+            self.counts["in"] += 1
+            r = self._rng.random
+            if r() < drop:
+                self.counts["dropped"] += 1
+                continue
+            if r() < corrupt:
+                k = self._rng.randrange(len(data))
+                data = data[:k] + bytes([data[k] ^ (1 + self._rng.randrange(255))]) + data[k + 1 :]
+                self.counts["corrupted"] += 1
+            if r() < reorder and dest not in self._held:
+                self._held[dest] = data  # goes out after the next datagram to the same side
+                self.counts["reordered"] += 1
+                continue
+            out = [data]
+            if r() < duplicate:
+                out.append(data)
+                self.counts["duplicated"] += 1
+            held = self._held.pop(dest, None)
+            if held is not None:
+                out.append(held)
+            for d in out:
+                with contextlib.suppress(OSError):
+                    self._sock.sendto(d, dest)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2)
+        self._sock.close()
