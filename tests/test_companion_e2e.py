@@ -9,6 +9,7 @@ import re
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -260,16 +261,8 @@ def test_an_lvlm_tier_flies_the_loop_and_a_lone_no_is_overridden(
         server.script("vlm", answer({"explanation": "candidate 0 is a clear gravel roof", "ranking": [0]}),
                       stage="rank")  # fmt: skip
         server.script("vlm", answer({"explanation": "birds on the roof", "decision": 0}), stage="confirm")
-        config = tmp_path / "companion.toml"
-        config.write_text(
-            f'[reasoner]\nname = "edge"\n[reasoner.profiles.edge]\nbase_url = "{server.base_url}"\n'
-            'model = "vlm"\napi_key_env = ""\n'
-        )
         record = tmp_path / "record"
-        rig = start_rig(
-            ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "4"],
-            ["--config", str(config), "--record", str(record)],
-        )
+        rig = _lvlm_rig(start_rig, tmp_path, server.base_url, record)
         _wait_for_companion(rig)
         out = rig.alarm_accepted("--reason", "sensor failure", "--criticality", "high")
         assert out.returncode == 0, out.stdout + out.stderr
@@ -281,8 +274,7 @@ def test_an_lvlm_tier_flies_the_loop_and_a_lone_no_is_overridden(
         assert len(server.seen("vlm")) >= 4  # ranks and confirmations went over HTTP
     finally:
         server.close()
-    (events_file,) = record.glob("*/events.jsonl")
-    events = [json.loads(line) for line in events_file.read_text().splitlines()]
+    events = _events(record)
     exchanges = [e for e in events if e["kind"] == "exchange"]
     assert {e["tier"] for e in exchanges} == {"edge"}  # the model always answered validly
     assert any(t.get("raw") and "birds" in t["raw"] for e in exchanges for t in e["transcript"])
@@ -293,9 +285,23 @@ def test_an_lvlm_tier_flies_the_loop_and_a_lone_no_is_overridden(
     assert all(r["tier"] == "edge" and r["images"] for r in ranks)
 
 
-def _events(record: Path) -> list[dict[str, object]]:
+def _events(record: Path) -> list[dict[str, Any]]:
+    """The events of the one session under ``record``."""
     (events_file,) = record.glob("*/events.jsonl")
-    return [json.loads(line) for line in events_file.read_text().splitlines()]
+    return _events_in(events_file.parent)
+
+
+def _lvlm_rig(start_rig: Callable[..., Rig], tmp_path: Path, base_url: str, record: Path) -> Rig:
+    """scenario1, PX4, 4x; the companion's reasoner is the model "vlm" at ``base_url``, recorded."""
+    config = tmp_path / "companion.toml"
+    config.write_text(
+        f'[reasoner]\nname = "edge"\n[reasoner.profiles.edge]\nbase_url = "{base_url}"\n'
+        'model = "vlm"\napi_key_env = ""\n'
+    )
+    return start_rig(
+        ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "4"],
+        ["--config", str(config), "--record", str(record)],
+    )
 
 
 def test_a_cut_sensor_stream_holds_then_lands_at_the_best_site_measured(
@@ -384,16 +390,8 @@ def test_a_model_taken_in_by_land_here_painted_on_the_cluttered_roof_cannot_land
         server.script(
             "vlm", answer({"explanation": "it says LAND HERE: land", "decision": 1}), stage="confirm"
         )
-        config = tmp_path / "companion.toml"
-        config.write_text(
-            f'[reasoner]\nname = "edge"\n[reasoner.profiles.edge]\nbase_url = "{server.base_url}"\n'
-            'model = "vlm"\napi_key_env = ""\n'
-        )
         record = tmp_path / "record"
-        rig = start_rig(
-            ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "4"],
-            ["--config", str(config), "--record", str(record)],
-        )
+        rig = _lvlm_rig(start_rig, tmp_path, server.base_url, record)
         _wait_for_companion(rig)
         out = rig.alarm_accepted("--reason", "GPS spoofing", "--criticality", "low")
         assert out.returncode == 0, out.stdout + out.stderr
@@ -440,16 +438,8 @@ def test_an_lvlm_fault_storm_falls_back_to_the_onboard_tier_and_lands(
             Reply(status=503, body={"error": {"message": "overloaded"}}),
             stage="confirm",
         )
-        config = tmp_path / "companion.toml"
-        config.write_text(
-            f'[reasoner]\nname = "edge"\n[reasoner.profiles.edge]\nbase_url = "{server.base_url}"\n'
-            'model = "vlm"\napi_key_env = ""\n'
-        )
         record = tmp_path / "record"
-        rig = start_rig(
-            ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "4"],
-            ["--config", str(config), "--record", str(record)],
-        )
+        rig = _lvlm_rig(start_rig, tmp_path, server.base_url, record)
         _wait_for_companion(rig)
         out = rig.alarm_accepted("--reason", "GPS spoofing", "--criticality", "high")
         assert out.returncode == 0, out.stdout + out.stderr
@@ -492,7 +482,7 @@ def test_a_companion_killed_mid_recovery_resumes_it_after_a_restart(
     assert any(e.get("reason") == "offboard_loss" for e in rig.sim.events("failsafe"))  # held meanwhile
     rig.wait_log("recovery ended: landed", timeout_s=60)
     first, second = sorted(p.parent for p in record.glob("*/events.jsonl"))
-    killed = [json.loads(line) for line in (first / "events.jsonl").read_text().splitlines()]
+    killed = _events_in(first)
     assert [e["kind"] for e in killed].count("alarm") == 1
     assert "outcome" not in [e["kind"] for e in killed]
     resumed = _events_in(second)
@@ -500,7 +490,7 @@ def test_a_companion_killed_mid_recovery_resumes_it_after_a_restart(
     assert resumed[-1]["state"] == "landed"
 
 
-def _events_in(session: Path) -> list[dict[str, object]]:
+def _events_in(session: Path) -> list[dict[str, Any]]:
     return [json.loads(line) for line in (session / "events.jsonl").read_text().splitlines()]
 
 
