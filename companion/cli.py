@@ -54,6 +54,7 @@ def params_from(cfg: CompanionConfig) -> RecoveryParams:
         explore_max_alt_m=r.explore_max_alt_m,
         blind_descent_agl_m=r.blind_descent_agl_m,
         sensor_loss_s=r.sensor_loss_s,
+        link_loss_s=r.link_loss_s,
         surface=SurfaceParams(
             cell_px=pc.cell_px,
             window_cells=pc.window_cells,

@@ -203,6 +203,7 @@ class RecoveryConfig(_Section):
     explore_max_alt_m: float = Field(default=90.0, gt=0)
     blind_descent_agl_m: float = Field(default=70.0, gt=0)
     sensor_loss_s: float = Field(default=30.0, gt=0)
+    link_loss_s: float = Field(default=60.0, gt=0)
 
 
 class PerceptionConfig(_Section):

@@ -22,6 +22,7 @@ POSITION_YAW_MASK = 2552  # use x, y, z and yaw
 STREAM_HZ = 20.0  # >= 10 Hz on a real vehicle; 20 keeps PX4's 2 Hz rule at 4x simulation speed
 MAV_STATE_CRITICAL = 5
 MAV_RESULT_ACCEPTED, MAV_RESULT_TEMPORARILY_REJECTED = 0, 1
+LINK_SILENCE_S = 3.0  # wall seconds without LOCAL_POSITION_NED before the link counts as lost
 
 
 class ControlError(RuntimeError):
@@ -59,7 +60,7 @@ class TargetTimeout(ControlError):
 
 
 class TelemetryLost(ControlError):
-    pass
+    """No LOCAL_POSITION_NED for ``LINK_SILENCE_S``: the MAVLink link to the autopilot is down."""
 
 
 class VehicleController:
@@ -196,6 +197,28 @@ class VehicleController:
         if self.failsafe is not None:
             raise self.failsafe
 
+    def check_interruption(self) -> None:
+        """Raise ``OperatorTakeover`` or ``AutopilotFailsafe`` if the latest heartbeat says so."""
+        self._raise_interruption()
+
+    async def await_link(self, timeout_s: float) -> float:
+        """After ``TelemetryLost``: wait until LOCAL_POSITION_NED flows again and a heartbeat sent
+        after the wait began has come (the mode the autopilot is in *now*). The setpoint stream keeps
+        running meanwhile. Returns the seconds since the last position before the silence; raises
+        ``TelemetryLost`` when nothing came within ``timeout_s``."""
+        start = time.monotonic()
+        last_heard = self.tm.state.stamps.get("position", start - LINK_SILENCE_S)
+        deadline = start + timeout_s
+        while True:
+            fresh = self.tm.age_s("position") < LINK_SILENCE_S / 3
+            if fresh and self.tm.state.stamps.get("heartbeat", 0.0) > start:
+                return time.monotonic() - last_heard
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise TelemetryLost(f"no telemetry for {timeout_s + LINK_SILENCE_S:.0f} s")
+            with contextlib.suppress(TimeoutError):
+                await self.tm.wait_update(min(remaining, 1.0))
+
     def set_target(self, n: float, e: float, d: float, yaw: float | None = None) -> None:
         if not all(math.isfinite(v) for v in (n, e, d)):
             raise ControlError(f"refusing a non-finite target ({n}, {e}, {d})")
@@ -244,8 +267,8 @@ class VehicleController:
             try:
                 await self.tm.wait_update(min(remaining, 3.0))
             except TimeoutError:
-                if self.tm.age_s("position") > 3.0:
-                    raise TelemetryLost("no LOCAL_POSITION_NED for 3 s") from None
+                if self.tm.age_s("position") > LINK_SILENCE_S:
+                    raise TelemetryLost(f"no LOCAL_POSITION_NED for {LINK_SILENCE_S:g} s") from None
                 continue
             err = math.dist(self.tm.state.pos_ned_m, (n, e, d))
             if err < tolerance_m and self.tm.speed_m_s < speed_m_s:

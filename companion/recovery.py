@@ -27,6 +27,7 @@ from companion.control import (
     ControlError,
     OperatorTakeover,
     TargetTimeout,
+    TelemetryLost,
     VehicleController,
 )
 from companion.guidance.frames import PinholeCamera, quat_to_matrix
@@ -85,6 +86,7 @@ class RecoveryParams:
     closeup_half_m: float = 6.0  # the confirmation close-up shows this far around the site
     land_timeout_s: float = 120.0
     sensor_loss_s: float = 30.0  # wall seconds without a usable frame before landing without sensors
+    link_loss_s: float = 60.0  # wall seconds without telemetry before leaving the vehicle to the autopilot
 
 
 class Record(Protocol):
@@ -147,6 +149,8 @@ class Recovery:
         self.best: Site | None = None
         self.rejected: list[tuple[float, float]] = []
         self._explore_step = 0
+        self._reengaged = 0
+        self._descending: tuple[tuple[float, float, float], Candidate] | None = None
 
     @property
     def budget(self) -> int:
@@ -171,19 +175,25 @@ class Recovery:
         self._say(5, f"alarm '{self.alarm.reason}' ({self.criticality.name.lower()}), {self.budget} rounds")
         try:
             await self.ctl.engage()
-            reengaged = 0
-            while self.round < self.budget:
-                self.round += 1
+            resume: tuple[tuple[float, float, float], Candidate] | None = None
+            while resume is not None or self.round < self.budget:
                 try:
-                    landed = await self._round()
+                    if resume is not None:  # the link came back mid-descent: same site, confirm first
+                        landed = await self._confirm_and_descend(*resume)
+                    else:
+                        self.round += 1
+                        self._descending = None
+                        landed = await self._round()
+                    resume = None
                 except AutopilotFailsafe as exc:
-                    # policy: the autopilot's own failsafe (e.g. a lost setpoint stream) is re-engaged
-                    # from where the vehicle is, twice at most; then the autopilot keeps control
-                    reengaged += 1
-                    if reengaged > MAX_REENGAGE:
-                        raise ControlError(f"{exc}; not re-engaging again") from exc
-                    self._say(4, f"{exc}: re-engaging")
-                    await self.ctl.engage()
+                    resume = None
+                    await self._reengage(exc)
+                    continue
+                except TelemetryLost as exc:
+                    resume = self._descending
+                    ended = await self._ride_out_link_loss(exc)
+                    if ended is not None:
+                        return ended
                     continue
                 except SensorsLost as exc:
                     # policy: no sensors, no new site; the alarm still stands, so come down: at the
@@ -203,6 +213,45 @@ class Recovery:
             self._say(2, f"aborted: {exc}")
             await self.ctl.release()
             return Outcome(State.ABORTED, self.round, None, str(exc))
+
+    async def _reengage(self, exc: AutopilotFailsafe) -> None:
+        """Policy: the autopilot's own failsafe (e.g. a lost setpoint stream) is re-engaged from where
+        the vehicle is, ``MAX_REENGAGE`` times at most; then the autopilot keeps control."""
+        self._reengaged += 1
+        if self._reengaged > MAX_REENGAGE:
+            raise ControlError(f"{exc}; not re-engaging again") from exc
+        self._say(4, f"{exc}: re-engaging")
+        await self.ctl.engage()
+
+    async def _ride_out_link_loss(self, exc: TelemetryLost) -> Outcome | None:
+        """Policy for a lost MAVLink link: keep streaming the last setpoint and wait up to
+        ``link_loss_s`` for telemetry. Meanwhile the autopilot holds (PX4's offboard-loss failsafe
+        after COM_OF_LOSS_T; ArduPilot's GUIDED keeps the last target). When the link returns: a
+        vehicle that came down meanwhile ends the recovery; a failsafe is re-engaged from where the
+        vehicle is; someone else's mode is a takeover. Then an interrupted descent goes on at the
+        same site, confirmed again first; otherwise the next round starts. No telemetry within
+        ``link_loss_s``: the companion stops commanding and leaves the vehicle to the autopilot."""
+        self.record.record_event("link_lost", {"round": self.round, "state": self.state.value})
+        self._say(3, f"link to the autopilot lost ({exc}): holding, waiting {self.p.link_loss_s:.0f} s")
+        try:
+            silent_s = await self.ctl.await_link(self.p.link_loss_s)
+        except TelemetryLost as lost:
+            raise ControlError(f"{lost}: leaving the vehicle to the autopilot") from lost
+        s = self.tm.state
+        self.record.record_event(
+            "link_restored",
+            {"round": self.round, "silent_s": round(silent_s, 2), "custom_mode": s.custom_mode},
+        )
+        self._say(5, f"link back after {silent_s:.1f} s")
+        if not s.armed or s.landed_state == 1:
+            self._set(State.LANDED)
+            self._say(4, "the vehicle came down while the link was lost")
+            return Outcome(State.LANDED, self.round, None, "landed by the autopilot during a link loss")
+        try:
+            self.ctl.check_interruption()
+        except AutopilotFailsafe as failsafe:
+            await self._reengage(failsafe)
+        return None
 
     def _site_ned(self) -> tuple[float, float, float] | None:
         return self.best.ned_m if self.best is not None else None
@@ -270,6 +319,7 @@ class Recovery:
         return await self._confirm_and_descend(target, choice)
 
     async def _confirm_and_descend(self, target: tuple[float, float, float], choice: Candidate) -> bool:
+        self._descending = (target, choice)  # what a link loss resumes: this site, confirmed again
         while True:
             frame = await self._acquire()
             self._set(State.CONFIRM)

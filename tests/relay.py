@@ -93,7 +93,8 @@ class LossyUdpRelay:
 
         self.target = ("127.0.0.1", target_port)
         self.rates = (drop, duplicate, reorder, corrupt)
-        self.counts = {"in": 0, "dropped": 0, "duplicated": 0, "reordered": 0, "corrupted": 0}
+        kinds = ("in", "dropped", "duplicated", "reordered", "corrupted", "blacked_out")
+        self.counts = dict.fromkeys(kinds, 0)
         self._rng = random.Random(seed)
         self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self._sock.bind(("127.0.0.1", 0))
@@ -102,6 +103,7 @@ class LossyUdpRelay:
         self._sim: tuple[str, int] | None = None
         self._held: dict[tuple[str, int], bytes] = {}
         self._stop = threading.Event()
+        self._blackout = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._thread.start()
 
@@ -121,6 +123,9 @@ class LossyUdpRelay:
             if dest is None:
                 continue
             self.counts["in"] += 1
+            if self._blackout.is_set():
+                self.counts["blacked_out"] += 1
+                continue
             r = self._rng.random
             if r() < drop:
                 self.counts["dropped"] += 1
@@ -143,6 +148,13 @@ class LossyUdpRelay:
             for d in out:
                 with contextlib.suppress(OSError):
                     self._sock.sendto(d, dest)
+
+    def blackout(self) -> None:
+        """Drop everything, both ways, until ``restore()``: a link that is down."""
+        self._blackout.set()
+
+    def restore(self) -> None:
+        self._blackout.clear()
 
     def close(self) -> None:
         self._stop.set()

@@ -527,3 +527,104 @@ def test_a_lossy_mavlink_link_still_lands(start_rig: Callable[..., Rig]) -> None
     stopped = rig.log_text().split("companion stopped: ")[1]
     bad = int(stopped.split(" bad")[0].split(", ")[-1])
     assert bad > 0  # the corrupted frames were seen and refused, not acted on
+
+
+def _clean_relays(relays: list[Any]) -> Callable[[int], int]:
+    """A ``mavlink_via`` that puts a relay with no losses (until blacked out) on the MAVLink link."""
+    from tests.relay import LossyUdpRelay
+
+    def via(port: int) -> int:
+        relays.append(LossyUdpRelay(port, drop=0.0, duplicate=0.0, reorder=0.0, corrupt=0.0))
+        return int(relays[-1].port)
+
+    return via
+
+
+@pytest.mark.parametrize("autopilot", ["px4", "ardupilot"])
+def test_a_five_second_link_loss_during_descent_resumes_on_the_same_site(
+    start_rig: Callable[..., Rig], tmp_path: Path, autopilot: str
+) -> None:
+    """The MAVLink link goes dead for 5 s while the vehicle descends onto the clear roof. PX4's
+    offboard-loss failsafe holds the vehicle (AUTO.LOITER), ArduPilot's GUIDED holds the last target;
+    the companion keeps streaming, waits, and when the link returns re-engages PX4 from where the
+    vehicle is, confirms the same site again before the next descent step (no new ranking) and
+    lands on it."""
+    relays: list[Any] = []
+    record = tmp_path / "record"
+    try:
+        rig = start_rig(
+            ["--scenario", "scenario1", "--autopilot", autopilot, "--speed", "4"],
+            ["--record", str(record)],
+            mavlink_via=_clean_relays(relays),
+        )
+        _wait_for_companion(rig)
+        out = rig.alarm_accepted("--reason", "GPS spoofing", "--criticality", "high")
+        assert out.returncode == 0, out.stdout + out.stderr
+        rig.wait_log("m, ", timeout_s=120)  # "descending 62 m, <rationale>": the first descent step
+        relays[0].blackout()
+        time.sleep(5.0)  # the link is down for 5 s of wall time
+        relays[0].restore()
+        td = _wait_touchdown(rig, timeout_s=200)
+    finally:
+        for r in relays:
+            r.close()
+    assert td["surface"] == "rooftop_clear", (td, rig.log_text()[-3000:])
+    assert td["safe"] is True
+    assert relays[0].counts["blacked_out"] > 0
+    log = rig.wait_log("recovery ended: landed", timeout_s=60)
+    assert "link to the autopilot lost (no LOCAL_POSITION_NED for 3 s)" in log
+    back = float(re.search(r"link back after ([0-9.]+) s", log).group(1))  # type: ignore[union-attr]
+    assert 4.5 < back < 10.0
+    failsafes = [f["reason"] for f in rig.sim.events("failsafe")]
+    if autopilot == "px4":
+        assert failsafes == ["offboard_loss"]
+        assert "autopilot failsafe switched to custom_mode" in log
+        assert "re-engaging" in log
+    else:  # GUIDED has no offboard-loss failsafe: it held the last target, still in GUIDED
+        assert failsafes == []
+        assert "re-engaging" not in log
+    events = _events(record)
+    kinds = [e["kind"] for e in events]
+    lost, restored = kinds.index("link_lost"), kinds.index("link_restored")
+    assert events[lost]["state"] == "descend"
+    assert lost < restored
+    after = kinds[restored:]
+    assert "confirm" in after
+    assert "rank" not in after[: after.index("confirm")]
+    confirms = [e for e in events if e["kind"] == "confirm"]
+    before = [e for e in events[:lost] if e["kind"] == "confirm"]
+    assert confirms[-1]["site_ned_m"] == before[-1]["site_ned_m"]
+    assert events[-1]["kind"] == "outcome"
+    assert events[-1]["state"] == "landed"
+
+
+def test_a_link_lost_for_good_leaves_the_vehicle_in_the_autopilots_hold(
+    start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """With recovery.link_loss_s = 2 and a link that stays down longer, the companion gives up:
+    it stops commanding and the vehicle stays in PX4's failsafe hold, also after the link returns
+    (the companion does not snatch it back)."""
+    relays: list[Any] = []
+    try:
+        rig = start_rig(
+            ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "4"],
+            env={"LANDFALL_RECOVERY_LINK_LOSS_S": "2"},
+            mavlink_via=_clean_relays(relays),
+        )
+        _wait_for_companion(rig)
+        out = rig.alarm_accepted("--reason", "GPS spoofing", "--criticality", "high")
+        assert out.returncode == 0, out.stdout + out.stderr
+        rig.wait_log("site 0 roof", timeout_s=120)
+        relays[0].blackout()
+        log = rig.wait_log("recovery ended: aborted", timeout_s=30)
+        relays[0].restore()
+        time.sleep(3.0)  # 12 simulated seconds with the link back
+        assert rig.companion.poll() is None
+    finally:
+        for r in relays:
+            r.close()
+    assert "no telemetry for 5 s: leaving the vehicle to the autopilot" in log
+    assert not rig.sim.events("touchdown")
+    modes = [m["mode"] for m in rig.sim.events("mode")]
+    assert modes[-1] == "AUTO.LOITER", modes  # the failsafe's hold, not OFFBOARD again
+    assert "link back" not in rig.log_text()
