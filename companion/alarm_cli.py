@@ -34,6 +34,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--criticality", default="high", choices=("low", "high", "critical"))
     p.add_argument("--code", default="other", choices=[c.name.lower() for c in ReasonCode])
     p.add_argument("--signing-key", help="MAVLink 2 signing key, 64 hex digits")
+    p.add_argument(
+        "--source-system", type=int, default=255, help="our own MAVLink system id (255: a ground station)"
+    )
     p.add_argument("--target-system", type=int, default=1, help="the vehicle's system id")
     p.add_argument("--target-component", type=int, default=191, help="the companion's component id")
     p.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the acknowledgement")
@@ -51,7 +54,7 @@ async def send_alarm(args: argparse.Namespace, key: bytes | None) -> int | None:
 
     crit = Criticality.parse(args.criticality)
     code = ReasonCode[args.code.upper()]
-    async with MavlinkUdpLink(args.mavlink, 255, 25, on_message, signing_key=key) as link:
+    async with MavlinkUdpLink(args.mavlink, args.source_system, 25, on_message, signing_key=key) as link:
         text = (ALARM_TEXT_PREFIX + args.reason)[:50]
         loop = asyncio.get_running_loop()
         deadline = loop.time() + args.timeout
@@ -88,6 +91,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         LinkUrl.parse(args.mavlink)
+        if not 1 <= args.source_system <= 255:
+            raise ValueError(f"--source-system must be 1..255 (got {args.source_system})")
         key = parse_signing_key(args.signing_key) if args.signing_key else None
     except (LinkUrlError, ValueError) as exc:
         parser.error(str(exc))

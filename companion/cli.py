@@ -22,6 +22,7 @@ from companion.perception.depth import DepthError, DepthSource, make_source
 from companion.perception.surface_id import SurfaceParams
 from companion.reasoning.tiers import BUILTIN_PROFILES, ONBOARD, build_cascade
 from companion.recovery import RecoveryParams
+from companion.redact import redact_logs
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -166,6 +167,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"companion: configuration error: {exc}", file=sys.stderr)
         return 2
     logging.basicConfig(level=cfg.log.level, stream=sys.stderr, format="%(levelname)s %(name)s: %(message)s")
+    redact_logs(cfg.secrets(os.environ))
 
     # What the start-up imported (numpy, scipy, cv2, pydantic, pymavlink: some 70,000 objects) lives as
     # long as the daemon: frozen out of the collector, a full collection no longer walks it and stalls

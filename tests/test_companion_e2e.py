@@ -628,3 +628,108 @@ def test_a_link_lost_for_good_leaves_the_vehicle_in_the_autopilots_hold(
     modes = [m["mode"] for m in rig.sim.events("mode")]
     assert modes[-1] == "AUTO.LOITER", modes  # the failsafe's hold, not OFFBOARD again
     assert "link back" not in rig.log_text()
+
+
+def _signed_sender(port: int, key: bytes) -> Any:
+    """A pymavlink connection that signs as a ground station (255, 190) and sends to ``port``."""
+    from pymavlink import mavutil
+
+    conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=255, source_component=190)
+    conn.setup_signing(key, sign_outgoing=True)
+    return conn
+
+
+def test_the_signed_link_refuses_forged_replayed_and_foreign_alarms_and_leaks_no_secret(
+    start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """Signing on at both ends, alarms only from system 255, an LVLM behind an API key whose first
+    answer is a 401 that echoes the key (as some providers do), everything logged at DEBUG and
+    recorded. Unsigned, forged (wrong key), replayed and misaddressed alarms get no answer; a signed
+    alarm from system 42 is denied; the signed alarm from 255 is accepted and the vehicle lands on the
+    clear roof. Each refusal is counted, and neither the signing key nor the API key appears in any
+    log or flight-record file."""
+    from tests.lvlm_server import Reply, ScriptedServer, answer
+
+    key_hex = "5a" * 8 + "c3" * 8 + "0f" * 8 + "e1" * 8
+    key = bytes.fromhex(key_hex)
+    api_key = "sk-landfall-test-0123456789abcdefSECRET"
+    server = ScriptedServer()
+    try:
+        server.script(
+            "vlm",
+            Reply(status=401, body={"error": {"message": f"Incorrect API key provided: {api_key}"}}),
+            answer({"explanation": "candidate 0 is a clear gravel roof", "ranking": [0]}),
+            stage="rank",
+        )
+        server.script("vlm", answer({"explanation": "clear gravel", "decision": 1}), stage="confirm")
+        config = tmp_path / "companion.toml"
+        config.write_text(
+            "[alarms]\naccept_from_system_ids = [255]\n"
+            f'[reasoner]\nname = "edge"\n[reasoner.profiles.edge]\nbase_url = "{server.base_url}"\n'
+            'model = "vlm"\napi_key_env = "LANDFALL_TEST_API_KEY"\n'
+        )
+        record = tmp_path / "record"
+        rig = start_rig(
+            ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "4", "--signing-key", key_hex],
+            ["--config", str(config), "--record", str(record), "--log-level", "DEBUG"],
+            env={"LANDFALL_SIGNING_KEY": key_hex, "LANDFALL_TEST_API_KEY": api_key},
+        )
+        _wait_for_companion(rig)
+        signed = ("--signing-key", key_hex)
+        assert rig.alarm("--reason", "unsigned", timeout_s=2).returncode == 3
+        assert rig.alarm("--reason", "forged", "--signing-key", "00" * 32, timeout_s=2).returncode == 3
+        misaddressed = rig.alarm("--reason", "not you", "--target-system", "7", *signed, timeout_s=2)
+        assert misaddressed.returncode == 3
+        foreign = rig.alarm("--reason", "from 42", "--source-system", "42", *signed)
+        assert foreign.returncode == 1
+        assert "refused (denied)" in foreign.stdout
+
+        sender = _signed_sender(rig.port, key)
+        try:
+            frame = sender.mav.command_long_encode(1, 191, 31010, 0, 1.0, 1.0, 0, 0, 0, 0, 0).pack(sender.mav)
+            ack = None
+            for _ in range(20):  # right after start-up the companion may still answer "not yet"
+                sender.write(frame)
+                ack = sender.recv_match(type="COMMAND_ACK", blocking=True, timeout=2)
+                if ack is not None and ack.result == 0:
+                    break
+                time.sleep(0.5)
+                frame = sender.mav.command_long_encode(1, 191, 31010, 0, 1.0, 1.0, 0, 0, 0, 0, 0).pack(
+                    sender.mav
+                )
+            assert ack is not None
+            assert ack.result == 0  # accepted: the recovery started
+            sender.write(frame)  # the same signed bytes again: a replay
+            assert sender.recv_match(type="COMMAND_ACK", blocking=True, timeout=2) is None
+            fresh = sender.mav.command_long_encode(1, 191, 31010, 0, 1.0, 1.0, 0, 0, 0, 0, 0).pack(sender.mav)
+            sender.write(fresh)  # a new signature: answered, merged into the running recovery
+            again = sender.recv_match(type="COMMAND_ACK", blocking=True, timeout=3)
+            assert again is not None
+            assert again.result == 5
+        finally:
+            sender.close()
+        td = _wait_touchdown(rig, timeout_s=200)
+        rig.wait_log("recovery ended: landed", timeout_s=60)
+        rig.companion.terminate()
+        assert rig.companion.wait(timeout=20) == 0
+    finally:
+        server.close()
+    assert td["surface"] == "rooftop_clear", (td, rig.log_text()[-3000:])
+    assert td["safe"] is True
+    assert all(r.headers.get("authorization") == f"Bearer {api_key}" for r in server.seen("vlm"))
+    log = rig.log_text()
+    m = re.search(r"(\d+) unsigned and (\d+) badly signed refused, (\d+) alarms refused", log)
+    assert m is not None, log[-2000:]
+    unsigned, bad_signature, refused = (int(g) for g in m.groups())
+    assert unsigned >= 1
+    assert bad_signature >= 2  # the forged alarm (with its STATUSTEXT) and the replay
+    assert refused == 1  # system 42
+    assert "alarm from system 42 refused" in log
+    assert "DEBUG" in log  # the most talkative level was on
+    secrets = [key_hex, key_hex.upper(), key.decode("latin-1"), api_key, api_key[3:20]]
+    texts = {"companion log": log, "simbridge log": rig.sim.stderr_path.read_text()}
+    texts.update({str(p): p.read_bytes().decode("latin-1") for p in record.rglob("*") if p.is_file()})
+    assert len(texts) > 5
+    for where, text in texts.items():
+        for secret in secrets:
+            assert secret not in text, f"a secret is in {where}"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import sys
 import tomllib
 from pathlib import Path
 
@@ -464,6 +465,52 @@ def test_signing_key_never_in_repr_str_or_dumps(caplog: pytest.LogCaptureFixture
         assert KEY_HEX not in text
         assert KEY_HEX.upper() not in text
     assert "**********" in repr(cfg.mavlink)
+
+
+def test_the_log_redacts_every_secret_the_config_gives(
+    in_tmp: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The second line of defence: text from outside (an error message quoting a key, a traceback)
+    that holds a secret is masked by the handlers' filter before it is written."""
+    from companion.redact import MASK, redact_logs
+
+    env = {
+        "LANDFALL_SIGNING_KEY": KEY_HEX,
+        "OPENAI_API_KEY": "sk-openai-0123456789",
+        "MY_EDGE_KEY": "edge-key-abcdefgh",
+        "LANDFALL_MQTT_PASSWORD": "broker-pass-1234",
+        "UNRELATED": "not-a-secret-value",
+    }
+    path = Path("companion.toml")
+    path.write_text(
+        '[reasoner.profiles.edge]\nbase_url = "http://127.0.0.1:1/v1"\nmodel = "m"\n'
+        'api_key_env = "MY_EDGE_KEY"\n[mqtt]\npassword_env = "LANDFALL_MQTT_PASSWORD"\n'
+    )
+    secrets = load_config(path, env, {}).secrets(env)
+    assert set(secrets) == {
+        KEY_HEX, KEY_HEX.upper(), "sk-openai-0123456789", "edge-key-abcdefgh", "broker-pass-1234"
+    }  # fmt: skip
+    logger = logging.getLogger("test.redact")
+    logger.propagate = False
+    handler = logging.StreamHandler(sys.stderr)
+    logger.addHandler(handler)
+    try:
+        redact_logs(secrets, logger)
+        logger.warning("provider said: Incorrect API key provided: %s", "sk-openai-0123456789")
+        logger.warning("key %s in upper case %s", KEY_HEX, KEY_HEX.upper())
+        try:
+            raise RuntimeError("auth failed for edge-key-abcdefgh")
+        except RuntimeError:
+            logger.exception("the tier failed")
+        logger.warning("left alone: %s", "not-a-secret-value")
+    finally:
+        logger.removeHandler(handler)
+    err = capsys.readouterr().err
+    for secret in secrets:
+        assert secret not in err
+    assert err.count(MASK) == 5  # 1 + 2 + the traceback's source line and its message
+    assert "RuntimeError: auth failed for [redacted]" in err
+    assert "left alone: not-a-secret-value" in err
 
 
 # --- the shipped example -----------------------------------------------------------------------------

@@ -322,3 +322,20 @@ async def test_unreachable_endpoint() -> None:
     with pytest.raises(Unreachable):
         await r.rank(rank_request(deadline_s=4.0))
     await r.aclose()
+
+
+async def test_a_provider_quoting_the_key_back_loses_it_before_the_log_and_the_record(
+    server: ScriptedServer,
+) -> None:
+    """Some providers put the rejected key in their 401 message; the error and the transcript that
+    the flight record keeps carry a placeholder instead."""
+    server.script("m", Reply(status=401, body={"error": {"message": f"Incorrect API key provided: {KEY}"}}))
+    r = reasoner(server, "m")
+    req = rank_request()
+    with pytest.raises(EndpointError) as info:
+        await r.rank(req)
+    await r.aclose()
+    assert "Incorrect API key provided: [api key]" in str(info.value)
+    assert KEY not in str(info.value)
+    assert req.transcript
+    assert KEY not in json.dumps(req.transcript)

@@ -141,6 +141,15 @@ def _content_text(content: Any) -> str | None:
     raise MalformedAnswer(f"message content is a {type(content).__name__}, not text")
 
 
+def _scrubbed(text: str | None, headers: dict[str, str]) -> str | None:
+    """``text`` without the API key this request sent (a server may quote it back in an answer or an
+    error message, which the log and the flight record keep)."""
+    key = headers.get("authorization", "").removeprefix("Bearer ").strip()
+    if text is None or len(key) < 4:
+        return text
+    return text.replace(key, "[api key]")
+
+
 def _error_text(body: Any) -> str:
     err = body.get("error") if isinstance(body, dict) else None
     if isinstance(err, dict):
@@ -287,8 +296,9 @@ class LvlmReasoner:
             t0 = time.monotonic()
             entry: dict[str, Any] = {"stage": stage, "attempt": attempt, "timeout_s": round(timeout, 3)}
             try:
-                answer = await self._attempt(body, headers, timeout)
+                answer = _scrubbed(await self._attempt(body, headers, timeout), headers)
             except ReasonerError as exc:
+                exc.args = (_scrubbed(str(exc), headers),)  # some providers echo a rejected key
                 entry.update(latency_s=round(time.monotonic() - t0, 4), error=f"{exc.kind}: {exc}")
                 if isinstance(exc, EndpointError):
                     entry["status"] = exc.status

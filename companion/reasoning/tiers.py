@@ -10,6 +10,7 @@ then required). Keys come from the environment variable each profile names, neve
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
 from collections.abc import Callable, Mapping
@@ -124,6 +125,18 @@ def resolve_profile(name: str, configured: Mapping[str, LvlmProfileConfig], opti
             raise ConfigError(f"reasoner.profiles.{name}", f"a new profile needs {' and '.join(missing)}")
         return LvlmProfile(name=name, **fields)
     return dataclasses.replace(base, **fields)
+
+
+def api_keys(cfg: ReasonerConfig, env: Mapping[str, str]) -> list[str]:
+    """The API keys (values) in ``env`` of every profile the config names or defines."""
+    names = {*BUILTIN_PROFILES, *cfg.profiles}
+    keys: list[str] = []
+    for name in sorted(names):
+        with contextlib.suppress(ConfigError):
+            var = resolve_profile(name, cfg.profiles, "reasoner.profiles").api_key_env
+            if var and env.get(var, "").strip():
+                keys.append(env[var].strip())
+    return keys
 
 
 def tier_names(cfg: ReasonerConfig, stage: str) -> list[str]:
