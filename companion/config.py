@@ -582,6 +582,10 @@ def _read_file(path: Path) -> dict[str, Any]:
         raise ConfigError(str(path), f"cannot read the file: {exc.strerror or exc}") from exc
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(str(path), f"invalid TOML: {exc}") from exc
+    except UnicodeDecodeError as exc:  # found by fuzzing (atheris): TOML files are UTF-8
+        raise ConfigError(
+            str(path), f"not UTF-8 text: byte {exc.start} is 0x{exc.object[exc.start]:02x}"
+        ) from exc
     for section, table in data.items():
         if not isinstance(table, dict):
             if section in CompanionConfig.model_fields:

@@ -28,7 +28,15 @@ from typing import Any, TextIO
 
 from landfall_eval.grading import kinematic_lower_bound_s, surface_class
 
-__all__ = ["EpisodeSpec", "EpisodeTimes", "ProcessSample", "run_episode"]
+__all__ = [
+    "EpisodeSpec",
+    "EpisodeTimes",
+    "JsonlTail",
+    "ProcessSample",
+    "free_port",
+    "run_episode",
+    "stop_process",
+]
 
 ROOT = Path(__file__).resolve().parent.parent
 TRAJECTORY_STEP_S = 1.0  # one trajectory point per simulated second
@@ -104,7 +112,7 @@ class ProcessSample:
         self.cpu_s = (int(fields[11]) + int(fields[12])) / self._tick  # utime + stime
 
 
-class _Tail:
+class JsonlTail:
     """Reads the JSON lines another process appends to a file, as they come (no line read twice)."""
 
     def __init__(self, path: Path) -> None:
@@ -133,13 +141,13 @@ class _Tail:
             self._fh.close()
 
 
-def _free_port(kind: int) -> int:
+def free_port(kind: int) -> int:
     with socket.socket(socket.AF_INET, kind) as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
 
 
-def _stop(proc: subprocess.Popen[bytes]) -> None:
+def stop_process(proc: subprocess.Popen[bytes]) -> None:
     if proc.poll() is None:
         proc.terminate()
         try:
@@ -192,7 +200,7 @@ def run_episode(
     )
     for stale in (episode_log, comp_log):
         stale.unlink(missing_ok=True)
-    udp, tcp = _free_port(socket.SOCK_DGRAM), _free_port(socket.SOCK_STREAM)
+    udp, tcp = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_STREAM)
     sim_cmd = [
         sys.executable, "-m", "simbridge", "--scenario", spec.scenario, "--seed", str(spec.seed),
         "--autopilot", spec.autopilot, "--weather", spec.weather, "--speed", f"{times.speed:g}",
@@ -233,7 +241,7 @@ def run_episode(
     with comp_log.open("wb") as fh:
         comp = subprocess.Popen(comp_cmd, cwd=ROOT, env=env, stdout=fh, stderr=subprocess.STDOUT)
     usage = ProcessSample(comp.pid)
-    tail = _Tail(episode_log)
+    tail = JsonlTail(episode_log)
     states: list[dict[str, Any]] = []
     touchdown: dict[str, Any] | None = None
     takeover: dict[str, Any] | None = None
@@ -292,7 +300,7 @@ def run_episode(
     finally:
         usage.sample()
         for proc in (comp, sim):
-            _stop(proc)
+            stop_process(proc)
         if on_line is not None:
             for line in comp_log.read_text(errors="replace").splitlines()[shown:]:
                 on_line("companion", line)

@@ -276,6 +276,15 @@ def test_load_config_unknown_file_option_lists_all_allowed(in_tmp: Path) -> None
     assert err.problem == "unknown option (allowed: level)"
 
 
+def test_a_config_file_that_is_not_utf8_is_a_config_error(in_tmp: Path) -> None:
+    """Found by atheris: a Latin-1 file used to escape as a UnicodeDecodeError."""
+    path = Path("companion.toml")
+    path.write_bytes("[recovery]\n# \u00e9t\u00e9\nmax_rounds = 3\n".encode("latin-1"))
+    err = error_of(path)
+    assert err.option == "companion.toml"
+    assert err.problem == "not UTF-8 text: byte 13 is 0xe9"
+
+
 def test_load_config_missing_file_names_the_file(tmp_path: Path) -> None:
     missing = tmp_path / "nope.toml"
     err = error_of(missing)
