@@ -34,7 +34,7 @@ from typing import Any
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from landfall_eval.episode import JsonlTail, free_port, stop_process  # noqa: E402
+from landfall_eval.episode import JsonlTail, free_port, sped_up_env, stop_process  # noqa: E402
 
 RSS_GROWTH_GOAL = 0.10
 EPISODE_WALL_S = 300.0  # one landing at 4x takes 20-60 s of wall time
@@ -60,6 +60,13 @@ def proc_figures(pid: int) -> tuple[float, int, int]:
     rss = int(re.search(r"VmRSS:\s+(\d+)", status).group(1)) / 1024  # type: ignore[union-attr]
     threads = int(re.search(r"Threads:\s+(\d+)", status).group(1))  # type: ignore[union-attr]
     return rss, len(os.listdir(f"/proc/{pid}/fd")), threads
+
+
+def _slope(ys: list[float]) -> float:
+    """Least-squares slope of ``ys`` against their index (0 for fewer than two points)."""
+    if len(ys) < 2:
+        return 0.0
+    return float(statistics.linear_regression(range(len(ys)), ys).slope)
 
 
 def _send_alarm(udp: int, reason: str, deadline: float) -> subprocess.CompletedProcess[str]:
@@ -138,7 +145,7 @@ def main(argv: list[str] | None = None) -> int:
     udp, tcp = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_STREAM)
     comp_cmd = [sys.executable, "-m", "companion", "--mavlink", f"udp:{udp}", "--sensors",
                 f"127.0.0.1:{tcp}", "--record", str(out / "record")]  # fmt: skip
-    env = dict(os.environ, LANDFALL_SENSORS_MAX_FRAME_AGE_S=str(2.0 * args.speed))
+    env = {**os.environ, **sped_up_env(args.speed)}
     comp_log = out / "companion.log"
     t_start = time.monotonic()
     with comp_log.open("wb") as fh:
@@ -186,7 +193,13 @@ def main(argv: list[str] | None = None) -> int:
             "after_last": last.fds,
             "max": max(s.fds for s in samples),
         },
-        "threads": {"start": start_threads, "after_first": first.threads, "after_last": last.threads},
+        "threads": {
+            "start": start_threads,
+            "after_first": first.threads,
+            "after_last": last.threads,
+            "max": max(s.threads for s in samples),
+        },
+        "rss_slope_mb_per_episode": round(_slope([s.rss_mb for s in samples[1:]]), 4),
         "median_episode_wall_s": statistics.median(s.wall_s for s in samples),
         "wall_s": round(time.monotonic() - t_start, 1),
         "companion_exit_status": comp_rc,
@@ -204,7 +217,8 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"\n{safe}/{len(samples)} safe landings in one daemon lifetime ({summary['wall_s'] / 60:.1f} min); "
         f"RSS {first.rss_mb:.1f} MB after the first episode -> {last.rss_mb:.1f} MB after the last "
-        f"({growth:+.1%}, goal < {RSS_GROWTH_GOAL:.0%}); fds {first.fds} -> {last.fds}; threads "
+        f"({growth:+.1%}, goal < {RSS_GROWTH_GOAL:.0%}; trend after the first "
+        f"{summary['rss_slope_mb_per_episode']:+.3f} MB per episode); fds {first.fds} -> {last.fds}; threads "
         f"{first.threads} -> {last.threads}; companion exit status {comp_rc}; "
         f"{'goals met' if ok else 'GOALS NOT MET'} ({out / 'soak.json'})"
     )

@@ -149,10 +149,9 @@ class GroundFeed:
 
     def _rank_payload(self, body: dict[str, Any]) -> Payload:
         frame, self._last_frame = self._last_frame, None
-        order = body.get("order") or []
         candidates = body.get("candidates") or []
-        chosen = next((k for k in order if not candidates[k].get("fallback")), None) if candidates else None
-        head = {"stage": "rank", "chosen": chosen, **body}
+        chosen = body.get("chosen")  # the recovery's pick: the first of the order that is not a fallback
+        head = {"stage": "rank", **body}
         if frame is None or not candidates:
             return head
         boxes = [c["box"] for c in candidates]

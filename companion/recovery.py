@@ -289,8 +289,8 @@ class Recovery:
             await self._explore(blind=_lidar_silent(frame.lidar_frd))
             return False
         self._set(State.RANK)
-        ranking = await self._rank(candidates, frame)
-        choice = next((candidates[k] for k in ranking.order if not candidates[k].fallback), None)
+        ranking, chosen = await self._rank(candidates, frame)
+        choice = candidates[chosen] if chosen is not None else None
         if choice is None:
             await self._explore()
             return False
@@ -438,8 +438,10 @@ class Recovery:
             return quadrant_fallback(camera)
         return cands
 
-    async def _rank(self, candidates: list[Candidate], frame: Any) -> Ranking:
-        """The reasoner's order of the candidates, from their crops (the configured context variant)."""
+    async def _rank(self, candidates: list[Candidate], frame: Any) -> tuple[Ranking, int | None]:
+        """The reasoner's order of the candidates, from their crops (the configured context variant),
+        and the one the vehicle flies to: the first in that order that is not a fallback crop (a
+        quadrant has no measured site). Both go to the record's ``rank`` event (``order``, ``chosen``)."""
         image = frame.image_rgb
         names: list[str] = []
         if image is None:
@@ -460,11 +462,13 @@ class Recovery:
                 cores=cores if pad_of(self.p.context) > 0 else None,
             )
             ranking = await self.reasoner.rank(request)
+        chosen = next((k for k in ranking.order if not candidates[k].fallback), None)
         self.record.record_event(
             "rank",
             {
                 "round": self.round,
                 "order": list(ranking.order),
+                "chosen": chosen,
                 "rationale": ranking.rationale,
                 "tier": ranking.tier,
                 "latency_s": ranking.latency_s,
@@ -473,7 +477,7 @@ class Recovery:
                 "candidates": [c.to_json() for c in candidates],
             },
         )
-        return ranking
+        return ranking, chosen
 
     async def _confirm(
         self, check: Any, frame: Any, target: tuple[float, float, float], choice: Candidate

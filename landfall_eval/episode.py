@@ -35,6 +35,7 @@ __all__ = [
     "ProcessSample",
     "free_port",
     "run_episode",
+    "sped_up_env",
     "stop_process",
 ]
 
@@ -141,6 +142,12 @@ class JsonlTail:
             self._fh.close()
 
 
+def sped_up_env(speed: float) -> dict[str, str]:
+    """The companion's environment for a simulation at ``speed`` x: a frame's age is counted in
+    simulated seconds, so the default 2 s tolerance becomes 2 s of wall clock at any speed."""
+    return {"LANDFALL_SENSORS_MAX_FRAME_AGE_S": str(2.0 * speed)}
+
+
 def free_port(kind: int) -> int:
     with socket.socket(socket.AF_INET, kind) as s:
         s.bind(("127.0.0.1", 0))
@@ -215,12 +222,7 @@ def run_episode(
     ]  # fmt: skip
     if config_path is not None:
         comp_cmd += ["--config", str(config_path)]
-    env = dict(
-        os.environ,
-        LANDFALL_REASONER_CONTEXT=spec.context,
-        # a frame's age is counted in simulated seconds: at speed s, 2 s of wall-clock tolerance
-        LANDFALL_SENSORS_MAX_FRAME_AGE_S=str(2.0 * times.speed),
-    )
+    env = {**os.environ, "LANDFALL_REASONER_CONTEXT": spec.context, **sped_up_env(times.speed)}
     entry: dict[str, Any] = {
         "id": spec.id,
         "kind": spec.kind,

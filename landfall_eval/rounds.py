@@ -73,7 +73,9 @@ def _rank(ev: dict[str, Any], session: Path, fig_dir: Path) -> str:
     r = int(ev.get("round", 0))
     candidates = [c for c in ev.get("candidates") or [] if isinstance(c, dict)]
     order = [k for k in ev.get("order") or [] if isinstance(k, int) and 0 <= k < len(candidates)]
-    chosen = next((k for k in order if not candidates[k].get("fallback")), None)
+    chosen = ev.get("chosen")  # the recovery's pick, recorded with the ranking
+    if not (isinstance(chosen, int) and 0 <= chosen < len(candidates)):
+        chosen = None
     name = ""
     frame = cv2.imread(str(session / f"round{r:02d}-acquire.jpg"))
     if frame is not None and candidates:

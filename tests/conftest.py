@@ -17,6 +17,7 @@ import pytest
 
 os.environ.setdefault("MAVLINK20", "1")
 
+from landfall_eval.episode import sped_up_env
 from simbridge.world.camera import Frame
 from simbridge.world.live import LiveWorld
 from tests.mavclient import MavClient
@@ -183,8 +184,7 @@ def start_rig(start_sim: Callable[..., SimProcess], tmp_path: Path) -> Iterator[
         cmd = [sys.executable, "-m", "companion", "--mavlink", f"udp:{port}", "--sensors",
                f"127.0.0.1:{to}", *(companion_args or [])]  # fmt: skip
         speed = float(sim_args[sim_args.index("--speed") + 1]) if "--speed" in sim_args else 1.0
-        # frame age is measured in simulated seconds: the same wall-clock tolerance at any speed
-        env = {"LANDFALL_SENSORS_MAX_FRAME_AGE_S": str(2.0 * speed), **(env or {})}
+        env = {**sped_up_env(speed), **(env or {})}
 
         def launch() -> tuple[subprocess.Popen[bytes], Path]:
             log = tmp_path / f"companion-{len(procs)}.log"

@@ -92,7 +92,7 @@ async def test_a_round_reaches_the_ground_station(broker: Callable[..., Broker])
         feed.alarm(Alarm(ReasonCode.GPS_SPOOFING, Criticality.HIGH, "GPS spoofing", (255, 190), 0.0), 0)
         feed.record_event("state", {"state": "rank", "round": 1})
         feed.save_image("round01-acquire", frame)
-        rank = {"round": 1, "order": [1, 0], "rationale": "site 1 is clear", "tier": "onboard",
+        rank = {"round": 1, "order": [1, 0], "chosen": 1, "rationale": "site 1 is clear", "tier": "onboard",
                 "latency_s": 0.01, "candidates": candidates()}  # fmt: skip
         feed.record_event("rank", rank)
         no_edge = {"edge_distance_m": math.inf, "roughness_m": 0.02}  # JSON has no inf: null

@@ -302,7 +302,7 @@ def test_rounds_section_reads_a_record_without_images_and_skips_torn_lines(tmp_p
     session.mkdir(parents=True)
     first = {"box": [0, 0, 10, 10], "fallback": False, "geometry": {"height_above_m": 22.0}}
     second = {"box": [20, 0, 30, 10], "fallback": False, "geometry": {"landable_area_m2": 800.0}}
-    rank = {"kind": "rank", "round": 1, "order": [1, 0], "tier": "onboard", "latency_s": 0.012,
+    rank = {"kind": "rank", "round": 1, "order": [1, 0], "chosen": 1, "tier": "onboard", "latency_s": 0.012,
             "rationale": "site 1 <clear>", "candidates": [first, second]}  # fmt: skip
     outcome = {"kind": "outcome", "state": "landed", "rounds": 1, "reason": "landed"}
     lines = [json.dumps(rank), '{"kind": "confirm", "round": 1, "acc', json.dumps(outcome)]

@@ -5,6 +5,7 @@ The 50-episode figures are in the README (benchmarks/soak.py)."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -32,7 +33,8 @@ def test_one_daemon_lands_every_episode_across_simulator_resets_and_keeps_its_fd
     assert {s["autopilot"] for s in summary["samples"]} == {"px4", "ardupilot"}
     assert log.count("recovery ended: landed") == 4  # one daemon, four recoveries
     assert summary["fds"]["after_last"] <= summary["fds"]["after_first"], res.stdout  # sockets closed
-    assert summary["threads"]["after_last"] <= summary["threads"]["after_first"], res.stdout
+    # threads: the asyncio worker pool grows on demand up to cpu_count + 4, and no further
+    assert summary["threads"]["max"] <= summary["threads"]["start"] + (os.cpu_count() or 1) + 4
     assert summary["companion_exit_status"] == 0
     assert "safe landings in one daemon lifetime" in res.stdout
     assert res.returncode == (0 if summary["goals_met"] else 1)
