@@ -42,8 +42,12 @@ class TcpRelay:
             upstream.settimeout(None)
             with self._lock:
                 self._conns += [client, upstream]
-            for a, b in ((client, upstream), (upstream, client)):
-                threading.Thread(target=self._pump, args=(a, b), daemon=True).start()
+            threading.Thread(target=self._pump, args=(client, upstream), daemon=True).start()
+            threading.Thread(target=self._downstream, args=(upstream, client), daemon=True).start()
+
+    def _downstream(self, src: socket.socket, dst: socket.socket) -> None:
+        """simbridge -> companion; a subclass may rewrite what passes."""
+        self._pump(src, dst)
 
     def _pump(self, src: socket.socket, dst: socket.socket) -> None:
         with contextlib.suppress(OSError):
@@ -69,6 +73,40 @@ class TcpRelay:
     def close(self) -> None:
         self.cut()
         self._listener.close()
+
+
+class PartDroppingRelay(TcpRelay):
+    """A sensor-stream relay that takes the named parts out of every frame response, as simbridge
+    does for a sensor that failed (docs/sensor-stream.md: a part asked for but not produced is absent
+    from ``parts``). ``drop={"image"}``: a dead camera."""
+
+    def __init__(self, target_port: int, drop: set[str]) -> None:
+        self.drop = drop
+        self.dropped = 0
+        super().__init__(target_port)
+
+    def _downstream(self, src: socket.socket, dst: socket.socket) -> None:
+        import json
+
+        reader = src.makefile("rb")
+        with contextlib.suppress(OSError, ValueError):
+            while line := reader.readline():
+                header = json.loads(line)
+                kept: list[dict[str, object]] = []
+                body = []
+                for part in header.get("parts") or []:
+                    data = reader.read(int(part["nbytes"]))
+                    if part["name"] in self.drop:
+                        self.dropped += 1
+                        continue
+                    kept.append(part)
+                    body.append(data)
+                if "parts" in header:
+                    header["parts"] = kept
+                dst.sendall(json.dumps(header).encode() + b"\n" + b"".join(body))
+        for s in (src, dst):
+            with contextlib.suppress(OSError):
+                s.shutdown(socket.SHUT_RDWR)
 
 
 class LossyUdpRelay:

@@ -34,6 +34,19 @@ def _wait_for_companion(rig: Rig) -> None:
     rig.wait_log("sensor stream connected", timeout_s=60)
 
 
+def _alarm_and_land(
+    rig: Rig, reason: str, criticality: str, *, timeout_s: float, ended: str = "recovery ended"
+) -> dict[str, object]:
+    """Once the companion takes alarms: one alarm, accepted; simbridge's touchdown event; then the
+    companion's own word that the recovery ended (``ended``: a prefix of that log line)."""
+    _wait_for_companion(rig)
+    out = rig.alarm_accepted("--reason", reason, "--criticality", criticality)
+    assert out.returncode == 0, out.stdout + out.stderr
+    td = _wait_touchdown(rig, timeout_s=timeout_s)
+    rig.wait_log(ended, timeout_s=60)
+    return td
+
+
 @pytest.mark.parametrize(
     ("autopilot", "scenario", "roof_ne", "roof_height_m"),
     [("px4", "scenario1", (0.0, -27.0), 22.0), ("ardupilot", "scenario2", None, None)],
@@ -392,11 +405,7 @@ def test_a_model_taken_in_by_land_here_painted_on_the_cluttered_roof_cannot_land
         )
         record = tmp_path / "record"
         rig = _lvlm_rig(start_rig, tmp_path, server.base_url, record)
-        _wait_for_companion(rig)
-        out = rig.alarm_accepted("--reason", "GPS spoofing", "--criticality", "low")
-        assert out.returncode == 0, out.stdout + out.stderr
-        td = _wait_touchdown(rig, timeout_s=300)
-        rig.wait_log("recovery ended", timeout_s=60)
+        td = _alarm_and_land(rig, "GPS spoofing", "low", timeout_s=300, ended="recovery ended")
     finally:
         server.close()
     assert td["safe"] is True, (td, rig.log_text()[-3000:])
@@ -440,11 +449,7 @@ def test_an_lvlm_fault_storm_falls_back_to_the_onboard_tier_and_lands(
         )
         record = tmp_path / "record"
         rig = _lvlm_rig(start_rig, tmp_path, server.base_url, record)
-        _wait_for_companion(rig)
-        out = rig.alarm_accepted("--reason", "GPS spoofing", "--criticality", "high")
-        assert out.returncode == 0, out.stdout + out.stderr
-        td = _wait_touchdown(rig, timeout_s=300)
-        rig.wait_log("recovery ended", timeout_s=60)
+        td = _alarm_and_land(rig, "GPS spoofing", "high", timeout_s=300, ended="recovery ended")
     finally:
         server.close()
     assert td["surface"] == "rooftop_clear", (td, rig.log_text()[-3000:])
@@ -733,3 +738,40 @@ def test_the_signed_link_refuses_forged_replayed_and_foreign_alarms_and_leaks_no
     for where, text in texts.items():
         for secret in secrets:
             assert secret not in text, f"a secret is in {where}"
+
+
+def test_a_dead_camera_lands_on_the_lidar_alone(start_rig: Callable[..., Rig], tmp_path: Path) -> None:
+    """Every frame arrives without its camera image (the part is absent, as simbridge sends a failed
+    sensor's). Surface ID runs on the LiDAR, the ranking is Surface ID's own order and each
+    confirmation is the LiDAR check alone, all said so in the record; the vehicle lands on the
+    clear roof."""
+    from tests.relay import PartDroppingRelay
+
+    relays: list[PartDroppingRelay] = []
+
+    def via(port: int) -> int:
+        relays.append(PartDroppingRelay(port, {"image"}))
+        return relays[-1].port
+
+    record = tmp_path / "record"
+    try:
+        rig = start_rig(
+            ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "4"],
+            ["--record", str(record)],
+            sensors_via=via,
+        )
+        td = _alarm_and_land(rig, "camera failure", "high", timeout_s=200, ended="recovery ended: landed")
+    finally:
+        for r in relays:
+            r.close()
+    assert td["surface"] == "rooftop_clear", (td, rig.log_text()[-3000:])
+    assert td["safe"] is True
+    assert relays[0].dropped >= 2  # an image taken out of every frame asked for
+    events = _events(record)
+    ranks = [e for e in events if e["kind"] == "rank"]
+    confirms = [e for e in events if e["kind"] == "confirm"]
+    assert ranks
+    assert confirms
+    assert all(r["tier"] == "surface-id" and r["rationale"].startswith("no camera image") for r in ranks)
+    assert all(c["tier"] == "site-check" and c["image"] == "" for c in confirms)
+    assert "Traceback" not in rig.log_text()
