@@ -240,7 +240,10 @@ class VehicleController:
         if self.flavour.needs_stream:
             t0 = time.monotonic()
             while time.monotonic() - t0 < 1.2:  # PX4: >2 Hz for about 1 s before OFFBOARD
-                await self.tm.wait_update(5.0)
+                try:
+                    await self.tm.wait_update(5.0)
+                except TimeoutError:
+                    raise TelemetryLost("no LOCAL_POSITION_NED for 5 s while engaging") from None
         await self.set_mode(Mode.GUIDED)
         self.set_target(n, e, d)
 

@@ -267,23 +267,30 @@ class Companion:
         """Raise alarms from autopilot signals: battery critical, failsafe text, GPS fix lost."""
         while True:
             await asyncio.sleep(1.0)
-            s = self.tm.state
-            if not s.armed or s.landed_state == 1:
-                continue
-            if self._watch_battery_pct is not None and s.battery_pct < self._watch_battery_pct:
-                self._own_alarm(ReasonCode.LOW_BATTERY, Criticality.HIGH, f"battery {s.battery_pct:.0f} %")
-            new_texts = self.tm.texts[self._texts_seen :]
-            self._texts_seen = len(self.tm.texts)
-            if self._watch_failsafe:
-                for _, _, text in new_texts:
-                    if "failsafe" in text.lower():
-                        self._own_alarm(ReasonCode.FAILSAFE, Criticality.HIGH, text)
-            if self._watch_gps and s.gps_fix >= 0:
-                if s.gps_fix >= 3:
-                    self._gps_was_ok = True
-                elif self._gps_was_ok:
-                    self._own_alarm(ReasonCode.GPS_LOST, Criticality.CRITICAL, "GPS fix lost")
-                    self._gps_was_ok = False
+            self.watch_once()
+
+    def watch_once(self) -> None:
+        """One look at the autopilot's signals (every second in flight)."""
+        s = self.tm.state
+        # texts counted by a running total: ``tm.texts`` keeps only the last 50 (an index into it
+        # would stop seeing new ones after the 50th); what came while on the ground is passed over
+        fresh = self.tm.texts_received - self._texts_seen
+        self._texts_seen = self.tm.texts_received
+        new_texts = self.tm.texts[-fresh:] if fresh > 0 else []
+        if not s.armed or s.landed_state == 1:
+            return
+        if self._watch_battery_pct is not None and s.battery_pct < self._watch_battery_pct:
+            self._own_alarm(ReasonCode.LOW_BATTERY, Criticality.HIGH, f"battery {s.battery_pct:.0f} %")
+        if self._watch_failsafe:
+            for _, _, text in new_texts:
+                if "failsafe" in text.lower():
+                    self._own_alarm(ReasonCode.FAILSAFE, Criticality.HIGH, text)
+        if self._watch_gps and s.gps_fix >= 0:
+            if s.gps_fix >= 3:
+                self._gps_was_ok = True
+            elif self._gps_was_ok:
+                self._own_alarm(ReasonCode.GPS_LOST, Criticality.CRITICAL, "GPS fix lost")
+                self._gps_was_ok = False
 
     def _own_alarm(self, code: ReasonCode, criticality: Criticality, text: str) -> None:
         result = self.raise_alarm(Alarm(code, criticality, text, (0, 0), time.monotonic()))

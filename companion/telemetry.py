@@ -45,7 +45,8 @@ class TelemetryCache:
     def __init__(self, vehicle_system_id: int = 0) -> None:
         self.state = VehicleState(system_id=vehicle_system_id)
         self._update = asyncio.Event()
-        self.texts: list[tuple[float, int, str]] = []  # (monotonic, severity, text) from the autopilot
+        self.texts: list[tuple[float, int, str]] = []  # (monotonic, severity, text): the last 50
+        self.texts_received = 0  # every STATUSTEXT from the autopilot so far (``texts`` keeps the last 50)
 
     def _stamp(self, part: str) -> None:
         self.state.stamps[part] = time.monotonic()
@@ -108,6 +109,7 @@ class TelemetryCache:
         elif kind == "STATUSTEXT":
             self.texts.append((time.monotonic(), int(msg.severity), str(msg.text)))
             del self.texts[:-50]
+            self.texts_received += 1
 
     async def wait_update(self, timeout_s: float) -> None:
         """Wait for the next position update; TimeoutError if none comes in ``timeout_s``."""

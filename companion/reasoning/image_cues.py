@@ -229,7 +229,8 @@ class ImageCues:
         if name == "vegetation":
             return f"vegetation ({100 * self.vegetation_share:.0f} %)"
         if name == "markings":
-            return f"lane markings ({self.lane_lines} painted lines: a road stays risky even when empty)"
+            lines = "1 painted line" if self.lane_lines == 1 else f"{self.lane_lines} painted lines"
+            return f"lane markings ({lines}: a road stays risky even when empty)"
         if name == "raised":
             # A few objects on a road are vehicles; many of them (clutter's share) are clutter, whatever
             # pipes running across them look like.

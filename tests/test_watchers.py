@@ -1,0 +1,58 @@
+"""The daemon's own alarm sources (battery, failsafe STATUSTEXT, GPS), fed real MAVLink frames through
+the companion's receive path."""
+
+from __future__ import annotations
+
+import logging
+
+import pytest
+from pymavlink.dialects.v20 import common as mavlink2
+
+from companion.daemon import Companion
+
+AUTOPILOT = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
+ADDR = ("127.0.0.1", 14580)
+
+
+def _feed(c: Companion, *msgs: object) -> None:
+    c.link.datagram_received(b"".join(m.pack(AUTOPILOT) for m in msgs), ADDR)  # type: ignore[attr-defined]
+
+
+def _flying() -> Companion:
+    c = Companion(mavlink_url="udp:14550", sensors=None, watch_battery_pct=None)
+    _feed(
+        c,
+        AUTOPILOT.heartbeat_encode(2, 12, 128 | 29, 6 << 16 | 4 << 24, 4),  # PX4, armed
+        AUTOPILOT.extended_sys_state_encode(0, 2),  # in the air
+    )
+    return c
+
+
+def test_a_failsafe_text_after_fifty_others_still_raises_an_alarm(caplog: pytest.LogCaptureFixture) -> None:
+    """The autopilot's texts are kept 50 deep; the watcher used to index into that list and went deaf
+    once it was full (found in review). Now it counts every text received."""
+    c = _flying()
+    caplog.set_level(logging.INFO)
+    for k in range(120):
+        _feed(c, AUTOPILOT.statustext_encode(6, f"Mode change {k}".encode()))
+        if k % 7 == 0:
+            c.watch_once()
+    c.watch_once()
+    assert "watcher alarm" not in caplog.text
+    _feed(c, AUTOPILOT.statustext_encode(2, b"Failsafe: offboard lost, AUTO.LOITER"))
+    c.watch_once()
+    assert "watcher alarm 'Failsafe: offboard lost, AUTO.LOITER'" in caplog.text
+    caplog.clear()
+    c.watch_once()  # seen once, raised once
+    assert "watcher alarm" not in caplog.text
+
+
+def test_texts_that_came_on_the_ground_are_passed_over(caplog: pytest.LogCaptureFixture) -> None:
+    c = _flying()
+    caplog.set_level(logging.INFO)
+    _feed(c, AUTOPILOT.extended_sys_state_encode(0, 1))  # landed
+    _feed(c, AUTOPILOT.statustext_encode(2, b"Failsafe: battery low"))
+    c.watch_once()
+    _feed(c, AUTOPILOT.extended_sys_state_encode(0, 2))  # airborne again
+    c.watch_once()
+    assert "watcher alarm" not in caplog.text
