@@ -34,7 +34,7 @@ from typing import Any
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from landfall_eval.episode import JsonlTail, free_port, sped_up_env, stop_process  # noqa: E402
+from landfall_eval.episode import JsonlTail, free_port, send_alarm, sped_up_env, stop_process  # noqa: E402
 
 RSS_GROWTH_GOAL = 0.10
 EPISODE_WALL_S = 300.0  # one landing at 4x takes 20-60 s of wall time
@@ -69,16 +69,6 @@ def _slope(ys: list[float]) -> float:
     return float(statistics.linear_regression(range(len(ys)), ys).slope)
 
 
-def _send_alarm(udp: int, reason: str, deadline: float) -> subprocess.CompletedProcess[str]:
-    cmd = [sys.executable, str(ROOT / "trigger_alarm.py"), "--mavlink", f"udpout:127.0.0.1:{udp}",
-           "--reason", reason, "--criticality", "high"]  # fmt: skip
-    while True:  # "refused for now" until the new autopilot's telemetry is in
-        res = subprocess.run(cmd, capture_output=True, text=True, timeout=30, cwd=ROOT)
-        if res.returncode == 0 or time.monotonic() > deadline:
-            return res
-        time.sleep(0.5)
-
-
 def _log_count(path: Path, text: str) -> int:
     return path.read_text(errors="replace").count(text)
 
@@ -101,7 +91,7 @@ def run_episode(k: int, comp: subprocess.Popen[bytes], comp_log: Path, udp: int,
     touchdown: dict[str, Any] | None = None
     outcome = "landed"
     try:
-        res = _send_alarm(udp, f"soak alarm {k}", time.monotonic() + 90)
+        res = send_alarm(udp, f"soak alarm {k}", "high", time.monotonic() + 90)
         if res.returncode != 0:
             outcome = "alarm refused: " + (res.stdout or res.stderr).strip()[:120]
         while outcome == "landed":

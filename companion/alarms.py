@@ -12,7 +12,9 @@ from __future__ import annotations
 import enum
 import math
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 MAV_CMD_USER_1 = 31010
 ALARM_TEXT_PREFIX = "ALARM: "
@@ -48,6 +50,27 @@ class Alarm:
     reason: str
     source: tuple[int, int]  # (system, component) of whoever raised it; (0, 0) for our own watchers
     received_monotonic: float
+
+    def to_json(self) -> dict[str, Any]:
+        """What the flight record and the ground feed say of an alarm (``from_json`` reads it back)."""
+        return {
+            "reason": self.reason,
+            "code": self.code.name.lower(),
+            "criticality": self.criticality.name.lower(),
+            "source": list(self.source),
+        }
+
+    @staticmethod
+    def from_json(row: Mapping[str, Any]) -> Alarm:
+        """An alarm from ``to_json``'s fields, as received now; names it does not know give OTHER and
+        HIGH, a missing reason the code's name. The source is (0, 0): the daemon raises it itself."""
+        try:
+            code = ReasonCode[str(row.get("code", "other")).upper()]
+            criticality = Criticality[str(row.get("criticality", "high")).upper()]
+        except KeyError:
+            code, criticality = ReasonCode.OTHER, Criticality.HIGH
+        reason = str(row.get("reason") or code.name.lower())[:50]
+        return Alarm(code, criticality, reason, (0, 0), time.monotonic())
 
     @staticmethod
     def from_command(param1: float, param2: float, text: str, source: tuple[int, int]) -> Alarm:

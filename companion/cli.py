@@ -9,12 +9,11 @@ import logging
 import os
 import signal
 import sys
-import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from companion.alarms import Alarm, Criticality, ReasonCode
+from companion.alarms import Alarm, Criticality
 from companion.config import CompanionConfig, ConfigError, load_config
 from companion.daemon import Companion
 from companion.ground import GroundFeed, GroundParams
@@ -82,15 +81,7 @@ def _depth_source(cfg: CompanionConfig) -> DepthSource:
 def _interrupted(record: Any) -> Alarm | None:
     """The alarm whose recovery the previous session never finished (see Companion._resume)."""
     pending = record.interrupted_alarm() if record is not None else None
-    if pending is None:
-        return None
-    try:
-        code = ReasonCode[str(pending.get("code", "other")).upper()]
-        criticality = Criticality[str(pending.get("criticality", "high")).upper()]
-    except KeyError:
-        code, criticality = ReasonCode.OTHER, Criticality.HIGH
-    reason = str(pending.get("reason") or code.name.lower())[:50]
-    return Alarm(code, criticality, reason, (0, 0), time.monotonic())
+    return Alarm.from_json(pending) if pending is not None else None
 
 
 def _ground_feed(cfg: CompanionConfig) -> GroundFeed | None:

@@ -190,16 +190,13 @@ class VehicleController:
             self._log.warning("%s", self.takeover)
         self._target = None  # stop commanding at once
 
-    def _raise_interruption(self) -> None:
+    def check_interruption(self) -> None:
+        """Raise ``OperatorTakeover`` or ``AutopilotFailsafe`` if the latest heartbeat says so."""
         self._check_takeover()
         if self.takeover is not None:
             raise self.takeover
         if self.failsafe is not None:
             raise self.failsafe
-
-    def check_interruption(self) -> None:
-        """Raise ``OperatorTakeover`` or ``AutopilotFailsafe`` if the latest heartbeat says so."""
-        self._raise_interruption()
 
     async def await_link(self, timeout_s: float) -> float:
         """After ``TelemetryLost``: wait until LOCAL_POSITION_NED flows again and a heartbeat sent
@@ -263,7 +260,7 @@ class VehicleController:
         deadline = time.monotonic() + timeout_s
         err = math.inf
         while True:
-            self._raise_interruption()
+            self.check_interruption()
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 raise TargetTimeout((n, e, d), err, timeout_s)
@@ -285,7 +282,7 @@ class VehicleController:
         self._engaged_mode = self.flavour.modes[Mode.LAND]
         deadline = time.monotonic() + timeout_s
         while self.tm.state.armed and self.tm.state.landed_state != 1:
-            self._raise_interruption()
+            self.check_interruption()
             if time.monotonic() > deadline:
                 raise ControlError(f"no touchdown within {timeout_s:.0f} s of switching to land")
             with contextlib.suppress(TimeoutError):

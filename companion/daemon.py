@@ -136,15 +136,7 @@ class Companion:
             self.ground.alarm(alarm, result)
         if result == RESULT_ACCEPTED and self.record is not None:
             # what a restarted daemon resumes when this recovery never records its outcome
-            self.record.record_event(
-                "alarm",
-                {
-                    "reason": alarm.reason,
-                    "code": alarm.code.name.lower(),
-                    "criticality": alarm.criticality.name.lower(),
-                    "source": list(alarm.source),
-                },
-            )
+            self.record.record_event("alarm", alarm.to_json())
         return result
 
     async def _resume(self, alarm: Alarm) -> None:

@@ -120,14 +120,7 @@ class GroundFeed:
     def alarm(self, alarm: Alarm, result: int) -> None:
         self.publish(
             "alarm",
-            {
-                "t": time.time(),
-                "reason": alarm.reason,
-                "code": alarm.code.name.lower(),
-                "criticality": alarm.criticality.name.lower(),
-                "source": list(alarm.source),
-                "result": RESULT_NAMES.get(result, str(result)),
-            },
+            {"t": time.time(), **alarm.to_json(), "result": RESULT_NAMES.get(result, str(result))},
         )
 
     # ------------------------------------------------------------------ Record protocol

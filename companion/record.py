@@ -52,7 +52,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["EVENTS_FILE", "REDACTED", "FlightRecord", "NullRecord", "open_record"]
+__all__ = ["EVENTS_FILE", "REDACTED", "FlightRecord", "NullRecord", "open_record", "read_events"]
 
 EVENTS_FILE = "events.jsonl"
 REDACTED = "<redacted>"
@@ -160,6 +160,20 @@ def _mtime_ns(path: Path) -> int:
         return 0
 
 
+def read_events(session_dir: Path) -> list[dict[str, Any]]:
+    """A session's events in order; a torn last line (a killed writer) and lines that are not JSON
+    objects are skipped."""
+    events = []
+    for line in (session_dir / EVENTS_FILE).read_text(encoding="utf-8", errors="replace").splitlines():
+        try:
+            row = json.loads(line)
+        except json.JSONDecodeError:
+            continue
+        if isinstance(row, dict):
+            events.append(row)
+    return events
+
+
 class FlightRecord:
     """One session's flight record under ``root/<session>/``, bounded to ``max_mb`` MiB for all of ``root``.
 
@@ -229,13 +243,7 @@ class FlightRecord:
         if not others:
             return None
         pending: dict[str, Any] | None = None
-        for line in (others[-1] / EVENTS_FILE).read_text(encoding="utf-8", errors="replace").splitlines():
-            try:
-                row = json.loads(line)
-            except json.JSONDecodeError:
-                continue
-            if not isinstance(row, dict):
-                continue
+        for row in read_events(others[-1]):
             if row.get("kind") == "alarm":
                 pending = row
             elif row.get("kind") == "outcome":

@@ -35,6 +35,7 @@ __all__ = [
     "ProcessSample",
     "free_port",
     "run_episode",
+    "send_alarm",
     "sped_up_env",
     "stop_process",
 ]
@@ -171,10 +172,14 @@ def _record_events(record_dir: Path) -> list[dict[str, Any]]:
     return events
 
 
-def _send_alarm(spec: EpisodeSpec, udp_port: int, deadline: float) -> subprocess.CompletedProcess[str]:
+def send_alarm(
+    udp_port: int, reason: str, criticality: str, deadline: float
+) -> subprocess.CompletedProcess[str]:
+    """``trigger_alarm.py`` to the companion on ``udp_port``, again every 0.5 s until it is accepted or
+    ``deadline`` (monotonic) has passed; the last try's result."""
     cmd = [
         sys.executable, str(ROOT / "trigger_alarm.py"), "--mavlink", f"udpout:127.0.0.1:{udp_port}",
-        "--reason", spec.reason, "--criticality", spec.criticality,
+        "--reason", reason, "--criticality", criticality,
     ]  # fmt: skip
     while True:  # the first telemetry may still be on its way: "refused for now" until it is in
         res = subprocess.run(cmd, capture_output=True, text=True, timeout=30, cwd=ROOT)
@@ -256,7 +261,7 @@ def run_episode(
             if time.monotonic() - t_wall > times.start_wall_s:
                 raise _EpisodeError(f"no sensor stream after {times.start_wall_s:.0f} s")
             time.sleep(0.2)
-        res = _send_alarm(spec, udp, time.monotonic() + 30.0)
+        res = send_alarm(udp, spec.reason, spec.criticality, time.monotonic() + 30.0)
         if on_line is not None:
             on_line("alarm", (res.stdout or res.stderr).strip())
         if res.returncode != 0:

@@ -5,7 +5,6 @@ each confirmation the close-up the reasoner judged and its verdict."""
 from __future__ import annotations
 
 import html
-import json
 import shutil
 from pathlib import Path
 from typing import Any
@@ -13,6 +12,7 @@ from typing import Any
 import cv2
 
 from companion.ground import annotated_thumbnail
+from companion.record import EVENTS_FILE, read_events
 
 FRAME_WIDTH_PX = 640
 
@@ -23,18 +23,10 @@ def _e(x: object) -> str:
 
 def record_events(record_dir: Path) -> tuple[Path, list[dict[str, Any]]] | None:
     """The newest session under ``record_dir`` and its events (torn or foreign lines skipped)."""
-    sessions = sorted(p.parent for p in record_dir.glob("*/events.jsonl"))
+    sessions = sorted(p.parent for p in record_dir.glob(f"*/{EVENTS_FILE}"))
     if not sessions:
         return None
-    events = []
-    for line in (sessions[-1] / "events.jsonl").read_text(errors="replace").splitlines():
-        try:
-            row = json.loads(line)
-        except json.JSONDecodeError:
-            continue
-        if isinstance(row, dict):
-            events.append(row)
-    return sessions[-1], events
+    return sessions[-1], read_events(sessions[-1])
 
 
 def rounds_html(record_dir: Path, fig_dir: Path) -> str:

@@ -34,14 +34,37 @@ def _wait_for_companion(rig: Rig) -> None:
     rig.wait_log("sensor stream connected", timeout_s=60)
 
 
+def _via(relays: list[Any], make: Callable[[int], Any]) -> Callable[[int], int]:
+    """A ``sensors_via`` / ``mavlink_via`` for ``start_rig``: a relay ``make(port)`` in front of the
+    port, kept in ``relays`` for the test to drive and close."""
+
+    def via(port: int) -> int:
+        relays.append(make(port))
+        return int(relays[-1].port)
+
+    return via
+
+
+def _clean_relay(port: int) -> Any:
+    """A MAVLink relay with no losses, until blacked out."""
+    from tests.relay import LossyUdpRelay
+
+    return LossyUdpRelay(port, drop=0.0, duplicate=0.0, reorder=0.0, corrupt=0.0)
+
+
+def _raise_alarm(rig: Rig, reason: str, criticality: str) -> None:
+    """Once the companion takes alarms: one alarm, accepted."""
+    _wait_for_companion(rig)
+    out = rig.alarm_accepted("--reason", reason, "--criticality", criticality)
+    assert out.returncode == 0, out.stdout + out.stderr
+
+
 def _alarm_and_land(
     rig: Rig, reason: str, criticality: str, *, timeout_s: float, ended: str = "recovery ended"
 ) -> dict[str, object]:
     """Once the companion takes alarms: one alarm, accepted; simbridge's touchdown event; then the
     companion's own word that the recovery ended (``ended``: a prefix of that log line)."""
-    _wait_for_companion(rig)
-    out = rig.alarm_accepted("--reason", reason, "--criticality", criticality)
-    assert out.returncode == 0, out.stdout + out.stderr
+    _raise_alarm(rig, reason, criticality)
     td = _wait_touchdown(rig, timeout_s=timeout_s)
     rig.wait_log(ended, timeout_s=60)
     return td
@@ -112,9 +135,7 @@ def test_operator_takeover_stops_the_companion(start_rig: Callable[..., Rig]) ->
     from pymavlink import mavutil
 
     rig = start_rig(["--scenario", "scenario1", "--autopilot", "ardupilot", "--speed", "2"])
-    _wait_for_companion(rig)
-    out = rig.alarm_accepted("--reason", "sensor failure", "--criticality", "low")
-    assert out.returncode == 0, out.stdout + out.stderr
+    _raise_alarm(rig, "sensor failure", "low")
     deadline = time.monotonic() + 60
     while not [e for e in rig.sim.events("mode") if e["mode"] == "GUIDED"]:
         assert time.monotonic() < deadline, rig.log_text()
@@ -158,9 +179,7 @@ def test_unreachable_target_ends_the_round_and_the_budget_still_lands(start_rig:
             raise AssertionError("geofence parameter not set")
     finally:
         gcs.close()
-    _wait_for_companion(rig)
-    out = rig.alarm_accepted("--reason", "storm", "--criticality", "critical")
-    assert out.returncode == 0, out.stdout + out.stderr
+    _raise_alarm(rig, "storm", "critical")
     _wait_touchdown(rig, timeout_s=200)
     log = rig.wait_log("recovery ended")
     assert log.count("target not reached") == 3  # one per round of the critical budget
@@ -219,9 +238,7 @@ def test_nothing_flat_explores_then_lands_when_the_budget_runs_out(
     scenario.write_text(PITCHED_WORLD)
     # 70 m up: room for one 15 m climb below the 90 m ceiling (recovery.explore_max_alt_m), then outward
     rig = start_rig(["--scenario", str(scenario), "--autopilot", "ardupilot", "--speed", "8"])
-    _wait_for_companion(rig)
-    out = rig.alarm_accepted("--reason", "storm", "--criticality", "critical")
-    assert out.returncode == 0, out.stdout + out.stderr
+    _raise_alarm(rig, "storm", "critical")
     td = _wait_touchdown(rig, timeout_s=200)
     log = rig.log_text()
     assert "no flat site in view: climbing 15 m" in log  # first a wider view ...
@@ -249,9 +266,7 @@ def test_out_of_lidar_range_descends_into_it_instead_of_climbing(
     scenario = tmp_path / "open_field.toml"
     scenario.write_text(OPEN_FIELD)
     rig = start_rig(["--scenario", str(scenario), "--autopilot", "px4", "--speed", "8"])
-    _wait_for_companion(rig)
-    out = rig.alarm_accepted("--reason", "GPS spoofing", "--criticality", "high")
-    assert out.returncode == 0, out.stdout + out.stderr
+    _raise_alarm(rig, "GPS spoofing", "high")
     td = _wait_touchdown(rig, timeout_s=200)
     log = rig.log_text()
     assert "LiDAR sees nothing, ground 125 m below: descending 55 m" in log
@@ -276,9 +291,7 @@ def test_an_lvlm_tier_flies_the_loop_and_a_lone_no_is_overridden(
         server.script("vlm", answer({"explanation": "birds on the roof", "decision": 0}), stage="confirm")
         record = tmp_path / "record"
         rig = _lvlm_rig(start_rig, tmp_path, server.base_url, record)
-        _wait_for_companion(rig)
-        out = rig.alarm_accepted("--reason", "sensor failure", "--criticality", "high")
-        assert out.returncode == 0, out.stdout + out.stderr
+        _raise_alarm(rig, "sensor failure", "high")
         td = _wait_touchdown(rig, timeout_s=200)
         assert td["surface"] == "rooftop_clear", (td, rig.log_text()[-3000:])
         assert td["safe"] is True
@@ -327,10 +340,7 @@ def test_a_cut_sensor_stream_holds_then_lands_at_the_best_site_measured(
     from tests.relay import TcpRelay
 
     relays: list[TcpRelay] = []
-
-    def via(port: int) -> int:
-        relays.append(TcpRelay(port))
-        return relays[-1].port
+    via = _via(relays, TcpRelay)
 
     record = tmp_path / "record"
     env = {"LANDFALL_RECOVERY_SENSOR_LOSS_S": "6", "LANDFALL_SENSORS_FRAME_TIMEOUT_S": "2"}
@@ -341,9 +351,7 @@ def test_a_cut_sensor_stream_holds_then_lands_at_the_best_site_measured(
             env=env,
             sensors_via=via,
         )
-        _wait_for_companion(rig)
-        out = rig.alarm_accepted("--reason", "camera driver crashed", "--criticality", "high")
-        assert out.returncode == 0, out.stdout + out.stderr
+        _raise_alarm(rig, "camera driver crashed", "high")
         rig.wait_log("site 0 roof")
         relays[0].cut()
         td = _wait_touchdown(rig, timeout_s=200)
@@ -370,9 +378,7 @@ def test_stale_frames_are_discarded_and_a_vehicle_with_no_fresh_frame_lands_wher
     record = tmp_path / "record"
     env = {"LANDFALL_SENSORS_MAX_FRAME_AGE_S": "0.01", "LANDFALL_RECOVERY_SENSOR_LOSS_S": "3"}
     rig = start_rig(["--scenario", "scenario1", "--speed", "4"], ["--record", str(record)], env=env)
-    _wait_for_companion(rig)
-    out = rig.alarm_accepted("--reason", "sensor failure", "--criticality", "high")
-    assert out.returncode == 0, out.stdout + out.stderr
+    _raise_alarm(rig, "sensor failure", "high")
     td = _wait_touchdown(rig, timeout_s=200)
     log = rig.wait_log("recovery ended", timeout_s=60)
     assert "no sensor frame (frame captured" in log
@@ -474,9 +480,7 @@ def test_a_companion_killed_mid_recovery_resumes_it_after_a_restart(
     rig = start_rig(
         ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "4"], ["--record", str(record)]
     )
-    _wait_for_companion(rig)
-    out = rig.alarm_accepted("--reason", "GPS spoofing", "--criticality", "high")
-    assert out.returncode == 0, out.stdout + out.stderr
+    _raise_alarm(rig, "GPS spoofing", "high")
     rig.wait_log("site 0 roof")
     rig.kill_and_restart_companion()
     log = rig.wait_log("recovery resumed after a restart", timeout_s=90)
@@ -507,16 +511,13 @@ def test_a_lossy_mavlink_link_still_lands(start_rig: Callable[..., Rig]) -> None
     from tests.relay import LossyUdpRelay
 
     relays: list[LossyUdpRelay] = []
-
-    def via(port: int) -> int:
-        relays.append(LossyUdpRelay(port, drop=0.2, duplicate=0.05, reorder=0.05, corrupt=0.02, seed=7))
-        return relays[-1].port
+    via = _via(
+        relays, lambda p: LossyUdpRelay(p, drop=0.2, duplicate=0.05, reorder=0.05, corrupt=0.02, seed=7)
+    )
 
     try:
         rig = start_rig(["--scenario", "scenario1", "--autopilot", "px4", "--speed", "2"], mavlink_via=via)
-        _wait_for_companion(rig)
-        out = rig.alarm_accepted("--reason", "GPS spoofing", "--criticality", "high")
-        assert out.returncode == 0, out.stdout + out.stderr
+        _raise_alarm(rig, "GPS spoofing", "high")
         td = _wait_touchdown(rig, timeout_s=300)
         rig.companion.terminate()
         rig.companion.wait(timeout=20)
@@ -534,17 +535,6 @@ def test_a_lossy_mavlink_link_still_lands(start_rig: Callable[..., Rig]) -> None
     assert bad > 0  # the corrupted frames were seen and refused, not acted on
 
 
-def _clean_relays(relays: list[Any]) -> Callable[[int], int]:
-    """A ``mavlink_via`` that puts a relay with no losses (until blacked out) on the MAVLink link."""
-    from tests.relay import LossyUdpRelay
-
-    def via(port: int) -> int:
-        relays.append(LossyUdpRelay(port, drop=0.0, duplicate=0.0, reorder=0.0, corrupt=0.0))
-        return int(relays[-1].port)
-
-    return via
-
-
 @pytest.mark.parametrize("autopilot", ["px4", "ardupilot"])
 def test_a_five_second_link_loss_during_descent_resumes_on_the_same_site(
     start_rig: Callable[..., Rig], tmp_path: Path, autopilot: str
@@ -560,11 +550,9 @@ def test_a_five_second_link_loss_during_descent_resumes_on_the_same_site(
         rig = start_rig(
             ["--scenario", "scenario1", "--autopilot", autopilot, "--speed", "4"],
             ["--record", str(record)],
-            mavlink_via=_clean_relays(relays),
+            mavlink_via=_via(relays, _clean_relay),
         )
-        _wait_for_companion(rig)
-        out = rig.alarm_accepted("--reason", "GPS spoofing", "--criticality", "high")
-        assert out.returncode == 0, out.stdout + out.stderr
+        _raise_alarm(rig, "GPS spoofing", "high")
         rig.wait_log("m, ", timeout_s=120)  # "descending 62 m, <rationale>": the first descent step
         relays[0].blackout()
         time.sleep(5.0)  # the link is down for 5 s of wall time
@@ -614,11 +602,9 @@ def test_a_link_lost_for_good_leaves_the_vehicle_in_the_autopilots_hold(
         rig = start_rig(
             ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "4"],
             env={"LANDFALL_RECOVERY_LINK_LOSS_S": "2"},
-            mavlink_via=_clean_relays(relays),
+            mavlink_via=_via(relays, _clean_relay),
         )
-        _wait_for_companion(rig)
-        out = rig.alarm_accepted("--reason", "GPS spoofing", "--criticality", "high")
-        assert out.returncode == 0, out.stdout + out.stderr
+        _raise_alarm(rig, "GPS spoofing", "high")
         rig.wait_log("site 0 roof", timeout_s=120)
         relays[0].blackout()
         log = rig.wait_log("recovery ended: aborted", timeout_s=30)
@@ -748,10 +734,7 @@ def test_a_dead_camera_lands_on_the_lidar_alone(start_rig: Callable[..., Rig], t
     from tests.relay import PartDroppingRelay
 
     relays: list[PartDroppingRelay] = []
-
-    def via(port: int) -> int:
-        relays.append(PartDroppingRelay(port, {"image"}))
-        return relays[-1].port
+    via = _via(relays, lambda p: PartDroppingRelay(p, {"image"}))
 
     record = tmp_path / "record"
     try:
