@@ -22,6 +22,7 @@ POSITION_YAW_MASK = 2552  # use x, y, z and yaw
 STREAM_HZ = 20.0  # >= 10 Hz on a real vehicle; 20 keeps PX4's 2 Hz rule at 4x simulation speed
 MAV_STATE_CRITICAL = 5
 MAV_RESULT_ACCEPTED, MAV_RESULT_TEMPORARILY_REJECTED = 0, 1
+LANDED_ON_GROUND = 1  # MAV_LANDED_STATE_ON_GROUND
 LINK_SILENCE_S = 3.0  # wall seconds without LOCAL_POSITION_NED before the link counts as lost
 
 
@@ -57,6 +58,12 @@ class TargetTimeout(ControlError):
         super().__init__(f"target {target} not reached within {timeout_s:.0f} s ({error_m:.1f} m away)")
         self.target = target
         self.error_m = error_m
+
+
+class TouchedDown(ControlError):
+    """The vehicle is on the ground (landed or disarmed) while the companion still flew it: a descent
+    step met the surface before the final approach. A mode change that comes with the disarm (PX4
+    leaves OFFBOARD when it auto-disarms) is the landing, not a takeover."""
 
 
 class TelemetryLost(ControlError):
@@ -191,7 +198,15 @@ class VehicleController:
         self._target = None  # stop commanding at once
 
     def check_interruption(self) -> None:
-        """Raise ``OperatorTakeover`` or ``AutopilotFailsafe`` if the latest heartbeat says so."""
+        """Raise ``TouchedDown``, ``OperatorTakeover`` or ``AutopilotFailsafe`` if the latest
+        telemetry says so. Being on the ground is checked first: an autopilot that auto-disarms after
+        a touchdown changes its mode in the same heartbeat."""
+        s = self.tm.state
+        if self._engaged_mode is not None and (not s.armed or s.landed_state == LANDED_ON_GROUND):
+            self._target = None
+            raise TouchedDown(
+                f"on the ground ({'disarmed' if not s.armed else 'landed'}) while the companion flew it"
+            )
         self._check_takeover()
         if self.takeover is not None:
             raise self.takeover
@@ -281,7 +296,7 @@ class VehicleController:
         await self.release()
         self._engaged_mode = self.flavour.modes[Mode.LAND]
         deadline = time.monotonic() + timeout_s
-        while self.tm.state.armed and self.tm.state.landed_state != 1:
+        while self.tm.state.armed and self.tm.state.landed_state != LANDED_ON_GROUND:
             self.check_interruption()
             if time.monotonic() > deadline:
                 raise ControlError(f"no touchdown within {timeout_s:.0f} s of switching to land")

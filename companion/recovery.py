@@ -28,8 +28,10 @@ from companion.control import (
     OperatorTakeover,
     TargetTimeout,
     TelemetryLost,
+    TouchedDown,
     VehicleController,
 )
+from companion.guidance.descent import height_above_site
 from companion.guidance.frames import PinholeCamera, quat_to_matrix
 from companion.guidance.ipm import IpmError, LidarPixelIndex, pixel_to_ned, pixel_to_ned_flat
 from companion.perception.crops import crop, pad_of, rank_crops, site_box
@@ -203,6 +205,12 @@ class Recovery:
                 if landed:
                     return Outcome(State.LANDED, self.round, self._site_ned(), "landed")
             return await self._land_at_best("round budget spent")
+        except TouchedDown as exc:
+            # the surface came sooner than measured: the vehicle is down, and says so
+            self._set(State.LANDED)
+            self._say(4, f"touched down before the final approach: {exc}")
+            await self.ctl.release()
+            return Outcome(State.LANDED, self.round, self._site_ned(), "touched down during a descent step")
         except OperatorTakeover as exc:
             self._set(State.ABORTED)
             self._say(4, "operator took over: stopped commanding")
@@ -341,15 +349,26 @@ class Recovery:
                 self._say(4, f"site {choice.index} {decision.rationale[:120]}")
                 return False
             self.best = Site(target, choice)
-            rng_m = frame.rangefinder_m
+            _n, _e, d = self.tm.state.pos_ned_m
+            rng_m, rng_quat = frame.rangefinder_m, frame.quat_wxyz
             if not math.isfinite(rng_m):
-                rng_m = self.tm.state.rangefinder_m
-            if rng_m <= self.p.final_land_m:
+                rng_m, rng_quat = self.tm.state.rangefinder_m, self.tm.state.quat_wxyz
+            height_m = height_above_site(
+                d,
+                surface_up_m=check.surface_up_m,
+                site_d_m=target[2],
+                rangefinder_m=rng_m,
+                quat_wxyz=rng_quat,
+            )
+            if not math.isfinite(height_m):
+                self._say(4, "no height above the site measured: next round")
+                return False
+            if height_m <= self.p.final_land_m:
                 return await self._land()
             self._set(State.DESCEND)
-            _n, _e, d = self.tm.state.pos_ned_m
-            new_d = d + self.p.descent_fraction * rng_m
-            self._say(6, f"descending {self.p.descent_fraction * rng_m:.0f} m, {decision.rationale[:80]}")
+            step_m = self.p.descent_fraction * height_m
+            new_d = d + step_m
+            self._say(6, f"descending {step_m:.0f} m, {decision.rationale[:80]}")
             try:
                 await self.ctl.goto(
                     target[0],

@@ -75,14 +75,20 @@ class TcpRelay:
         self._listener.close()
 
 
-class PartDroppingRelay(TcpRelay):
-    """A sensor-stream relay that takes the named parts out of every frame response, as simbridge
-    does for a sensor that failed (docs/sensor-stream.md: a part asked for but not produced is absent
-    from ``parts``). ``drop={"image"}``: a dead camera."""
+class FrameEditingRelay(TcpRelay):
+    """A sensor-stream relay that edits every frame response on its way to the companion: it takes
+    the parts named in ``drop`` out, as simbridge does for a sensor that failed (docs/sensor-stream.md:
+    a part asked for but not produced is absent from ``parts``), and sets the header fields in
+    ``header`` (``{"rangefinder_m": 150.0}``: a rangefinder that reads long). ``drop={"image"}``: a
+    dead camera."""
 
-    def __init__(self, target_port: int, drop: set[str]) -> None:
-        self.drop = drop
+    def __init__(
+        self, target_port: int, drop: set[str] | None = None, header: dict[str, object] | None = None
+    ) -> None:
+        self.drop = drop or set()
+        self.header = header or {}
         self.dropped = 0
+        self.edited = 0
         super().__init__(target_port)
 
     def _downstream(self, src: socket.socket, dst: socket.socket) -> None:
@@ -103,6 +109,9 @@ class PartDroppingRelay(TcpRelay):
                     body.append(data)
                 if "parts" in header:
                     header["parts"] = kept
+                    if self.header:
+                        header.update(self.header)
+                        self.edited += 1
                 dst.sendall(json.dumps(header).encode() + b"\n" + b"".join(body))
         for s in (src, dst):
             with contextlib.suppress(OSError):

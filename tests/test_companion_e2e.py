@@ -731,25 +731,13 @@ def test_a_dead_camera_lands_on_the_lidar_alone(start_rig: Callable[..., Rig], t
     sensor's). Surface ID runs on the LiDAR, the ranking is Surface ID's own order and each
     confirmation is the LiDAR check alone, all said so in the record; the vehicle lands on the
     clear roof."""
-    from tests.relay import PartDroppingRelay
-
-    relays: list[PartDroppingRelay] = []
-    via = _via(relays, lambda p: PartDroppingRelay(p, {"image"}))
+    from tests.relay import FrameEditingRelay
 
     record = tmp_path / "record"
-    try:
-        rig = start_rig(
-            ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "4"],
-            ["--record", str(record)],
-            sensors_via=via,
-        )
-        td = _alarm_and_land(rig, "camera failure", "high", timeout_s=200, ended="recovery ended: landed")
-    finally:
-        for r in relays:
-            r.close()
-    assert td["surface"] == "rooftop_clear", (td, rig.log_text()[-3000:])
-    assert td["safe"] is True
-    assert relays[0].dropped >= 2  # an image taken out of every frame asked for
+    rig, relay = _land_on_edited_frames(
+        start_rig, "camera failure", lambda p: FrameEditingRelay(p, drop={"image"}), ["--record", str(record)]
+    )
+    assert relay.dropped >= 2  # an image taken out of every frame asked for
     events = _events(record)
     ranks = [e for e in events if e["kind"] == "rank"]
     confirms = [e for e in events if e["kind"] == "confirm"]
@@ -758,3 +746,45 @@ def test_a_dead_camera_lands_on_the_lidar_alone(start_rig: Callable[..., Rig], t
     assert all(r["tier"] == "surface-id" and r["rationale"].startswith("no camera image") for r in ranks)
     assert all(c["tier"] == "site-check" and c["image"] == "" for c in confirms)
     assert "Traceback" not in rig.log_text()
+
+
+def test_a_rangefinder_that_reads_long_does_not_fly_the_descent_into_the_roof(
+    start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """Every frame's rangefinder reads 150 m, as a beam that passes the roof's edge and meets the
+    street reads when the vehicle tilts (a CI run saw 116 m over the 88 m-high clear roof; the descent
+    step then aimed below the roof and the vehicle hit it). Each step is sized from the LiDAR's height
+    of the site instead: the vehicle reaches the final approach and the autopilot lands it."""
+    from tests.relay import FrameEditingRelay
+
+    rig, relay = _land_on_edited_frames(
+        start_rig, "sensor failure", lambda p: FrameEditingRelay(p, header={"rangefinder_m": 150.0}), []
+    )
+    assert relay.edited >= 2
+    log = rig.log_text()
+    assert "final approach: autopilot land mode" in log, log[-3000:]
+    assert "touched down before the final approach" not in log
+    steps = [float(m) for m in re.findall(r"descending (\d+) m", log)]
+    assert steps
+    assert steps[0] < 88 * 0.8 + 2, steps  # the LiDAR's 88 m, not the rangefinder's 150 m
+
+
+def _land_on_edited_frames(
+    start_rig: Callable[..., Rig], reason: str, make: Callable[[int], Any], companion_args: list[str]
+) -> tuple[Rig, Any]:
+    """scenario1, PX4, 4x, every sensor frame through the relay ``make`` builds; one high alarm. The
+    vehicle must land safe on the clear roof, the recovery saying it landed."""
+    relays: list[Any] = []
+    try:
+        rig = start_rig(
+            ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "4"],
+            companion_args,
+            sensors_via=_via(relays, make),
+        )
+        td = _alarm_and_land(rig, reason, "high", timeout_s=200, ended="recovery ended: landed")
+    finally:
+        for r in relays:
+            r.close()
+    assert td["surface"] == "rooftop_clear", (td, rig.log_text()[-3000:])
+    assert td["safe"] is True
+    return rig, relays[0]
