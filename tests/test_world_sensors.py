@@ -9,7 +9,7 @@ import pytest
 
 from simbridge.geo import euler_to_quat
 from simbridge.world.actors import CAR_HEIGHT_M, Actors
-from simbridge.world.camera import CameraModel, ShadowMap, render
+from simbridge.world.camera import CameraModel, ShadowMap, body_to_neu, render
 from simbridge.world.grader import grade
 from simbridge.world.lidar import LidarModel, rangefinder_m, sweep
 from simbridge.world.live import LiveWorld
@@ -161,6 +161,40 @@ def test_ray_cast_matches_brute_force() -> None:
                 break
         assert ts[k] == pytest.approx(expected, abs=0.02), k
     assert (kinds != HIT_MISS).sum() > 150  # not vacuous: most rays hit something
+
+
+@pytest.mark.parametrize("scenario", ["scenario1", "scenario2"])
+def test_image_rays_through_the_neighbours_plane_give_the_march_s_answer(scenario: str) -> None:
+    """Camera and LiDAR casts that first try the plane of a neighbouring pixel's hit (row > 0) find
+    exactly what the march alone finds: same hit kinds, cells and distances, from high and low,
+    level and tilted, in both scenarios (thin clutter, parapets, a dome, moving actors' cells)."""
+    from simbridge.world.scenario_file import BUILTIN_SCENARIO_DIR, load_scenario_file
+
+    live = LiveWorld(load_scenario_file(BUILTIN_SCENARIO_DIR / f"{scenario}.toml", 0))
+    g, p = live.grid, live.pyramid
+    camera = CameraModel(320, 180, 90.0)
+    lidar = LidarModel(channels=32, points_per_ring=256)
+    hits = 0
+    for n, e, alt, roll, pitch, yaw in [
+        (0.0, 0.0, 110.0, 0.0, 0.0, 0.0),
+        (20.0, -30.0, 60.0, 4.0, -9.0, 30.0),
+        (0.0, -27.0, 25.0, 0.0, 0.0, 10.0),
+        (5.0, -27.0, 6.0, 0.0, 0.0, 0.0),
+        (-40.0, 40.0, 300.0, 20.0, 0.0, 90.0),
+    ]:
+        q = euler_to_quat(math.radians(roll), math.radians(pitch), math.radians(yaw))
+        origin = np.array([[n, e, alt]])
+        for rays, row, t_max in (
+            (camera.unit_rays_body(), camera.width_px, 600.0),
+            (lidar.rays_body(), lidar.points_per_ring, lidar.range_m),
+        ):
+            dirs = body_to_neu(rays, q)
+            march = cast_rays(g.height, p.maps, p.h_max, g.res, g.n0, g.e0, origin, dirs, t_max)
+            planes = cast_rays(g.height, p.maps, p.h_max, g.res, g.n0, g.e0, origin, dirs, t_max, row)
+            for a, b in zip(march, planes, strict=True):
+                np.testing.assert_array_equal(a, b)
+            hits += int((march[3] != HIT_MISS).sum())
+    assert hits > 100_000  # not vacuous
 
 
 def test_actors_move_arrive_and_leave_deterministically() -> None:

@@ -27,6 +27,7 @@ from simbridge.world.raycast import HIT_MISS, HIT_TOP, HIT_WALL_N, Pyramid, cast
 CAMERA_TO_BODY = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
 _RAYS_BODY: dict[tuple[int, int, float], tuple[np.ndarray, np.ndarray]] = {}
 MAX_RANGE_M = 600.0
+SENSOR_NOISE = 0.008  # sigma of the sensor noise, in units of full scale
 
 
 @dataclass(frozen=True, slots=True)
@@ -243,18 +244,44 @@ def _texture(mat: int, pn: float, pe: float, r: float, g: float, b: float) -> tu
     return (r * k, g * k, b * k)
 
 
+@njit(cache=True, inline="always")
+def _lcg_noise(state: np.uint64) -> tuple[np.uint64, float]:
+    """Next state of the sensor-noise LCG and a triangular value in about [0, 2) (mean 1)."""
+    state = state * np.uint64(6364136223846793005) + np.uint64(1442695040888963407)
+    r = (
+        float((state >> np.uint64(33)) & np.uint64(0xFFFF))
+        + float((state >> np.uint64(49)) & np.uint64(0x7FFF)) * 2.0
+    ) / 65535.0
+    return state, r
+
+
+@njit(cache=True, inline="always")
+def _quantise(value: np.float32, v: np.float32, r: float, sigma: float) -> np.uint8:
+    val = (value * v + sigma * 2.45 * (r - 1.0)) * 255.0
+    return np.uint8(0) if val < 0.0 else np.uint8(255) if val > 255.0 else np.uint8(val)
+
+
 @njit(cache=True, nogil=True)
 def shade(
     ts: np.ndarray, ii: np.ndarray, jj: np.ndarray, kinds: np.ndarray, steps: np.ndarray, dirs: np.ndarray,
     origin: np.ndarray, height: np.ndarray, mat: np.ndarray, region: np.ndarray, shadow: np.ndarray,
     res: float, n0: float, e0: float, sun: np.ndarray, mat_rgb: np.ndarray, actor_rgb: np.ndarray,
-    facade_rgb: np.ndarray,
+    facade_rgb: np.ndarray, ray_len: np.ndarray, cls_grid: np.ndarray, depth: np.ndarray, cls: np.ndarray,
+    out_u8: np.ndarray, vignette: np.ndarray, seed: int, sigma: float,
 ) -> np.ndarray:  # fmt: skip
-    """Colour every ray's hit: albedo x (ambient + sun x lit), RGB float32 in [0, 1+]."""
+    """Colour every ray's hit: albedo x (ambient + sun x lit), RGB float32 in [0, 1+]; and per pixel
+    the z-depth along the optical axis (``ray_len``: |(x, y, 1)|) and the class seen (255: sky).
+
+    With an ``out_u8`` of one row per ray (clear weather: nothing comes between shading and the
+    sensor), the same pass also applies the vignette and the seeded sensor noise and quantises into
+    it (what ``_to_uint8`` does, in the same order); the float image is then not kept (empty)."""
     n = ts.shape[0]
     rows, cols = height.shape
-    out = np.empty((n, 3), np.float32)
+    direct = out_u8.shape[0] == n
+    out = np.empty((0 if direct else n, 3), np.float32)
+    state = np.uint64(seed) * np.uint64(6364136223846793005) + np.uint64(1442695040888963407)
     ambient = 0.38
+    cam_up = origin[2]
     for k in range(n):
         dn, de, du = dirs[k, 0], dirs[k, 1], dirs[k, 2]
         t = ts[k]
@@ -265,56 +292,92 @@ def shade(
                 pn = origin[0] + t * dn
                 pe = origin[1] + t * de
                 r, g, b = _texture(18, pn, pe, mat_rgb[18, 0], mat_rgb[18, 1], mat_rgb[18, 2])
-                lit = ambient + 0.8 * max(sun[2], 0.0)
-                out[k, 0], out[k, 1], out[k, 2] = r * lit, g * lit, b * lit
+                light = ambient + 0.8 * max(sun[2], 0.0)
+                depth[k] = (cam_up / -du) / ray_len[k]
+                cls[k] = 1
             else:  # sky
-                out[k, 0], out[k, 1], out[k, 2] = 0.62, 0.72, 0.85
-            continue
-        i = ii[k]
-        j = jj[k]
-        pn = origin[0] + t * dn
-        pe = origin[1] + t * de
-        pu = origin[2] + t * du
-        reg = region[i, j]
-        m = mat[i, j]
-        if kind == HIT_TOP:
-            if reg < 0 and (m == 19 or m == 20):  # actor: its own paint
-                a = (-reg - 1) % actor_rgb.shape[0]
-                r, g, b = actor_rgb[a, 0], actor_rgb[a, 1], actor_rgb[a, 2]
-            else:
-                r, g, b = _texture(m, pn, pe, mat_rgb[m, 0], mat_rgb[m, 1], mat_rgb[m, 2])
-            # normal from the height gradient (domes, trees, pitched roofs)
-            i0 = max(i - 1, 0)
-            i1 = min(i + 1, rows - 1)
-            j0 = max(j - 1, 0)
-            j1 = min(j + 1, cols - 1)
-            gn = (height[i1, j] - height[i0, j]) / ((i1 - i0) * res + 1e-9)
-            ge = (height[i, j1] - height[i, j0]) / ((j1 - j0) * res + 1e-9)
+                r, g, b, light = 0.62, 0.72, 0.85, 1.0
+                depth[k] = np.nan
+                cls[k] = 255
+        else:
+            depth[k] = t / ray_len[k]
+            cls[k] = cls_grid[ii[k], jj[k]]
+            r, g, b, light = _surface(
+                k, t, kind, dn, de, du, ii, jj, steps, origin, height, mat, region, shadow, res, rows, cols,
+                sun, mat_rgb, actor_rgb, facade_rgb, ambient,
+            )  # fmt: skip
+        c0 = np.float32(r * light)
+        c1 = np.float32(g * light)
+        c2 = np.float32(b * light)
+        if direct:
+            v = vignette[k]
+            state, x = _lcg_noise(state)
+            out_u8[k, 0] = _quantise(c0, v, x, sigma)
+            state, x = _lcg_noise(state)
+            out_u8[k, 1] = _quantise(c1, v, x, sigma)
+            state, x = _lcg_noise(state)
+            out_u8[k, 2] = _quantise(c2, v, x, sigma)
+        else:
+            out[k, 0] = c0
+            out[k, 1] = c1
+            out[k, 2] = c2
+    return out
+
+
+@njit(cache=True, inline="always")
+def _surface(
+    k: int, t: float, kind: int, dn: float, de: float, du: float, ii: np.ndarray, jj: np.ndarray,
+    steps: np.ndarray, origin: np.ndarray, height: np.ndarray, mat: np.ndarray, region: np.ndarray,
+    shadow: np.ndarray, res: float, rows: int, cols: int, sun: np.ndarray, mat_rgb: np.ndarray,
+    actor_rgb: np.ndarray, facade_rgb: np.ndarray, ambient: float,
+) -> tuple[float, float, float, float]:  # fmt: skip
+    """Albedo and light of a ray's hit on the grid (a cell top or a facade)."""
+    i = ii[k]
+    j = jj[k]
+    pn = origin[0] + t * dn
+    pe = origin[1] + t * de
+    pu = origin[2] + t * du
+    reg = region[i, j]
+    m = mat[i, j]
+    if kind == HIT_TOP:
+        if reg < 0 and (m == 19 or m == 20):  # actor: its own paint
+            a = (-reg - 1) % actor_rgb.shape[0]
+            r, g, b = actor_rgb[a, 0], actor_rgb[a, 1], actor_rgb[a, 2]
+        else:
+            r, g, b = _texture(m, pn, pe, mat_rgb[m, 0], mat_rgb[m, 1], mat_rgb[m, 2])
+        # normal from the height gradient (domes, trees, pitched roofs)
+        i0 = max(i - 1, 0)
+        i1 = min(i + 1, rows - 1)
+        j0 = max(j - 1, 0)
+        j1 = min(j + 1, cols - 1)
+        dh_n = height[i1, j] - height[i0, j]
+        dh_e = height[i, j1] - height[i, j0]
+        if dh_n == 0.0 and dh_e == 0.0:  # level (most pixels): the normal is straight up
+            cos_sun = sun[2]
+        else:
+            gn = dh_n / ((i1 - i0) * res + 1e-9)
+            ge = dh_e / ((j1 - j0) * res + 1e-9)
             if abs(gn) > 3.0 or abs(ge) > 3.0:  # an edge, not a slope
                 gn = 0.0
                 ge = 0.0
             nn, ne_, nu = -gn, -ge, 1.0
             norm = math.sqrt(nn * nn + ne_ * ne_ + nu * nu)
             cos_sun = (nn * sun[0] + ne_ * sun[1] + nu * sun[2]) / norm
-            lit = 0.0 if shadow[i, j] else max(cos_sun, 0.0)
+        lit = 0.0 if shadow[i, j] else max(cos_sun, 0.0)
+    else:
+        # facade: a tint per building, floors every 3 m, windows every 1.6 m
+        fc = (reg if reg > 0 else i // 7 + j // 11) % facade_rgb.shape[0]
+        r, g, b = facade_rgb[fc, 0], facade_rgb[fc, 1], facade_rgb[fc, 2]
+        along = pe if kind == HIT_WALL_N else pn
+        if reg > 0 and (pu % 3.0) > 1.0 and (pu % 3.0) < 2.4 and (along % 1.6) > 0.4:
+            r, g, b = 0.16, 0.2, 0.26  # glass
+        st = steps[k]
+        if kind == HIT_WALL_N:
+            cos_sun = -st * sun[0]
         else:
-            # facade: a tint per building, floors every 3 m, windows every 1.6 m
-            fc = (reg if reg > 0 else i // 7 + j // 11) % facade_rgb.shape[0]
-            r, g, b = facade_rgb[fc, 0], facade_rgb[fc, 1], facade_rgb[fc, 2]
-            along = pe if kind == HIT_WALL_N else pn
-            if reg > 0 and (pu % 3.0) > 1.0 and (pu % 3.0) < 2.4 and (along % 1.6) > 0.4:
-                r, g, b = 0.16, 0.2, 0.26  # glass
-            st = steps[k]
-            if kind == HIT_WALL_N:
-                cos_sun = -st * sun[0]
-            else:
-                cos_sun = -st * sun[1]
-            lit = max(cos_sun, 0.0)
-        light = ambient + 0.85 * lit
-        out[k, 0] = r * light
-        out[k, 1] = g * light
-        out[k, 2] = b * light
-    return out
+            cos_sun = -st * sun[1]
+        lit = max(cos_sun, 0.0)
+    return r, g, b, ambient + 0.85 * lit
 
 
 @njit(cache=True, nogil=True)
@@ -330,26 +393,6 @@ def _tiles_needed(ii: np.ndarray, jj: np.ndarray, done: np.ndarray, tile: int) -
 
 
 @njit(cache=True, nogil=True)
-def _finish(
-    rgb: np.ndarray, ts: np.ndarray, ii: np.ndarray, jj: np.ndarray, kinds: np.ndarray, dirs: np.ndarray,
-    ray_len: np.ndarray, cam_up: float, cls_grid: np.ndarray, depth: np.ndarray, cls: np.ndarray,
-) -> None:  # fmt: skip
-    """Per pixel: z-depth along the optical axis and the class seen (255 for sky)."""
-    for k in range(ts.shape[0]):
-        if kinds[k] == HIT_MISS:
-            du = dirs[k, 2]
-            if du < -1e-6:  # open ground beyond the modelled area
-                depth[k] = (cam_up / -du) / ray_len[k]
-                cls[k] = 1
-            else:
-                depth[k] = np.nan
-                cls[k] = 255
-        else:
-            depth[k] = ts[k] / ray_len[k]
-            cls[k] = cls_grid[ii[k], jj[k]]
-
-
-@njit(cache=True, nogil=True)
 def _to_uint8(img: np.ndarray, vignette: np.ndarray, seed: int, sigma: float) -> np.ndarray:
     """Vignetting, sensor noise (seeded, approximately Gaussian) and quantisation to uint8."""
     h, w, c = img.shape
@@ -360,13 +403,8 @@ def _to_uint8(img: np.ndarray, vignette: np.ndarray, seed: int, sigma: float) ->
             v = vignette[y, x, 0]
             for ch in range(c):
                 # sum of two 16-bit uniforms from an LCG: triangular noise with the given sigma
-                state = state * np.uint64(6364136223846793005) + np.uint64(1442695040888963407)
-                r = (
-                    float((state >> np.uint64(33)) & np.uint64(0xFFFF))
-                    + float((state >> np.uint64(49)) & np.uint64(0x7FFF)) * 2.0
-                ) / 65535.0
-                val = (img[y, x, ch] * v + sigma * 2.45 * (r - 1.0)) * 255.0
-                out[y, x, ch] = 0 if val < 0.0 else 255 if val > 255.0 else np.uint8(val)
+                state, r = _lcg_noise(state)
+                out[y, x, ch] = _quantise(img[y, x, ch], v, r, sigma)
     return out
 
 
@@ -457,26 +495,34 @@ def render(
     origin = np.array([[pos_ned_m[0], pos_ned_m[1], -pos_ned_m[2]]])
     ts, ii, jj, kinds, steps = cast_rays(
         grid.height, pyramid.maps, pyramid.h_max,
-        grid.res, grid.n0, grid.e0, origin, dirs, MAX_RANGE_M,
+        grid.res, grid.n0, grid.e0, origin, dirs, MAX_RANGE_M, camera.width_px,
     )  # fmt: skip
     sun = np.asarray(sun_neu, dtype=np.float64)
     shadow.ensure(ii, jj)
+    if weather not in WEATHERS:
+        raise ValueError(f"unknown weather {weather!r}; expected one of {', '.join(WEATHERS)}")
+    rng = rng if rng is not None else np.random.default_rng(0)
+    h, w = camera.height_px, camera.width_px
+    n = ts.shape[0]
+    depth = np.empty(n, np.float32)
+    cls = np.empty(n, np.uint8)
+    vignette = _vignette(h, w)
+    clear = weather == "clear"  # nothing between shading and the sensor: one pass does both
+    out = np.empty((n if clear else 0, 3), np.uint8)
+    seed = int(rng.integers(1, 2**62)) if clear else 0
     rgb = shade(
         ts, ii, jj, kinds, steps, dirs, origin[0], grid.height, grid.mat, grid.region, shadow.shadow,
-        grid.res, grid.n0, grid.e0, sun, _MAT_RGB, _ACTOR_RGB, _FACADE_RGB,
+        grid.res, grid.n0, grid.e0, sun, _MAT_RGB, _ACTOR_RGB, _FACADE_RGB, ray_len, grid.cls, depth, cls,
+        out, vignette.reshape(-1), seed, SENSOR_NOISE,
     )  # fmt: skip
-    h, w = camera.height_px, camera.width_px
-    depth = np.empty(ts.shape[0], np.float32)
-    cls = np.empty(ts.shape[0], np.uint8)
-    _finish(rgb, ts, ii, jj, kinds, dirs, ray_len, float(origin[0, 2]), grid.cls, depth, cls)
-    img = rgb.reshape(h, w, 3)
     depth_img = depth.reshape(h, w)
-    rng = rng if rng is not None else np.random.default_rng(0)
-    img = apply_weather(img, depth_img, weather, rng)
-    out = _to_uint8(
-        np.ascontiguousarray(img, np.float32), _vignette(h, w), int(rng.integers(1, 2**62)), 0.008
+    if clear:
+        return Frame(rgb=out.reshape(h, w, 3), depth_m=depth_img, hit_class=cls.reshape(h, w))
+    img = apply_weather(rgb.reshape(h, w, 3), depth_img, weather, rng)
+    image = _to_uint8(
+        np.ascontiguousarray(img, np.float32), vignette, int(rng.integers(1, 2**62)), SENSOR_NOISE
     )
-    return Frame(rgb=out, depth_m=depth_img, hit_class=cls.reshape(h, w))
+    return Frame(rgb=image, depth_m=depth_img, hit_class=cls.reshape(h, w))
 
 
 _VIGNETTE: dict[tuple[int, int], np.ndarray] = {}

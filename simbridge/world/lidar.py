@@ -70,7 +70,7 @@ def sweep(
     origin = np.array([[pos_ned_m[0], pos_ned_m[1], -pos_ned_m[2]]])
     ts, ii, jj, kinds, _ = cast_rays(
         grid.height, pyramid.maps, pyramid.h_max,
-        grid.res, grid.n0, grid.e0, origin, dirs, model.range_m,
+        grid.res, grid.n0, grid.e0, origin, dirs, model.range_m, model.points_per_ring,
     )  # fmt: skip
     keep = (kinds != HIT_MISS) & (rng.random(ts.shape[0]) >= model.dropout)
     rng_m = ts[keep] + rng.normal(0.0, model.noise_sigma_m, int(keep.sum())).astype(np.float32)

@@ -26,7 +26,7 @@ from numba import njit
 HIT_TOP, HIT_WALL_N, HIT_WALL_E, HIT_MISS = 0, 1, 2, -1
 COARSE_SHIFT = 2  # coarse cells are 4 x 4 fine cells
 COARSE = 1 << COARSE_SHIFT
-LEVELS = 6  # jump radii of 1, 2, 4, ... 32 coarse cells (0.8 m ... 25.6 m at 0.2 m resolution)
+LEVELS = 8  # jump radii of 1, 2, 4, ... 128 coarse cells (0.8 m ... 102.4 m at 0.2 m resolution)
 _BIG = 1e30
 
 
@@ -81,15 +81,65 @@ class Pyramid:
         self.h_max = max(self.h_max, top_m)
 
 
+@njit(cache=True, fastmath=True, nogil=True, inline="always")
+def _plane_clear(
+    maps: np.ndarray, h_max: float, coarse_m: float, pn: float, pe: float, hp: float,
+    tp: float, dn: float, de: float, sink: float,
+) -> bool:  # fmt: skip
+    """Whether a ray reaching height ``hp`` at grid point ``(pn, pe)`` (metres from the grid's
+    corner) after ``tp`` of travel along ``(dn, de, -sink)`` passes over everything before it.
+
+    Walked back from that point toward the origin in pieces that double: max map ``k`` bounds every
+    cell within ``R_k = 2**k`` coarse cells (Chebyshev) of its coarse cell, so one lookup at the
+    middle of a piece ``2 R_k`` long bounds all of the piece; the piece is clear when that bound
+    is below the ray's lowest point on it, the end nearer the hit. The first piece, within ``R_0``
+    of the hit, must hold nothing above ``hp``. No piece is needed past the origin or above
+    ``h_max``. Any doubt is a ``False``: the march decides."""
+    inv_c = 1.0 / coarse_m
+    brows, bcols = maps.shape[1], maps.shape[2]
+    bi = min(int(pn * inv_c), brows - 1)
+    bj = min(int(pe * inv_c), bcols - 1)
+    if maps[0, bi, bj] > hp:
+        return False
+    hd = math.sqrt(dn * dn + de * de)
+    if hd < 1e-9:
+        return True  # straight down: the ray is above hp everywhere before the hit
+    un = dn / hd
+    ue = de / hd
+    slope = sink / hd
+    travelled = tp * hd  # horizontal distance back to the origin
+    s = coarse_m  # horizontal distance back from the hit proven clear so far
+    lvl = 0
+    while s < travelled:
+        low = hp + s * slope
+        if low > h_max:
+            return True
+        r = coarse_m * (1 << lvl)
+        back = s + r
+        qi = min(max(int((pn - back * un) * inv_c), 0), brows - 1)
+        qj = min(max(int((pe - back * ue) * inv_c), 0), bcols - 1)
+        if maps[lvl, qi, qj] >= low:
+            return False
+        s = back + r
+        if lvl < LEVELS - 1:
+            lvl += 1
+    return True
+
+
 @njit(cache=True, fastmath=True, nogil=True)
 def cast_rays(
     height: np.ndarray, maps: np.ndarray, h_max: float, res: float, n0: float, e0: float,
-    origins: np.ndarray, dirs: np.ndarray, t_max: float,
+    origins: np.ndarray, dirs: np.ndarray, t_max: float, row: int = 0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
     """Cast rays; ``dirs`` is (N, 3) unit (north, east, up); ``origins`` is (N, 3), or (1, 3) for all.
 
     Returns per ray: distance (``t_max`` on a miss), cell row, cell column, hit kind and, for wall
     hits, the ray's step (+1/-1) across the boundary it crossed (the wall faces ``-step``).
+
+    ``row`` > 0 (one origin only): the rays are an image, row-major with ``row`` rays per row, and
+    each ray first tries the plane of its left or upper neighbour's top hit (``_plane_hit``): most
+    pixels see the same roof or street as their neighbours, and proving that costs a few max-map
+    lookups instead of a march. The answer is the march's either way.
 
     The march is written inside the loop on purpose: a numba call per ray that passes the arrays
     costs eight atomic reference-count updates, more than the whole march over open ground.
@@ -106,6 +156,9 @@ def cast_rays(
     size_n = rows * res
     size_e = cols * res
     coarse_m = COARSE * res
+    inv_res = 1.0 / res
+    inv_coarse = 1.0 / coarse_m
+    coherent = row > 0 and one_origin
     for k in range(n):
         r = 0 if one_origin else k
         on = origins[r, 0]
@@ -114,6 +167,25 @@ def cast_rays(
         dn = dirs[k, 0]
         de = dirs[k, 1]
         du = dirs[k, 2]
+        if coherent and du < 0.0:
+            # ---- the plane of the left neighbour's top hit, else the upper neighbour's
+            g = k - 1 if k % row != 0 and kinds[k - 1] == HIT_TOP else k - row
+            if g >= 0 and kinds[g] == HIT_TOP:
+                hp = height[ii[g], jj[g]]
+                tp = (ou - hp) / -du
+                pn = on + tp * dn - n0
+                pe = oe + tp * de - e0
+                if 0.0 < tp <= t_max and 0.0 <= pn < size_n and 0.0 <= pe < size_e:
+                    pi = min(int(pn * inv_res), rows - 1)
+                    pj = min(int(pe * inv_res), cols - 1)
+                    if height[pi, pj] == hp and _plane_clear(
+                        maps, h_max, coarse_m, pn, pe, hp, tp, dn, de, -du
+                    ):
+                        ts[k] = tp
+                        ii[k] = pi
+                        jj[k] = pj
+                        kinds[k] = HIT_TOP
+                        continue
         # ---- clip to the grid's box and to the slab below h_max
         t0 = 0.0
         t1 = t_max
@@ -150,6 +222,14 @@ def cast_rays(
         last_axis = -1
         jumping = hd > 1e-6
         top_lvl = LEVELS - 1  # largest jump worth trying: one above the last that worked
+        if jumping and du < 0.0:
+            # a jump of 2**lvl coarse cells drops the ray 2**lvl * coarse_m * |du| / hd: no use
+            # trying one that would take it below the ground (height 0) from where it starts
+            fit = (ou + t0 * du) * hd / (coarse_m * -du)
+            if fit < 1.0:
+                top_lvl = 0
+            elif fit < 1 << (LEVELS - 1):
+                top_lvl = int(math.log2(fit))
         fine_left = 0.0  # t at which to stop fine stepping and try jumping again
         i = 0
         j = 0
@@ -159,8 +239,8 @@ def cast_rays(
             if jumping:
                 pn = on + t * dn - n0
                 pe = oe + t * de - e0
-                bi = min(max(int(pn / coarse_m), 0), brows - 1)
-                bj = min(max(int(pe / coarse_m), 0), bcols - 1)
+                bi = min(max(int(pn * inv_coarse), 0), brows - 1)
+                bj = min(max(int(pe * inv_coarse), 0), bcols - 1)
                 jumped = False
                 for lvl in range(top_lvl, -1, -1):
                     dt = (1 << lvl) * dt_per_coarse  # t for a jump of 2**lvl coarse cells
@@ -177,8 +257,8 @@ def cast_rays(
                 top_lvl = 1
                 fine_left = t + dt_per_coarse
             if not placed:
-                i = min(max(int((on + t * dn - n0) / res), 0), rows - 1)
-                j = min(max(int((oe + t * de - e0) / res), 0), cols - 1)
+                i = min(max(int((on + t * dn - n0) * inv_res), 0), rows - 1)
+                j = min(max(int((oe + t * de - e0) * inv_res), 0), cols - 1)
                 placed = True
             # ---- fine step through cell (i, j)
             h = height[i, j]
