@@ -302,10 +302,52 @@ def shade(
         else:
             depth[k] = t / ray_len[k]
             cls[k] = cls_grid[ii[k], jj[k]]
-            r, g, b, light = _surface(
-                k, t, kind, dn, de, du, ii, jj, steps, origin, height, mat, region, shadow, res, rows, cols,
-                sun, mat_rgb, actor_rgb, facade_rgb, ambient,
-            )  # fmt: skip
+            i = ii[k]
+            j = jj[k]
+            pn = origin[0] + t * dn
+            pe = origin[1] + t * de
+            pu = origin[2] + t * du
+            reg = region[i, j]
+            m = mat[i, j]
+            if kind == HIT_TOP:
+                if reg < 0 and (m == 19 or m == 20):  # actor: its own paint
+                    a = (-reg - 1) % actor_rgb.shape[0]
+                    r, g, b = actor_rgb[a, 0], actor_rgb[a, 1], actor_rgb[a, 2]
+                else:
+                    r, g, b = _texture(m, pn, pe, mat_rgb[m, 0], mat_rgb[m, 1], mat_rgb[m, 2])
+                # normal from the height gradient (domes, trees, pitched roofs)
+                i0 = max(i - 1, 0)
+                i1 = min(i + 1, rows - 1)
+                j0 = max(j - 1, 0)
+                j1 = min(j + 1, cols - 1)
+                dh_n = height[i1, j] - height[i0, j]
+                dh_e = height[i, j1] - height[i, j0]
+                if dh_n == 0.0 and dh_e == 0.0:  # level (most pixels): the normal is straight up
+                    cos_sun = sun[2]
+                else:
+                    gn = dh_n / ((i1 - i0) * res + 1e-9)
+                    ge = dh_e / ((j1 - j0) * res + 1e-9)
+                    if abs(gn) > 3.0 or abs(ge) > 3.0:  # an edge, not a slope
+                        gn = 0.0
+                        ge = 0.0
+                    nn, ne_, nu = -gn, -ge, 1.0
+                    norm = math.sqrt(nn * nn + ne_ * ne_ + nu * nu)
+                    cos_sun = (nn * sun[0] + ne_ * sun[1] + nu * sun[2]) / norm
+                lit = 0.0 if shadow[i, j] else max(cos_sun, 0.0)
+            else:
+                # facade: a tint per building, floors every 3 m, windows every 1.6 m
+                fc = (reg if reg > 0 else i // 7 + j // 11) % facade_rgb.shape[0]
+                r, g, b = facade_rgb[fc, 0], facade_rgb[fc, 1], facade_rgb[fc, 2]
+                along = pe if kind == HIT_WALL_N else pn
+                if reg > 0 and (pu % 3.0) > 1.0 and (pu % 3.0) < 2.4 and (along % 1.6) > 0.4:
+                    r, g, b = 0.16, 0.2, 0.26  # glass
+                st = steps[k]
+                if kind == HIT_WALL_N:
+                    cos_sun = -st * sun[0]
+                else:
+                    cos_sun = -st * sun[1]
+                lit = max(cos_sun, 0.0)
+            light = ambient + 0.85 * lit
         c0 = np.float32(r * light)
         c1 = np.float32(g * light)
         c2 = np.float32(b * light)
@@ -322,62 +364,6 @@ def shade(
             out[k, 1] = c1
             out[k, 2] = c2
     return out
-
-
-@njit(cache=True, inline="always")
-def _surface(
-    k: int, t: float, kind: int, dn: float, de: float, du: float, ii: np.ndarray, jj: np.ndarray,
-    steps: np.ndarray, origin: np.ndarray, height: np.ndarray, mat: np.ndarray, region: np.ndarray,
-    shadow: np.ndarray, res: float, rows: int, cols: int, sun: np.ndarray, mat_rgb: np.ndarray,
-    actor_rgb: np.ndarray, facade_rgb: np.ndarray, ambient: float,
-) -> tuple[float, float, float, float]:  # fmt: skip
-    """Albedo and light of a ray's hit on the grid (a cell top or a facade)."""
-    i = ii[k]
-    j = jj[k]
-    pn = origin[0] + t * dn
-    pe = origin[1] + t * de
-    pu = origin[2] + t * du
-    reg = region[i, j]
-    m = mat[i, j]
-    if kind == HIT_TOP:
-        if reg < 0 and (m == 19 or m == 20):  # actor: its own paint
-            a = (-reg - 1) % actor_rgb.shape[0]
-            r, g, b = actor_rgb[a, 0], actor_rgb[a, 1], actor_rgb[a, 2]
-        else:
-            r, g, b = _texture(m, pn, pe, mat_rgb[m, 0], mat_rgb[m, 1], mat_rgb[m, 2])
-        # normal from the height gradient (domes, trees, pitched roofs)
-        i0 = max(i - 1, 0)
-        i1 = min(i + 1, rows - 1)
-        j0 = max(j - 1, 0)
-        j1 = min(j + 1, cols - 1)
-        dh_n = height[i1, j] - height[i0, j]
-        dh_e = height[i, j1] - height[i, j0]
-        if dh_n == 0.0 and dh_e == 0.0:  # level (most pixels): the normal is straight up
-            cos_sun = sun[2]
-        else:
-            gn = dh_n / ((i1 - i0) * res + 1e-9)
-            ge = dh_e / ((j1 - j0) * res + 1e-9)
-            if abs(gn) > 3.0 or abs(ge) > 3.0:  # an edge, not a slope
-                gn = 0.0
-                ge = 0.0
-            nn, ne_, nu = -gn, -ge, 1.0
-            norm = math.sqrt(nn * nn + ne_ * ne_ + nu * nu)
-            cos_sun = (nn * sun[0] + ne_ * sun[1] + nu * sun[2]) / norm
-        lit = 0.0 if shadow[i, j] else max(cos_sun, 0.0)
-    else:
-        # facade: a tint per building, floors every 3 m, windows every 1.6 m
-        fc = (reg if reg > 0 else i // 7 + j // 11) % facade_rgb.shape[0]
-        r, g, b = facade_rgb[fc, 0], facade_rgb[fc, 1], facade_rgb[fc, 2]
-        along = pe if kind == HIT_WALL_N else pn
-        if reg > 0 and (pu % 3.0) > 1.0 and (pu % 3.0) < 2.4 and (along % 1.6) > 0.4:
-            r, g, b = 0.16, 0.2, 0.26  # glass
-        st = steps[k]
-        if kind == HIT_WALL_N:
-            cos_sun = -st * sun[0]
-        else:
-            cos_sun = -st * sun[1]
-        lit = max(cos_sun, 0.0)
-    return r, g, b, ambient + 0.85 * lit
 
 
 @njit(cache=True, nogil=True)
