@@ -22,7 +22,6 @@ POSITION_YAW_MASK = 2552  # use x, y, z and yaw
 STREAM_HZ = 20.0  # >= 10 Hz on a real vehicle; 20 keeps PX4's 2 Hz rule at 4x simulation speed
 MAV_STATE_CRITICAL = 5
 MAV_RESULT_ACCEPTED, MAV_RESULT_TEMPORARILY_REJECTED = 0, 1
-LANDED_ON_GROUND = 1  # MAV_LANDED_STATE_ON_GROUND
 LINK_SILENCE_S = 3.0  # wall seconds without LOCAL_POSITION_NED before the link counts as lost
 
 
@@ -202,7 +201,7 @@ class VehicleController:
         telemetry says so. Being on the ground is checked first: an autopilot that auto-disarms after
         a touchdown changes its mode in the same heartbeat."""
         s = self.tm.state
-        if self._engaged_mode is not None and (not s.armed or s.landed_state == LANDED_ON_GROUND):
+        if self._engaged_mode is not None and s.on_ground:
             self._target = None
             raise TouchedDown(
                 f"on the ground ({'disarmed' if not s.armed else 'landed'}) while the companion flew it"
@@ -296,7 +295,7 @@ class VehicleController:
         await self.release()
         self._engaged_mode = self.flavour.modes[Mode.LAND]
         deadline = time.monotonic() + timeout_s
-        while self.tm.state.armed and self.tm.state.landed_state != LANDED_ON_GROUND:
+        while not self.tm.state.on_ground:
             self.check_interruption()
             if time.monotonic() > deadline:
                 raise ControlError(f"no touchdown within {timeout_s:.0f} s of switching to land")

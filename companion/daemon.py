@@ -151,7 +151,7 @@ class Companion:
             s = self.tm.state
             if s.system_id == 0 or self.tm.age_s("position") > 3.0 or self._client is None:
                 continue
-            if not s.armed or s.landed_state == 1:
+            if s.on_ground:
                 self.log.info("the vehicle is on the ground: nothing to resume")
                 return
             result = self.raise_alarm(dataclasses.replace(alarm, received_monotonic=time.monotonic()))
@@ -173,7 +173,7 @@ class Companion:
         if s.system_id == 0 or self.tm.age_s("position") > 3.0:
             self.log.warning("alarm %r refused: no fresh vehicle telemetry", alarm.reason)
             return RESULT_TEMP_REJECTED
-        if not s.armed or s.landed_state == 1:
+        if s.on_ground:
             self.log.warning("alarm %r refused: the vehicle is not flying", alarm.reason)
             return RESULT_DENIED
         if self._client is None:
@@ -269,7 +269,7 @@ class Companion:
         fresh = self.tm.texts_received - self._texts_seen
         self._texts_seen = self.tm.texts_received
         new_texts = self.tm.texts[-fresh:] if fresh > 0 else []
-        if not s.armed or s.landed_state == 1:
+        if s.on_ground:
             return
         if self._watch_battery_pct is not None and s.battery_pct < self._watch_battery_pct:
             self._own_alarm(ReasonCode.LOW_BATTERY, Criticality.HIGH, f"battery {s.battery_pct:.0f} %")

@@ -251,7 +251,7 @@ class Recovery:
             {"round": self.round, "silent_s": round(silent_s, 2), "custom_mode": s.custom_mode},
         )
         self._say(5, f"link back after {silent_s:.1f} s")
-        if not s.armed or s.landed_state == 1:
+        if s.on_ground:
             self._set(State.LANDED)
             self._say(4, "the vehicle came down while the link was lost")
             return Outcome(State.LANDED, self.round, None, "landed by the autopilot during a link loss")

@@ -38,6 +38,11 @@ class VehicleState:
     t_boot_s: float = 0.0
     stamps: dict[str, float] = field(default_factory=dict)  # part -> monotonic time of last update
 
+    @property
+    def on_ground(self) -> bool:
+        """Disarmed, or the autopilot's land detector says ON_GROUND."""
+        return not self.armed or self.landed_state == LANDED_ON_GROUND
+
 
 class TelemetryCache:
     """Latest vehicle state; parts older than their use allows are reported by :meth:`age_s`."""

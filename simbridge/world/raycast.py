@@ -83,7 +83,7 @@ class Pyramid:
 
 @njit(cache=True, fastmath=True, nogil=True, inline="always")
 def _plane_clear(
-    maps: np.ndarray, h_max: float, coarse_m: float, pn: float, pe: float, hp: float,
+    maps: np.ndarray, h_max: float, coarse_m: float, inv_c: float, pn: float, pe: float, hp: float,
     tp: float, dn: float, de: float, sink: float,
 ) -> bool:  # fmt: skip
     """Whether a ray reaching height ``hp`` at grid point ``(pn, pe)`` (metres from the grid's
@@ -95,7 +95,6 @@ def _plane_clear(
     is below the ray's lowest point on it, the end nearer the hit. The first piece, within ``R_0``
     of the hit, must hold nothing above ``hp``. No piece is needed past the origin or above
     ``h_max``. Any doubt is a ``False``: the march decides."""
-    inv_c = 1.0 / coarse_m
     brows, bcols = maps.shape[1], maps.shape[2]
     bi = min(int(pn * inv_c), brows - 1)
     bj = min(int(pe * inv_c), bcols - 1)
@@ -179,7 +178,7 @@ def cast_rays(
                     pi = min(int(pn * inv_res), rows - 1)
                     pj = min(int(pe * inv_res), cols - 1)
                     if height[pi, pj] == hp and _plane_clear(
-                        maps, h_max, coarse_m, pn, pe, hp, tp, dn, de, -du
+                        maps, h_max, coarse_m, inv_coarse, pn, pe, hp, tp, dn, de, -du
                     ):
                         ts[k] = tp
                         ii[k] = pi
