@@ -219,7 +219,7 @@ class PerceptionConfig(_Section):
     edge_margin_m: float = Field(default=2.0, ge=0)
     max_candidates: int = Field(default=5, ge=1, le=20)
     lidar_range_m: float = Field(default=100.0, gt=0)
-    extend_with_image: bool = False
+    extend_with_image: bool = True
 
     @field_validator("window_cells")
     @classmethod

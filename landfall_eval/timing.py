@@ -13,6 +13,11 @@ def pin_one_core() -> None:
     """Run this process on CPU 0 only (where the OS allows it), so figures read as one core's cost."""
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {0})
+    try:
+        import cv2
+    except ImportError:
+        return
+    cv2.setNumThreads(1)  # OpenCV's own worker pool would contend for that one core
 
 
 def median_ms(fn: Callable[[], Any], reps: int) -> float:

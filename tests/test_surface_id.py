@@ -24,8 +24,16 @@ from companion.perception.crops import (
     pad_of,
     site_box,
 )
-from companion.perception.depth import ArrayDepth, DepthError, DepthMap, LidarDepth, make_source
-from companion.perception.surface_id import SurfaceParams, propose, quadrant_fallback, surface_id
+from companion.perception.depth import (
+    ArrayDepth,
+    DepthError,
+    DepthMap,
+    LidarDepth,
+    make_source,
+    ring_spacing_rad,
+)
+from companion.perception.surface_id import Candidate, SurfaceParams, propose, quadrant_fallback, surface_id
+from simbridge.world.lidar import LidarModel
 
 CAM = PinholeCamera.from_hfov(960, 540, 90.0)  # fx = 480 px
 ALT = 100.0
@@ -278,7 +286,7 @@ def test_context_crops_cover_every_level_and_the_full_frame() -> None:
 
 
 # ------------------------------------------------------------------------- extension over unmeasured cells
-EXTEND = SurfaceParams(extend_with_image=True)  # off by default (see docs/surface-id.md)
+EXTEND = SurfaceParams(extend_with_image=True)
 
 
 def _roof_image(roof_rgb: tuple[int, int, int]) -> np.ndarray:
@@ -293,35 +301,96 @@ def _roof_image(roof_rgb: tuple[int, int, int]) -> np.ndarray:
     return img
 
 
-def test_the_image_extends_a_roof_over_cells_the_depth_never_reached() -> None:
-    d = depth_image([ROOF])
-    d[:, :300] = np.nan  # out of LiDAR range: the roof's west part (x 258..300) and the ground beyond
-    dm = ArrayDepth(d).depth_map(CAM)
+def _out_of_range(d: np.ndarray, range_m: float) -> np.ndarray:
+    """The depth image as a sensor of ``range_m`` returns it: NaN wherever the surface is farther."""
+    u = ((np.arange(CAM.width) + 0.5 - CAM.cx) / CAM.fx)[None, :]
+    v = ((np.arange(CAM.height) + 0.5 - CAM.cy) / CAM.fy)[:, None]
+    return np.where(d * np.sqrt(1.0 + u * u + v * v) > range_m, np.nan, d)
+
+
+def _roof_of(depth: DepthMap, image: np.ndarray | None) -> list[Candidate]:
+    cands = surface_id(depth, CAM, pos_ned_m=POS, ground_up_m=-ALT, image=image, params=EXTEND)
+    return [c for c in cands if c.height_above_m > 3]
+
+
+# The roof's plane, 80 m below the camera, is 85.4 m away where the image's x = 300 crosses it.
+CUT_RANGE_M = 85.4
+
+
+def test_the_image_extends_a_roof_past_the_range_of_the_depth() -> None:
+    d = _out_of_range(depth_image([ROOF]), CUT_RANGE_M)  # the roof's west part and all the ground
+    dm = dataclasses.replace(ArrayDepth(d).depth_map(CAM), max_range_m=CUT_RANGE_M)
     m = SurfaceParams().edge_margin_m
     want = expected_box(ROOF.n0 + m, ROOF.n1 - m, ROOF.e0 + m, ROOF.e1 - m, ROOF.up)
 
-    def roof_of(image: np.ndarray | None, depth: DepthMap = dm) -> list:
-        cands = surface_id(depth, CAM, pos_ned_m=POS, ground_up_m=-ALT, image=image, params=EXTEND)
-        return [c for c in cands if c.height_above_m > 3]
-
-    (alike,) = roof_of(_roof_image((200, 196, 190)))
+    (alike,) = _roof_of(dm, _roof_image((200, 196, 190)))
     assert iou(alike.box_px, want) > 0.9
     assert alike.box_px[0] == pytest.approx(want[0], abs=6)  # stopped at the parapet, not the ground
-    assert 0.6 < alike.measured_share < 0.85
+    assert 0.6 < alike.measured_share < 0.95
     assert alike.centre_px[0] > 300  # the landing site stays on measured cells
-    (blind,) = roof_of(None)
-    assert blind.box_px[0] >= 300
+    (blind,) = _roof_of(dm, None)
+    assert blind.box_px[0] >= 295
     assert blind.measured_share == 1.0
-    # The unmeasured strip looks different (another colour): no extension.
+    # The unmeasured part looks different (another colour): no extension.
     img = _roof_image((200, 196, 190))
     img[:, :300] = (60, 120, 60)
-    (other,) = roof_of(img)
-    assert other.box_px[0] >= 300
+    (other,) = _roof_of(dm, img)
+    assert other.box_px[0] >= 295
     # A sensor that reaches 200 m would have answered from the roof's plane there: not the roof.
-    (in_range,) = roof_of(_roof_image((200, 196, 190)), dataclasses.replace(dm, max_range_m=200.0))
-    assert in_range.box_px[0] >= 300
-    (beyond,) = roof_of(_roof_image((200, 196, 190)), dataclasses.replace(dm, max_range_m=60.0))
-    assert beyond.box_px[0] == pytest.approx(want[0], abs=6)
+    (in_range,) = _roof_of(dataclasses.replace(dm, max_range_m=200.0), _roof_image((200, 196, 190)))
+    assert in_range.box_px[0] >= 295
+
+
+def test_a_roof_that_ends_inside_the_range_is_not_continued_round_its_corner() -> None:
+    """Scenario1's case: the whole roof measured, its far edge close to the sensor's range, the
+    ground beyond unknown (out of range) and looking just like the roof. Beside the roof the sensor
+    would have answered from the roof's plane, so the roof ends at its edge; only straight out from
+    where the roof itself reached the range could it go on."""
+    corner_m = float(np.hypot(ALT - ROOF.up, np.hypot(ROOF.n1, ROOF.e0)))  # the farthest roof point: 89.2 m
+    range_m = corner_m + 0.5
+    d = _out_of_range(depth_image([ROOF]), range_m)
+    dm = dataclasses.replace(ArrayDepth(d).depth_map(CAM), max_range_m=range_m)
+    img = np.full((CAM.height, CAM.width, 3), 150, np.uint8)  # roof and ground alike, no parapet line
+    img += np.random.default_rng(4).integers(0, 4, img.shape, dtype=np.uint8)
+    (roof,) = _roof_of(dm, img)
+    edge = expected_box(ROOF.n0, ROOF.n1, ROOF.e0, ROOF.e1, ROOF.up)
+    assert roof.box_px[0] >= edge[0] - 3  # nothing west of the roof's west edge
+    assert roof.box_px[1] >= edge[1] - 3
+    assert roof.box_px[3] <= edge[3] + 3
+    assert roof.measured_share > 0.97
+
+
+def test_a_roof_edge_at_the_range_stops_the_image_at_its_parapet_line() -> None:
+    """The roof's west edge lies right at the sensor's range, so the ground beyond could be roof as
+    far as the range can tell; the ground looks just like the roof, but the parapet's line between
+    them is an edge stronger than anything inside the roof: the growth stops at it."""
+    west_m = float(np.hypot(ALT - ROOF.up, ROOF.e0))  # 88.1 m: the middle of the west edge
+    range_m = west_m + 0.2  # the edge measured, the roof's corners (89.2 m) not
+    r, w, top = ROOF, 0.4, ROOF.up + 1.0  # a parapet 1 m high, 0.4 m wide
+    parapet = [
+        Slab(r.n0, r.n0 + w, r.e0, r.e1, top),
+        Slab(r.n1 - w, r.n1, r.e0, r.e1, top),
+        Slab(r.n0, r.n1, r.e0, r.e0 + w, top),
+        Slab(r.n0, r.n1, r.e1 - w, r.e1, top),
+    ]
+    d = _out_of_range(depth_image([ROOF, *parapet]), range_m)
+    dm = dataclasses.replace(ArrayDepth(d).depth_map(CAM), max_range_m=range_m)
+    img = _roof_image((110, 110, 110))  # the ground's grey, with the dark parapet line round it
+    (roof,) = _roof_of(dm, img)
+    edge = expected_box(ROOF.n0, ROOF.n1, ROOF.e0, ROOF.e1, ROOF.up)
+    assert roof.box_px[0] >= edge[0] - 4
+    assert roof.measured_share < 1.0  # the corners beyond the range were taken
+
+
+def test_ring_spacing_from_a_sweep() -> None:
+    model = LidarModel(channels=40, points_per_ring=64)
+    pts = model.rays_body() * 30.0
+    pts = pts[pts[:, 2] > 0.1]  # returns from below only
+    noisy = pts * (1.0 + 0.001 * np.random.default_rng(0).standard_normal(len(pts)))[:, None]
+    assert ring_spacing_rad(noisy) == pytest.approx(math.radians((90.0 - 0.5) / 39), rel=1e-6)
+    scattered = np.random.default_rng(1).normal(size=(500, 3)) + np.array([0.0, 0.0, 5.0])
+    assert ring_spacing_rad(scattered) is None  # no rings: a dense sensor's tolerance
+    assert ring_spacing_rad(pts[:5]) is None
 
 
 def test_the_image_never_extends_across_measured_cells() -> None:

@@ -61,6 +61,8 @@ class DepthMap:
         source: ``"lidar"``, ``"file"`` or the monocular model's name.
         measured: (rows, cols) bool, cells holding a measurement (the rest were filled), or None.
         max_range_m: the sensor's range, when a cell can be unknown because its surface lies beyond it.
+        ring_spacing_rad: for a scanning sensor, the angle between its scan rings (its last ring on
+            a surface may fall that far short of the range); None for a dense one.
     """
 
     depth: np.ndarray
@@ -69,6 +71,7 @@ class DepthMap:
     source: str
     measured: np.ndarray | None = field(default=None, repr=False)
     max_range_m: float | None = None
+    ring_spacing_rad: float | None = None
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -174,7 +177,24 @@ class LidarDepth:
         sparse[r[order], c[order]] = z[order]
         measured = np.isfinite(sparse)
         dense = densify(sparse, self.gap_cells)
-        return DepthMap(dense, True, self.cell_px, self.name, measured, self.range_m)
+        return DepthMap(dense, True, self.cell_px, self.name, measured, self.range_m, ring_spacing_rad(pts))
+
+
+def ring_spacing_rad(points_frd: np.ndarray) -> float | None:
+    """The angle between a scanning LiDAR's rings, from its returns: the median gap between the
+    distinct elevations they come back at (range noise moves a return along its ray, never off its
+    ring). None with fewer than four rings seen or for returns at no repeated elevations."""
+    if len(points_frd) < 8:
+        return None
+    el = np.sort(np.arctan2(points_frd[:, 2], np.hypot(points_frd[:, 0], points_frd[:, 1])))
+    gaps = np.diff(el)
+    rings = gaps[gaps > _RING_GAP_MIN_RAD]
+    if len(rings) < 3 or len(rings) > len(el) // 4:  # not rings: returns at scattered elevations
+        return None
+    return float(np.median(rings))
+
+
+_RING_GAP_MIN_RAD = math.radians(0.05)
 
 
 def to_cells(depth_px: np.ndarray, camera: PinholeCamera, cell_px: int) -> np.ndarray:

@@ -35,15 +35,16 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import cv2
 import numpy as np
 
-from companion.guidance.frames import PinholeCamera
+from companion.guidance.frames import CAMERA_TO_BODY, PinholeCamera, quat_to_matrix
 from companion.perception.depth import DepthError, DepthMap, DepthSource, grid_shape
-from companion.perception.flatness import Flatness, cell_points, flatness
+from companion.perception.flatness import Flatness, flatness
 from companion.perception.image_extend import ImageCells, extend_unmeasured
 
 __all__ = ["Candidate", "SurfaceParams", "propose", "quadrant_fallback", "surface_id"]
@@ -69,7 +70,7 @@ class SurfaceParams:
     score_area_m2: float = 400.0  # landable area beyond this adds nothing to the score
     same_surface_m: float = 1.0  # contained boxes this close in height are the same surface
     same_surface_rel: float = 0.02  # the same for relative depth (fraction of the depth range)
-    extend_with_image: bool = False  # grow metric surfaces over unmeasured cells that look the same
+    extend_with_image: bool = True  # grow metric surfaces over unmeasured cells that look the same
     roof_height_m: float = 3.0  # a surface this far above its surroundings is elevated (a roof)
     ground_level_factor: float = 0.5  # score factor for surfaces at street level (traffic, people)
 
@@ -256,19 +257,67 @@ def _component(
     return cand, level
 
 
-_RANGE_SLACK = 0.97  # a surface this close to the sensor's range may already go unanswered
+_SEED_LEVEL_M = 0.3  # measured cells this close to a flat surface's level are that surface
 
 
-def _ray_range_per_metre_below(
-    depth: DepthMap, camera: PinholeCamera, quat_wxyz: tuple[float, float, float, float]
-) -> np.ndarray:
-    """Range to a level plane one metre below the camera along each cell's centre ray (inf: no hit)."""
-    unit = DepthMap(np.ones(depth.shape, np.float32), True, depth.cell_px, "unit")
-    ray = cell_points(unit, camera, quat_wxyz)  # z = 1 rays in the level frame
-    down = ray[..., 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        out: np.ndarray = np.where(down > 1e-6, np.linalg.norm(ray, axis=-1) / down, np.inf)
-    return out
+def _range_reached(depth: DepthMap, camera: PinholeCamera, below_m: float) -> float | None:
+    """How far along a level plane ``below_m`` under the sensor its returns surely reach, when the
+    plane goes on past its range: the range, less one ring spacing (the last ring on the plane may
+    fall that short of it; a quarter more for the tilt of a hovering vehicle) and less one cell (the
+    depth grid's step). A surface measured out to here may continue unseen; one that ends short of
+    it ends. None when the plane lies beyond the range everywhere."""
+    r = depth.max_range_m
+    if r is None or below_m <= 0.0 or below_m >= r:
+        return None
+    cos = below_m / r
+    sin = math.sqrt(1.0 - cos * cos)
+    ring = 1.25 * r * (sin / cos) * (depth.ring_spacing_rad or 0.0)
+    cell = depth.cell_px * below_m / camera.fx * sin
+    return r - ring - cell
+
+
+_AZIMUTH_BINS = 720  # half a degree: finer than a 0.2 m cell seen 50 m out
+
+
+class _PlaneRays:
+    """Per cell centre ray, on a level plane one metre below the camera: its range there (inf where
+    it never meets the plane) and, when first asked for, its azimuth about the camera's nadir as a
+    bin of ``_AZIMUTH_BINS``."""
+
+    def __init__(
+        self, depth: DepthMap, camera: PinholeCamera, quat_wxyz: tuple[float, float, float, float]
+    ) -> None:
+        rows, cols = depth.shape
+        s = depth.cell_px
+        x = ((np.arange(cols, dtype=np.float32) + 0.5) * s - camera.cx) / camera.fx
+        y = ((np.arange(rows, dtype=np.float32) + 0.5) * s - camera.cy) / camera.fy
+        m = (quat_to_matrix(quat_wxyz) @ CAMERA_TO_BODY).astype(np.float32)  # camera -> level NED
+        n, e, d = (m[i, 0] * x[None, :] + m[i, 1] * y[:, None] + m[i, 2] for i in range(3))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            self.range_per_m: np.ndarray = np.where(d > 1e-6, np.sqrt(n * n + e * e + d * d) / d, np.inf)
+        self._ne = (n, e)
+        self._azimuth_bin: np.ndarray | None = None
+
+    @property
+    def azimuth_bin(self) -> np.ndarray:
+        if self._azimuth_bin is None:
+            turn = (np.arctan2(self._ne[1], self._ne[0]) + math.pi) * (_AZIMUTH_BINS / (2 * math.pi))
+            self._azimuth_bin = np.minimum(turn.astype(np.int32), _AZIMUTH_BINS - 1)
+        return self._azimuth_bin
+
+    def seen_to_the_range(self, seed: np.ndarray, below_m: float, reach_m: float) -> np.ndarray:
+        """Which azimuth bins hold a cell of ``seed`` at least ``reach_m`` from the sensor on the
+        level plane ``below_m`` under it (and the bins either side: the cells' own width).
+
+        A vertical plane through the sensor holds one azimuth of every ring: along it, a level
+        surface that goes on past the range was measured up to the range, and one that ended
+        short of it left unknown cells the sensor would have answered from. So a surface continues
+        only straight out from where it was seen at the range, never sideways round a corner."""
+        far = seed & (self.range_per_m * below_m >= reach_m)
+        bins = np.zeros(_AZIMUTH_BINS, bool)
+        bins[self.azimuth_bin[far]] = True
+        out: np.ndarray = bins | np.roll(bins, 1) | np.roll(bins, -1)
+        return out
 
 
 def surface_id(
@@ -312,14 +361,19 @@ def surface_id(
     found: list[tuple[Candidate, float]] = []
     cells: ImageCells | None = None
     use_image = depth.metric and image is not None and p.extend_with_image and not depth.valid.all()
-    ray_range = _ray_range_per_metre_below(depth, camera, quat_wxyz) if use_image else None
+    plane = _PlaneRays(depth, camera, quat_wxyz) if use_image else None
 
-    def beyond_range(below_m: float) -> np.ndarray | None:
-        """Cells where a level plane ``below_m`` under the camera lies beyond the sensor's range."""
-        if ray_range is None or depth.max_range_m is None:
-            return None
-        out: np.ndarray = ray_range * below_m >= _RANGE_SLACK * depth.max_range_m
-        return out
+    def unseen_beyond(seed: np.ndarray, below_m: float, reach_m: float) -> Callable[[np.ndarray], np.ndarray]:
+        """Which of some cells the seed's level plane, ``below_m`` under the camera, reaches beyond
+        the sensor's range (``reach_m``), straight out from a part of the seed measured there."""
+        assert plane is not None
+        bins = plane.seen_to_the_range(seed, below_m, reach_m)
+
+        def keep(cand: np.ndarray) -> np.ndarray:
+            out: np.ndarray = cand & (plane.range_per_m * below_m >= reach_m) & bins[plane.azimuth_bin]
+            return out
+
+        return keep
 
     k_grow = np.ones((2 * fl.half_window + 1, 2 * fl.half_window + 1), np.uint8)
     for c in range(1, count):
@@ -329,16 +383,30 @@ def surface_id(
         comp = labels[r0:r1, c0:c1] == c
         extra = None
         if use_image:
-            grown = cv2.dilate(comp.astype(np.uint8), k_grow).astype(bool) & depth.valid[r0:r1, c0:c1]
+            # The measured cells around the flat part at its level (the flatness window stops short
+            # of where the measurement ends), but not its parapet or kerb: a wall stays a wall.
+            down = fl.ned_m[r0:r1, c0:c1, 2]
+            below_m = float(np.median(down[comp]))
+            with np.errstate(invalid="ignore"):
+                level = np.abs(down - below_m) <= _SEED_LEVEL_M
+            grown = cv2.dilate(comp.astype(np.uint8), k_grow).astype(bool) & depth.valid[r0:r1, c0:c1] & level
             edge_of_known = cv2.dilate(grown.astype(np.uint8), _K3).astype(bool) & ~depth.valid[r0:r1, c0:c1]
+            # Growth starts next to the measured surface, beyond the range or not at all.
+            reach_m = None if depth.max_range_m is None else _range_reached(depth, camera, below_m)
+            if reach_m is not None and plane is not None:
+                edge_of_known &= plane.range_per_m[r0:r1, c0:c1] * below_m >= reach_m
+            elif depth.max_range_m is not None:
+                edge_of_known[:] = False
             if edge_of_known.any():
                 if cells is None:
                     assert image is not None
                     cells = ImageCells.from_image(np.asarray(image), rows, cols, depth.cell_px)
                 full = np.zeros(depth.shape, bool)
                 full[r0:r1, c0:c1] = grown
-                below_m = -float(np.median(-fl.ned_m[r0:r1, c0:c1][comp][:, 2]))
-                ext = extend_unmeasured(full, depth.valid, cells, allowed=beyond_range(below_m))
+                flat = np.zeros(depth.shape, bool)
+                flat[r0:r1, c0:c1] = comp
+                allowed = None if reach_m is None else unseen_beyond(full, below_m, reach_m)
+                ext = extend_unmeasured(full, depth.valid, cells, allowed=allowed, sample=flat)
                 if ext.any():
                     er, ec = np.nonzero(ext)
                     r0, c0 = min(r0, int(er.min()) - pad), min(c0, int(ec.min()) - pad)
