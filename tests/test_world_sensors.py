@@ -10,6 +10,7 @@ import pytest
 from simbridge.geo import euler_to_quat
 from simbridge.world.actors import CAR_HEIGHT_M, Actors
 from simbridge.world.camera import CameraModel, ShadowMap, body_to_neu, render
+from simbridge.world.city import generate_city
 from simbridge.world.grader import grade
 from simbridge.world.lidar import LidarModel, rangefinder_m, sweep
 from simbridge.world.live import LiveWorld
@@ -237,6 +238,34 @@ def test_stamped_actor_is_seen_by_camera_and_grader() -> None:
     assert not verdict.safe
     live.sync(live.t_s + 30.0)  # the car has driven on: its old cells are road again
     assert g.class_at(*car.centre_ne) in (C.ROAD, C.VEHICLE)
+
+
+def test_a_sensor_sees_the_same_actors_as_if_every_actor_were_stamped() -> None:
+    """Sensors stamp only the actors within their reach (a city has thousands); a frame rendered
+    that way equals one rendered with every actor in the grid, and the max maps, raised per actor
+    only at their low levels, still bound every actor's cells from above at every level."""
+    world = generate_city(3, size_m=600.0)
+    near, every = LiveWorld(world), LiveWorld(generate_city(3, size_m=600.0))
+    q = euler_to_quat(0.02, -0.03, 0.4)
+    for t in (5.0, 20.0):
+        pos = (40.0, -60.0, -90.0)
+        frame = near.camera_frame(pos, q, t, "clear", np.random.default_rng(1))
+        stamped = len(near.actors._stamped)
+        every.sync(t)
+        assert stamped < len(every.actors._stamped)  # fewer actors stamped...
+        full = render(
+            every.grid, every.pyramid, every.shadow, every.camera, pos, q, every.sun_neu, "clear",
+            np.random.default_rng(1),
+        )  # fmt: skip
+        assert np.array_equal(frame.rgb, full.rgb)  # ...and the same picture
+        assert np.array_equal(frame.hit_class, full.hit_class)
+        assert (frame.hit_class == C.VEHICLE).any()
+        # every level bounds every actor: the grid's coarse maxima under each map's window
+        from simbridge.world.raycast import COARSE, max_pool
+
+        base = max_pool(every.grid.height, COARSE)
+        for k in range(every.pyramid.maps.shape[0]):
+            assert (every.pyramid.maps[k] >= base).all()
 
 
 def _graded_block() -> WorldGrid:

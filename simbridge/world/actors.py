@@ -11,9 +11,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from simbridge.world.model import Material, SurfaceClass, WorldGrid
+from simbridge.world.raycast import COARSE
 from simbridge.world.world import Lane, Walkway
 
 CAR_LENGTH_M, CAR_WIDTH_M, CAR_HEIGHT_M = 4.5, 1.9, 1.5
@@ -139,10 +141,50 @@ class Actors:
             grid.region[i0:i1, j0:j1][mask] = r
         self._stamped = []
 
-    def stamp(self, grid: WorldGrid) -> list[ActorPose]:
-        """Put every actor into the grid at the current time; returns the poses stamped."""
+    def envelope(self, grid: WorldGrid) -> np.ndarray:
+        """Per coarse cell of ``grid`` (``COARSE`` fine cells square), at least the top of the
+        tallest actor that can ever stand in it: cars on their lanes, people on their walkways;
+        -1e9 where none can."""
+        rows, cols = grid.shape
+        out = np.full((-(-rows // COARSE), -(-cols // COARSE)), -1e9, np.float32)
+        coarse_m = grid.res * COARSE
+        paths = [(ln.points_ne, ln.deck_height_m + CAR_HEIGHT_M, CAR_LENGTH_M / 2) for ln in self._lanes]
+        paths += [
+            (w.points_ne, w.surface_height_m + PERSON_HEIGHT_M, 0.4 * w.width_m + PERSON_SIZE_M)
+            for w in self._walkways
+        ]
+        cells, tops, reach_m = [], [], 0.0
+        for points, top, reach in paths:
+            p = np.asarray(points, float)
+            if len(p) < 2:
+                continue
+            seg = np.diff(p, axis=0)
+            steps = np.maximum(np.ceil(np.hypot(seg[:, 0], seg[:, 1]) / (coarse_m / 2)), 1).astype(int)
+            pts = np.concatenate(
+                [p[k] + seg[k] * (np.arange(steps[k] + 1)[:, None] / steps[k]) for k in range(len(seg))]
+            )
+            cells.append(np.floor((pts - (grid.n0, grid.e0)) / coarse_m).astype(np.int64))
+            tops.append(np.full(len(pts), top, np.float32))
+            reach_m = max(reach_m, reach)
+        if not cells:
+            return out
+        ij = np.concatenate(cells)
+        ok = (ij[:, 0] >= 0) & (ij[:, 0] < out.shape[0]) & (ij[:, 1] >= 0) & (ij[:, 1] < out.shape[1])
+        np.maximum.at(out, (ij[ok, 0], ij[ok, 1]), np.concatenate(tops)[ok])
+        r = math.ceil(reach_m / coarse_m) + 1  # an actor's reach from its path point, and a cell
+        return np.asarray(cv2.dilate(out, np.ones((2 * r + 1, 2 * r + 1), np.uint8)), np.float32)
+
+    def stamp(
+        self, grid: WorldGrid, near: tuple[float, float, float] | None = None
+    ) -> list[tuple[ActorPose, tuple[int, int, int, int]]]:
+        """Put the actors into the grid at the current time: all, or those within ``near``'s radius
+        of its north and east. Returns each one stamped with its grid window."""
         self.unstamp(grid)
         poses = self.poses()
+        if near is not None:
+            n0, e0, radius = near
+            poses = [a for a in poses if math.hypot(a.centre_ne[0] - n0, a.centre_ne[1] - e0) <= radius]
+        out = []
         for a in poses:
             if a.kind is SurfaceClass.VEHICLE:
                 size, height, mat = (CAR_LENGTH_M, CAR_WIDTH_M), CAR_HEIGHT_M, Material.CAR_PAINT
@@ -162,4 +204,5 @@ class Actors:
             self._stamped.append((win, mask, *saved))
             # actors carry their paint colour as a negative region id: -(colour + 1)
             grid.paint(win, mask, a.base_height_m + height, a.kind, mat, -(a.colour + 1), "set")
-        return poses
+            out.append((a, win))
+        return out

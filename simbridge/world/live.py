@@ -24,6 +24,9 @@ from simbridge.world.model import SurfaceClass
 from simbridge.world.raycast import Pyramid
 from simbridge.world.world import World
 
+DYNAMIC_LEVELS = 5  # max maps raised per actor per frame (radii to 12.8 m); the rest hold an envelope
+SEEN_MARGIN_M = 60.0  # actors stamped this far beyond what a sensor's pose says it can see
+
 
 class LiveWorld:
     """``sync(t)`` moves the actors; sensors and grading call it themselves with their time."""
@@ -45,30 +48,31 @@ class LiveWorld:
         self.pyramid = Pyramid(self.grid.height)
         self.shadow = ShadowMap(self.grid, self.pyramid, self.sun_neu)
         self.actors = Actors(world.lanes, world.walkways, world.seed)
+        self.pyramid.raise_envelope(self.actors.envelope(self.grid), DYNAMIC_LEVELS)
         self.t_s = -1.0
+        self._near: tuple[float, float, float] | None = None
         self.sync(0.0)
 
     # ------------------------------------------------------------------ time
-    def sync(self, t_s: float) -> None:
-        """Advance the actors to ``t_s`` and stamp them (and their shadows) into the grid."""
-        if t_s == self.t_s:
+    def sync(self, t_s: float, near: tuple[float, float, float] | None = None) -> None:
+        """Advance the actors to ``t_s`` and stamp them (and their shadows) into the grid: all of
+        them, or (``near``: north, east, radius in metres) those within that distance, which is
+        all a sensor there can see. Every actor moves either way."""
+        if t_s == self.t_s and (near == self._near or self._near is None):
             return
         self.shadow.unstamp()
         self.actors.advance(max(t_s, 0.0))
-        poses = self.actors.stamp(self.grid)
+        stamped = self.actors.stamp(self.grid, near)
         sn, se, su = self.sun_neu
         shadow_len = 1.0 / max(math.tan(math.asin(min(su, 1.0))), 0.05)
         horiz = math.hypot(sn, se) or 1.0
-        for a in poses:
+        for a, (i0, i1, j0, j1) in stamped:
             if a.kind is SurfaceClass.VEHICLE:
                 length, width, height = CAR_LENGTH_M, CAR_WIDTH_M, CAR_HEIGHT_M
             else:
                 length, width, height = PERSON_SIZE_M, PERSON_SIZE_M, PERSON_HEIGHT_M
             top = a.base_height_m + height
-            got = self.grid.rect_mask(a.centre_ne, length, width, a.yaw_rad)
-            if got is not None:
-                i0, i1, j0, j1 = got[0]
-                self.pyramid.raise_window(i0, i1, j0, j1, top)
+            self.pyramid.raise_window(i0, i1, j0, j1, top, DYNAMIC_LEVELS)
             off = height * shadow_len
             centre = (a.centre_ne[0] - sn / horiz * off / 2, a.centre_ne[1] - se / horiz * off / 2)
             shade = self.grid.rect_mask(
@@ -80,13 +84,20 @@ class LiveWorld:
                 under = mask & (self.grid.height[i0:i1, j0:j1] < top - 0.5)  # not the actor's own top
                 self.shadow.stamp(win, under)
         self.t_s = t_s
+        self._near = near
+
+    def _seen_from(self, pos_ned_m: tuple[float, float, float]) -> tuple[float, float, float]:
+        """The ground a sensor at ``pos_ned_m`` can see actors on: a nadir camera's rays out to 63
+        degrees from straight down (its 90-degree field of view, tilted), and the LiDAR's range."""
+        up = max(-pos_ned_m[2], 0.0)
+        return (pos_ned_m[0], pos_ned_m[1], SEEN_MARGIN_M + max(2.0 * up, self.lidar.range_m))
 
     # ------------------------------------------------------------------ Terrain protocol
     def height_m(self, north_m: float, east_m: float) -> float:
         return self.grid.height_at(north_m, east_m)
 
     def grade_touchdown(self, north_m: float, east_m: float, t_s: float) -> TouchdownGrade:
-        self.sync(t_s)
+        self.sync(t_s, (north_m, east_m, SEEN_MARGIN_M))
         return grade(self.grid, north_m, east_m, self.grader)
 
     def rangefinder_m(self, pos_ned_m: tuple[float, float, float], quat: Quat, max_m: float = 200.0) -> float:
@@ -101,7 +112,7 @@ class LiveWorld:
         weather: str,
         rng: np.random.Generator,
     ) -> Frame:
-        self.sync(t_s)
+        self.sync(t_s, self._seen_from(pos_ned_m))
         return render(
             self.grid, self.pyramid, self.shadow, self.camera, pos_ned_m, quat, self.sun_neu, weather, rng
         )
@@ -109,5 +120,5 @@ class LiveWorld:
     def lidar_sweep(
         self, pos_ned_m: tuple[float, float, float], quat: Quat, t_s: float, rng: np.random.Generator
     ) -> np.ndarray:
-        self.sync(t_s)
+        self.sync(t_s, self._seen_from(pos_ned_m))
         return sweep(self.grid, self.pyramid, self.lidar, pos_ned_m, quat, rng)
