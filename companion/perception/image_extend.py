@@ -10,8 +10,8 @@ roof's edge, a parapet's line, a kerb). Growth starts only from the surface's ce
 edge, so a parapet's line on the surface's rim is a wall too; the cell that holds the stopping edge
 is taken (the surface reaches up to it), nothing beyond.
 
-The caller also says where the surface could be at all (``allowed``, a mask, or a function that
-keeps those of the candidate cells it is given): where the sensor could not
+The caller also says where the surface could be at all (``allowed``: a function that keeps those of
+the candidate cells it is given): where the sensor could not
 have seen it (surface_id.py: its plane, carried on, lies beyond the LiDAR's range, straight out from
 where the LiDAR saw it at that range). The grown cells widen the candidate's box for the reasoner;
 the landing site itself stays on measured cells, and the close-up check before every descent
@@ -59,7 +59,7 @@ def extend_unmeasured(
     known: np.ndarray,
     cells: ImageCells,
     *,
-    allowed: np.ndarray | Callable[[np.ndarray], np.ndarray] | None = None,
+    allowed: Callable[[np.ndarray], np.ndarray] | None = None,
     sample: np.ndarray | None = None,
     min_colour_tol: float = 6.0,
     edge_factor: float = 1.5,
@@ -80,10 +80,8 @@ def extend_unmeasured(
     coloured = ~known
     for ch in range(3):  # (numpy's all() over a last axis of 3 is several times slower)
         coloured &= np.abs(lab[..., ch] - med[ch]) <= tol[ch]
-    if callable(allowed):
+    if allowed is not None:
         coloured = allowed(coloured)
-    elif allowed is not None:
-        coloured &= allowed
     quiet = cells.edge <= edge_tol
     alike = coloured & quiet
     # Growth starts only from the surface's quiet cells: one holding a parapet's line is a wall

@@ -382,7 +382,7 @@ def surface_id(
         r1, c1 = min(y + h + pad, rows), min(x + w + pad, cols)
         comp = labels[r0:r1, c0:c1] == c
         extra = None
-        if use_image:
+        if plane is not None:  # use_image
             # The measured cells around the flat part at its level (the flatness window stops short
             # of where the measurement ends), but not its parapet or kerb: a wall stays a wall.
             down = fl.ned_m[r0:r1, c0:c1, 2]
@@ -393,10 +393,10 @@ def surface_id(
             edge_of_known = cv2.dilate(grown.astype(np.uint8), _K3).astype(bool) & ~depth.valid[r0:r1, c0:c1]
             # Growth starts next to the measured surface, beyond the range or not at all.
             reach_m = None if depth.max_range_m is None else _range_reached(depth, camera, below_m)
-            if reach_m is not None and plane is not None:
+            if reach_m is not None:
                 edge_of_known &= plane.range_per_m[r0:r1, c0:c1] * below_m >= reach_m
             elif depth.max_range_m is not None:
-                edge_of_known[:] = False
+                edge_of_known[:] = False  # the plane lies beyond the range everywhere: nothing seen
             if edge_of_known.any():
                 if cells is None:
                     assert image is not None

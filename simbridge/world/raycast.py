@@ -19,6 +19,7 @@ Hit kinds: 0 top, 1 wall crossed along north, 2 wall crossed along east, -1 miss
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 
 import numpy as np
 from numba import njit
@@ -53,16 +54,23 @@ def _dilate(a: np.ndarray, s: int) -> np.ndarray:
     return np.asarray(np.maximum(np.maximum(p[:, : -2 * s], p[:, s:-s]), p[:, 2 * s :]))
 
 
+def _max_levels(base: np.ndarray) -> Iterator[np.ndarray]:
+    """Level ``k`` of the max maps over coarse cells ``base``: the maximum within ``2**k`` cells
+    (Chebyshev), each level dilating the one before by half its radius."""
+    level = _dilate(base, 1)
+    yield level
+    for k in range(1, LEVELS):
+        level = _dilate(level, 1 << (k - 1))
+        yield level
+
+
 class Pyramid:
     """The max maps the march jumps with: ``maps[k, bi, bj]`` is the tallest cell within
     ``2**k`` coarse cells (Chebyshev) of coarse cell ``(bi, bj)``."""
 
     def __init__(self, height: np.ndarray) -> None:
         base = max_pool(height, COARSE)
-        levels = [_dilate(base, 1)]
-        for k in range(1, LEVELS):
-            levels.append(_dilate(levels[-1], 1 << (k - 1)))
-        self.maps = np.ascontiguousarray(np.stack(levels).astype(np.float32))
+        self.maps = np.ascontiguousarray(np.stack(list(_max_levels(base))).astype(np.float32))
         self.h_max = float(base.max())
 
     def raise_window(self, i0: int, i1: int, j0: int, j1: int, top_m: float, levels: int = LEVELS) -> None:
@@ -87,10 +95,7 @@ class Pyramid:
         where none can). Those maps' windows span tens of metres: raising them for every actor at
         every frame would cost more than the frame, and an envelope along the roads bounds them."""
         base = np.asarray(coarse_top, np.float32)
-        level = _dilate(base, 1)
-        for k in range(LEVELS):
-            if k > 0:
-                level = _dilate(level, 1 << (k - 1))
+        for k, level in enumerate(_max_levels(base)):
             if k >= from_level:
                 np.maximum(self.maps[k], level, out=self.maps[k])
         self.h_max = max(self.h_max, float(base.max()))
