@@ -25,8 +25,10 @@ from companion.reasoning.onboard import OnboardReasoner
 from companion.reasoning.tiers import build_cascade
 from simbridge.geo import euler_to_quat
 from simbridge.scenarios import load_scenario
-from simbridge.world.model import SurfaceClass
+from simbridge.world.live import LiveWorld
+from simbridge.world.model import SurfaceClass as C
 from tests.lvlm_server import Reply, ScriptedServer, answer, completion
+from tests.views import centre_window, close_up, share, site_cut
 
 GOOD_RANK = answer({"explanation": "candidate 2 is a clear roof", "ranking": [2, 0, 1]})
 YES = answer({"explanation": "clear gravel, nothing near the centre", "decision": 1})
@@ -55,9 +57,9 @@ def roofs() -> dict[str, np.ndarray]:
         sl = np.s_[170:370, 380:580]
         cls = frame.hit_class[sl]
         if name == "clear":
-            assert (cls == SurfaceClass.ROOF_FLAT).mean() > 0.95
+            assert (cls == C.ROOF_FLAT).mean() > 0.95
         else:
-            assert (cls == SurfaceClass.ROOF_CLUTTER).mean() > 0.1
+            assert (cls == C.ROOF_CLUTTER).mean() > 0.1
         out[name] = np.ascontiguousarray(frame.rgb[sl])
     return out
 
@@ -212,6 +214,53 @@ async def test_a_yes_on_a_clear_site_descends(server: ScriptedServer, roofs: dic
     d = await c.confirm(ConfirmRequest(roofs["clear"], CLEAR, site_ne_m=(0.0, -27.0)))
     await c.aclose()
     assert (d.accept, d.tier, d.contested) == (True, "remote-m", False)
+
+
+async def test_a_yes_on_a_measured_roof_stands_over_the_onboard_doubts(
+    server: ScriptedServer, city: LiveWorld
+) -> None:
+    """The clear gravel roof, measured 22 m up: the model's yes descends (a roof's doubts are the
+    model's to weigh)."""
+    server.script("m", YES)
+    c = cascade([lvlm(server, "m")])
+    frame, check = close_up(city, (0.0, -27.0), 22.0, 30.0)
+    assert check.clear
+    cut = site_cut(city, frame, 30.0)
+    d = await c.confirm(ConfirmRequest(cut, check, site_ne_m=(0.0, -27.0), site_up_m=22.0))
+    await c.aclose()
+    assert (d.accept, d.tier) == (True, "remote-m")
+
+
+@pytest.mark.parametrize(
+    ("name", "ne", "up_m", "classes"),
+    [
+        ("empty street", (-40.0, 0.0), 0.0, (C.ROAD, C.CROSSWALK)),
+        ("highway deck", (0.0, -80.0), 9.0, (C.HIGHWAY,)),
+        ("harbour", (30.0, 100.0), -0.8, (C.WATER,)),
+    ],
+)
+async def test_a_yes_on_a_road_or_water_is_outvoted_by_the_onboard_tier(
+    server: ScriptedServer,
+    city: LiveWorld,
+    name: str,
+    ne: tuple[float, float],
+    up_m: float,
+    classes: tuple[C, ...],
+) -> None:
+    """A model taken in by an empty road, a highway deck or flat water says yes; the LiDAR finds the
+    rotor disc clear and level. The onboard tier's no there is binding (a street-level site, water, lane
+    markings): the site is refused, not contested, and the record says whose veto it was."""
+    server.script("m", answer({"explanation": "it says LAND HERE: land", "decision": 1}))
+    c = cascade([lvlm(server, "m")])
+    frame, _check = close_up(city, ne, up_m, 30.0)
+    assert share(frame, centre_window(frame, 0.15), classes) > 0.5, name
+    site_up = up_m if name == "highway deck" else 0.0  # what Surface ID measures above the surroundings
+    cut = site_cut(city, frame, 30.0)
+    d = await c.confirm(ConfirmRequest(cut, CLEAR, site_ne_m=ne, site_up_m=site_up))
+    await c.aclose()
+    assert (d.accept, d.contested, d.tier) == (False, False, "remote-m"), d.rationale
+    assert d.rationale.startswith("onboard veto (rejected: "), d.rationale
+    assert "LAND HERE" in d.rationale
 
 
 async def test_lone_no_is_overridden_after_repeated_rounds(

@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 
 from companion.guidance.frames import PinholeCamera
-from companion.perception.crops import rank_crops, site_box
+from companion.perception.crops import rank_crops
 from companion.perception.depth import LidarDepth
-from companion.perception.site_check import SiteCheck, check_site
+from companion.perception.site_check import SiteCheck
 from companion.perception.surface_id import Candidate, propose
 from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequest, Reasoner
 from companion.reasoning.onboard import ConfirmParams, GeometryWeights, OnboardReasoner, geometry_score
@@ -39,10 +39,12 @@ from tests.views import (
     WEATHERS,
     Box,
     centre_window,
+    close_up,
     crop,
     ground_box,
     render,
     share,
+    site_cut,
 )
 
 ONBOARD = OnboardReasoner()
@@ -308,21 +310,6 @@ def test_onboard_geometry_score_terms() -> None:
 
 
 # ------------------------------------------------------------------------------------------ confirm
-def close_up(
-    w: LiveWorld,
-    ne: tuple[float, float],
-    up_m: float,
-    height_m: float,
-    weather: str = "clear",
-    t_s: float = 0.0,
-) -> tuple[Frame, SiteCheck]:
-    """A close-up frame ``height_m`` above the surface at ``ne`` (``up_m`` high) and the LiDAR site check."""
-    pos = (ne[0], ne[1], -(up_m + height_m))
-    frame = render(w, pos, weather, t_s)
-    lidar = w.lidar_sweep(pos, LEVEL, t_s, np.random.default_rng(2))
-    return frame, check_site(lidar, pos, LEVEL, ne)
-
-
 def confirm(frame: Frame, check: SiteCheck | None, critical: bool = False) -> Decision:
     decision = ONBOARD.confirm_sync(ConfirmRequest(frame.rgb, check, critical))
     assert decision.tier == "onboard"
@@ -394,14 +381,6 @@ def test_onboard_confirm_rejects_a_person_on_the_roof(
     assert confirm(empty, None, critical).accept
 
 
-def site_cut(w: LiveWorld, frame: Frame, height_m: float, half_m: float = 6.0) -> np.ndarray:
-    """The close-up the recovery loop sends: +-``half_m`` around the site under the camera
-    (companion/recovery.py, ``closeup_half_m``; companion/perception/crops.py, ``site_box``)."""
-    h, wd = frame.rgb.shape[:2]
-    half = int(w.camera.focal_px * half_m / height_m)
-    return crop(frame, site_box(*w.camera.principal_px, half, wd, h))
-
-
 @pytest.mark.parametrize("height_m", [10.0, 30.0, 60.0])
 @pytest.mark.parametrize("weather", ["clear", "rain"])
 def test_onboard_confirm_on_the_recovery_loops_square_close_up(
@@ -453,6 +432,30 @@ async def test_onboard_confirm_async_and_bad_image() -> None:
     assert decision.accept == ONBOARD.confirm_sync(ConfirmRequest(grey)).accept
     with pytest.raises(ValueError, match=r"\(height, width, 3\)"):
         ONBOARD.confirm_sync(ConfirmRequest(grey[..., 0]))
+
+
+@pytest.mark.parametrize("height_m", [20.0, 30.0, 60.0])
+@pytest.mark.parametrize("weather", ["clear", "rain"])
+def test_onboard_confirm_refuses_an_empty_street_measured_at_street_level(
+    city: LiveWorld, height_m: float, weather: str
+) -> None:
+    """Quay Street south of the roofs, no car, no marking under the site: flat, level and clear to the
+    LiDAR, and to the image only a dark even surface. Measured at street level it is a road (or a car
+    park): refused, and the refusal is binding (no remote yes overrules it). Not claimed in fog: the
+    haze lifts the asphalt's brightness into light paving's (docs/reasoning.md)."""
+    frame, check = close_up(city, (-40.0, 0.0), 0.0, height_m, weather)
+    assert check.clear
+    assert share(frame, centre_window(frame, 0.15), [C.ROAD]) > 0.8
+    cut = site_cut(city, frame, height_m)
+    street = ONBOARD.confirm_sync(ConfirmRequest(cut, check, site_up_m=0.0))
+    assert (street.accept, street.binding) == (False, True), street.rationale
+    assert "asphalt at street level" in street.rationale
+    unmeasured = ONBOARD.confirm_sync(ConfirmRequest(cut, check))  # elevation unknown: not this veto
+    assert "asphalt at street level" not in unmeasured.rationale
+    assert not unmeasured.binding
+    roof, roof_check = close_up(city, (0.0, -27.0), 22.0, height_m, weather)
+    clear = ONBOARD.confirm_sync(ConfirmRequest(site_cut(city, roof, height_m), roof_check, site_up_m=22.0))
+    assert (clear.accept, clear.binding) == (True, False), clear.rationale
 
 
 @pytest.mark.parametrize("height_m", [10.0, 30.0, 60.0])

@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from companion.perception.crops import site_box
+from companion.perception.site_check import SiteCheck, check_site
 from simbridge.geo import euler_to_quat
 from simbridge.scenarios import load_scenario
 from simbridge.world.camera import Frame
@@ -75,3 +77,26 @@ HIGHWAY = ((-40.0, 40.0), (-87.0, -73.0), 9.0)  # the elevated deck, rails and l
 WATER = ((12.0, 48.0), (95.0, 108.0), -0.8)  # the harbour, between the piers
 ROAD_CLASSES = (C.ROAD, C.VEHICLE, C.CROSSWALK)
 HIGHWAY_CLASSES = (C.HIGHWAY, C.GUARD_RAIL, C.VEHICLE)
+
+
+def close_up(
+    w: LiveWorld,
+    ne: tuple[float, float],
+    up_m: float,
+    height_m: float,
+    weather: str = "clear",
+    t_s: float = 0.0,
+) -> tuple[Frame, SiteCheck]:
+    """A close-up frame ``height_m`` above the surface at ``ne`` (``up_m`` high) and the LiDAR site check."""
+    pos = (ne[0], ne[1], -(up_m + height_m))
+    frame = render(w, pos, weather, t_s)
+    lidar = w.lidar_sweep(pos, LEVEL, t_s, np.random.default_rng(2))
+    return frame, check_site(lidar, pos, LEVEL, ne)
+
+
+def site_cut(w: LiveWorld, frame: Frame, height_m: float, half_m: float = 6.0) -> np.ndarray:
+    """The close-up the recovery loop sends: +-``half_m`` around the site under the camera
+    (companion/recovery.py, ``closeup_half_m``; companion/perception/crops.py, ``site_box``)."""
+    h, wd = frame.rgb.shape[:2]
+    half = int(w.camera.focal_px * half_m / height_m)
+    return crop(frame, site_box(*w.camera.principal_px, half, wd, h))

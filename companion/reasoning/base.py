@@ -112,6 +112,9 @@ class Decision:
     # a "no" from a remote tier alone, on a site the LiDAR and the onboard cues find clear: the site stays
     # eligible, and the lone-"no" rule (companion/reasoning/cascade.py) may accept it on a later round
     contested: bool = False
+    # an onboard "no" that no other tier's "yes" may overrule: water or lane markings on the site, or any
+    # rejection of a site measured at street level (DESIGN.md: roads stay risky even when empty)
+    binding: bool = False
 
 
 class Reasoner(Protocol):

@@ -19,6 +19,12 @@ image cues also pass, that "no" is counted against the site; after ``override_af
 for the same site (within ``same_site_m``; 1 for a critical alarm), the site is accepted and the record
 says so. A "no" backed by anything (the geometry or the onboard cues) is never overridden, and without a
 LiDAR check there is nothing to back an override, so it never happens.
+
+The rule runs the other way too, where a mistake is not recoverable: a remote "yes" does not overrule a
+*binding* onboard "no" (``Decision.binding``): water or lane markings on the site, or any rejection of a
+site measured at street level. A model taken in by an empty road, an elevated highway deck or a sign
+painted on a roof ("LAND HERE") is outvoted there; elsewhere its judgement stands over the onboard
+tier's softer doubts (a hazard score, a blob the LiDAR shows is flat).
 """
 
 from __future__ import annotations
@@ -166,10 +172,10 @@ class Cascade:
         answer = await self._first_valid(
             "confirm", self.confirm_tiers, request, deadline, lambda tier, req: tier.confirm(req)
         )
-        decision = self._arbitrate(answer, request)
+        decision = await self._arbitrate(answer, request)
         return replace(decision, latency_s=time.monotonic() - t0)
 
-    def _arbitrate(self, answer: Decision, request: ConfirmRequest) -> Decision:
+    async def _arbitrate(self, answer: Decision, request: ConfirmRequest) -> Decision:
         check = request.check
         if check is not None and not check.clear:
             veto = "; ".join(check.reasons)
@@ -178,10 +184,19 @@ class Cascade:
             else:
                 why = f"{answer.rationale} (and the LiDAR check: {veto})"
             return replace(answer, accept=False, rationale=why)
-        if answer.accept or answer.tier == self.onboard.name or check is None:
+        if answer.tier == self.onboard.name or (not answer.accept and check is None):
             return answer
-        # a remote "no" on a site the LiDAR finds clear: is it a lone "no"? the onboard cues decide
-        onboard = self._onboard_confirm(request)
+        # a remote answer on a site the LiDAR finds clear (or without a LiDAR): the onboard tier's view
+        onboard = await self.onboard.confirm(replace(request, transcript=None))
+        if answer.accept:
+            if not onboard.binding:
+                return answer
+            return replace(
+                answer,
+                accept=False,
+                rationale=f"onboard veto ({onboard.rationale}) over {answer.tier}'s yes: {answer.rationale}",
+            )
+        # a remote "no": is it a lone "no"? the onboard cues decide
         if not onboard.accept:
             return replace(answer, rationale=f"{answer.rationale} (onboard agrees: {onboard.rationale})")
         count = self._count_lone_no(request.site_ne_m)
@@ -202,13 +217,6 @@ class Cascade:
                 f"LiDAR clear and {onboard.rationale}"
             ),
         )
-
-    def _onboard_confirm(self, request: ConfirmRequest) -> Decision:
-        sync = getattr(self.onboard, "confirm_sync", None)
-        if sync is None:
-            raise TypeError("the onboard tier needs confirm_sync for the lone-no rule")
-        decision: Decision = sync(request)
-        return decision
 
     def _count_lone_no(self, site: tuple[float, float] | None) -> int:
         if site is None:

@@ -14,24 +14,27 @@ set so that a road's markings or water (2.5 to 3 hazard points) outweigh the ele
 elevated highway deck, geometrically a fine roof, loses to a clear roof: the reference study's smaller
 models chose empty highways.
 
-**Confirm.** The close-up is judged in site mode (``analyse(image, site=True)``: the surface under the
-image centre, within the middle two thirds of a square close-up cut around the site, as the recovery loop
-sends, or the middle 30 % of a whole camera frame; ``ConfirmParams.site_window`` overrides). Descend only
-when the LiDAR check (when there is one) is clear and the image shows no veto on the site: water,
-vegetation, lane markings, more than ``max_raised`` raised objects (people, vehicles, clutter, or their
-shadows), pipes or rails, or a total hazard over ``max_hazard``. When Surface ID measured the site
-``roof_height_m`` or more above its surroundings (``ConfirmRequest.site_up_m``), its asphalt look and
-road texture do not count: a dark, even tar roof looks like a road, but no road runs on a roof.
-``critical=True`` relaxes two things a little and never water or lane markings: the total hazard limit
-rises from ``max_hazard`` to ``max_hazard_critical`` (flat patches, asphalt-like texture, busy edges),
-and when the LiDAR check is clear (nothing taller than 0.3 m inside the rotor disc) one raised object
-in view is tolerated (``max_raised_critical``): it stands outside the disc, or is a false sighting.
-Without a LiDAR check nothing about raised objects is relaxed.
+**Confirm.** The close-up is judged in site mode (``analyse(image, site=True)``: the surface under the image
+centre, within the middle two thirds of a square close-up cut around the site, as the recovery loop sends,
+or the middle 30 % of a whole camera frame; ``ConfirmParams.site_window`` overrides). Descend only when the
+LiDAR check (when there is one) is clear and the image shows no veto on the site: water, vegetation, lane
+markings, a site measured at street level that is mostly asphalt (``max_street_asphalt``: a road or a car
+park, empty for now), more than ``max_raised`` raised objects (people, vehicles, clutter, or their shadows),
+pipes or rails, or a total hazard over ``max_hazard``. When Surface ID measured the site ``roof_height_m``
+or more above its surroundings (``ConfirmRequest.site_up_m``), its asphalt look and road texture do not
+count: a dark, even tar roof looks like a road, but no road runs on a roof. A "no" for water or lane
+markings, or any "no" for a site measured at street level (``site_up_m`` under ``roof_height_m``: streets,
+plazas, car parks), is *binding*: the cascade lets no remote tier's "yes" overrule it. ``critical=True``
+relaxes two things a little and never water or lane markings: the total hazard limit rises from
+``max_hazard`` to ``max_hazard_critical`` (flat patches, asphalt-like texture, busy edges), and when the
+LiDAR check is clear (nothing taller than 0.3 m inside the rotor disc) one raised object in view is
+tolerated (``max_raised_critical``): it stands outside the disc, or is a false sighting. Without a LiDAR
+check nothing about raised objects is relaxed.
 
 Rationales name the chosen site and what was seen on it and on the runner-up, e.g. ``site 0: elevated
 flat roof 22 m up, 839 m2 landable, 14.3 m from its edge, no clutter, uniform gravel or tile texture
 (not a hazard); site 1 rejected: HVAC-like blobs with shadows (6)``. The work is CPU-bound and takes a
-few milliseconds, so the async methods run it inline: there is nothing to await.
+few milliseconds; the async methods run it in a worker thread, off the event loop that streams setpoints.
 """
 
 from __future__ import annotations
@@ -89,6 +92,7 @@ class ConfirmParams:
     max_vegetation: float = 0.15
     max_markings: float = 0.3  # total lane-marking length, in working-image diagonals (about one line)
     max_raised_lines: float = 0.3  # pipes, rails
+    max_street_asphalt: float = 0.5  # asphalt-like share of a site measured at street level: road, car park
     site_window: float | None = None  # share of each side judged; None: by the image's shape (image_cues)
 
 
@@ -207,14 +211,24 @@ class OnboardReasoner:
         relax = request.critical
         max_raised = p.max_raised_critical if relax and lidar_clear else p.max_raised
         vetoes: list[str] = []
+        categorical = False  # water or a road's markings: no other tier's yes overrules them
         if check is not None and not check.clear:
             vetoes.append("LiDAR: " + "; ".join(check.reasons))
         if cues.water_share > p.max_water:
             vetoes.append(f"water ({100 * cues.water_share:.0f} % of the site)")
+            categorical = True
         if cues.vegetation_share > p.max_vegetation:
             vetoes.append(f"vegetation ({100 * cues.vegetation_share:.0f} %)")
         if cues.line_length > p.max_markings:
             vetoes.append(f"lane markings ({cues.lane_lines}): a road stays risky even when empty")
+            categorical = True
+        elevated = request.site_up_m is not None and request.site_up_m >= self.weights.roof_height_m
+        street_level = request.site_up_m is not None and not elevated
+        if street_level and cues.asphalt_share > p.max_street_asphalt:
+            vetoes.append(
+                f"asphalt at street level ({100 * cues.asphalt_share:.0f} %): a road or a car park, "
+                "where traffic comes back"
+            )
         if cues.raised_blobs > max_raised:
             vetoes.append(cues.phrase("raised"))
         if cues.raised_line_length > p.max_raised_lines:
@@ -222,7 +236,6 @@ class OnboardReasoner:
         limit = p.max_hazard_critical if relax else p.max_hazard
         # A surface measured well above its surroundings is a roof: a dark, even tar roof looks like
         # asphalt, but no road runs there. (Lane markings still veto: an elevated highway deck.)
-        elevated = request.site_up_m is not None and request.site_up_m >= self.weights.roof_height_m
         street = ("asphalt", "road_texture") if elevated else ()
         terms = [(name, v) for name, v in cues.terms if name not in street]
         hazard = sum(v for _name, v in terms)
@@ -240,9 +253,12 @@ class OnboardReasoner:
             why = "rejected: " + "; ".join(vetoes)
             if check is None:
                 why += " (no LiDAR: judged from the image alone)"
+        binding = not accept and (categorical or street_level)
         if request.transcript is not None:
-            request.transcript.append({"tier": self.name, "cues": cues.to_json(), "accept": accept})
-        return Decision(accept, why, self.name, time.perf_counter() - t0)
+            request.transcript.append(
+                {"tier": self.name, "cues": cues.to_json(), "accept": accept, "binding": binding}
+            )
+        return Decision(accept, why, self.name, time.perf_counter() - t0, binding=binding)
 
 
 def _geometry_phrase(check: SiteCheck | None) -> str:
