@@ -36,13 +36,14 @@ from companion.guidance.frames import PinholeCamera, quat_to_matrix
 from companion.guidance.ipm import IpmError, LidarPixelIndex, pixel_to_ned, pixel_to_ned_flat
 from companion.perception.crops import crop, pad_of, rank_crops, site_box
 from companion.perception.depth import DepthError, DepthSource, LidarDepth
-from companion.perception.site_check import check_site
+from companion.perception.site_check import SiteCheck, check_site
 from companion.perception.surface_id import Candidate, SurfaceParams, propose, quadrant_fallback
 from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequest, Reasoner
 from companion.telemetry import TelemetryCache
 
 MAX_REENGAGE = 2
 SENSOR_RETRY_S = 1.0  # between two asks for a frame after one failed
+SITE_RETRIES = 2  # more frames asked for when a LiDAR sweep misses the site before judging it unmeasured
 
 
 class FrameUnavailable(Exception):
@@ -329,11 +330,7 @@ class Recovery:
     async def _confirm_and_descend(self, target: tuple[float, float, float], choice: Candidate) -> bool:
         self._descending = (target, choice)  # what a link loss resumes: this site, confirmed again
         while True:
-            frame = await self._acquire()
-            self._set(State.CONFIRM)
-            check = await asyncio.to_thread(
-                check_site, frame.lidar_frd, frame.pos_ned_m, frame.quat_wxyz, (target[0], target[1])
-            )
+            frame, check = await self._measure_site(target)
             decision = await self._confirm(check, frame, target, choice)
             if not decision.accept and decision.contested:
                 # a lone "no" on a clear site: ask again next round (the cascade's lone-"no" rule)
@@ -381,6 +378,35 @@ class Recovery:
             except TargetTimeout as exc:
                 self._say(4, f"descent target not reached ({exc.error_m:.1f} m off): next round")
                 return False
+
+    async def _measure_site(self, target: tuple[float, float, float]) -> tuple[Any, SiteCheck]:
+        """A frame and the LiDAR check of the site under it.
+
+        Policy: a sweep that misses the site (empty, or too few returns in the rotor disc: a partial
+        sweep) is a sensor gap, not a hazard. It is recorded as a ``sensor_fault`` and a new frame is
+        asked for, ``SITE_RETRIES`` times at most; then the site goes to the reasoner unmeasured and is
+        judged from the image, as with no LiDAR at all (a frame without one goes so at once). A gap
+        never strikes a site off."""
+        for attempt in range(SITE_RETRIES + 1):
+            frame = await self._acquire()
+            self._set(State.CONFIRM)
+            check = await asyncio.to_thread(
+                check_site, frame.lidar_frd, frame.pos_ned_m, frame.quat_wxyz, (target[0], target[1])
+            )
+            if check.measured or frame.lidar_frd is None:
+                return frame, check
+            self.record.record_event(
+                "sensor_fault",
+                {
+                    "round": self.round,
+                    "error": f"site not measured: {check.points} LiDAR returns in the rotor disc",
+                    "attempt": attempt,
+                },
+            )
+            if attempt < SITE_RETRIES:
+                await asyncio.sleep(SENSOR_RETRY_S)
+        self._say(4, "the LiDAR keeps missing the site: judging it from the image")
+        return frame, check
 
     async def _land(self) -> bool:
         self._set(State.LAND)
@@ -499,11 +525,17 @@ class Recovery:
         return ranking, chosen
 
     async def _confirm(
-        self, check: Any, frame: Any, target: tuple[float, float, float], choice: Candidate
+        self, check: SiteCheck, frame: Any, target: tuple[float, float, float], choice: Candidate
     ) -> Decision:
         """Reasoner and geometric veto on a close-up of the site (the cascade arbitrates)."""
         image = frame.image_rgb
-        if image is None:
+        if image is None and not check.measured:
+            # neither sensor judged the site: not a reason to strike it off (contested: asked again)
+            decision = Decision(
+                False, "no camera image, and the LiDAR missed the site: not judged", "site-check", 0.0, True
+            )
+            closeup_name = ""
+        elif image is None:
             decision = Decision(
                 check.clear,
                 "no camera image: LiDAR check only: "
@@ -517,7 +549,7 @@ class Recovery:
             decision = await self.reasoner.confirm(
                 ConfirmRequest(
                     closeup,
-                    check if check.points > 0 else None,
+                    check if check.measured else None,
                     critical=self.criticality == Criticality.CRITICAL,
                     site_ne_m=(target[0], target[1]),
                     site_up_m=choice.height_above_m if math.isfinite(choice.height_above_m) else None,

@@ -6,6 +6,10 @@ from __future__ import annotations
 import contextlib
 import socket
 import threading
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
 
 
 class TcpRelay:
@@ -80,16 +84,33 @@ class FrameEditingRelay(TcpRelay):
     the parts named in ``drop`` out, as simbridge does for a sensor that failed (docs/sensor-stream.md:
     a part asked for but not produced is absent from ``parts``), and sets the header fields in
     ``header`` (``{"rangefinder_m": 150.0}``: a rangefinder that reads long). ``drop={"image"}``: a
-    dead camera."""
+    dead camera. ``lidar(points, k)`` replaces the k-th sweep's (N, 4) float32 returns (body FRD +
+    intensity) with what it gives back: an empty sweep, a partial one."""
 
     def __init__(
-        self, target_port: int, drop: set[str] | None = None, header: dict[str, object] | None = None
+        self,
+        target_port: int,
+        drop: set[str] | None = None,
+        header: dict[str, object] | None = None,
+        lidar: Callable[[np.ndarray, int], np.ndarray] | None = None,
     ) -> None:
         self.drop = drop or set()
         self.header = header or {}
+        self.lidar = lidar
         self.dropped = 0
         self.edited = 0
+        self.sweeps = 0
         super().__init__(target_port)
+
+    def _edit_lidar(self, part: dict[str, Any], data: bytes) -> bytes:
+        assert self.lidar is not None
+        assert part["encoding"] == "raw"
+        points = np.frombuffer(data, dtype=part["dtype"]).reshape(part["shape"])
+        edited = np.ascontiguousarray(self.lidar(points, self.sweeps), dtype=part["dtype"])
+        self.sweeps += 1
+        part["shape"] = list(edited.shape)
+        part["nbytes"] = edited.nbytes
+        return edited.tobytes()
 
     def _downstream(self, src: socket.socket, dst: socket.socket) -> None:
         import json
@@ -105,6 +126,8 @@ class FrameEditingRelay(TcpRelay):
                     if part["name"] in self.drop:
                         self.dropped += 1
                         continue
+                    if part["name"] == "lidar" and self.lidar is not None:
+                        data = self._edit_lidar(part, data)
                     kept.append(part)
                     body.append(data)
                 if "parts" in header:

@@ -107,6 +107,22 @@ def test_site_check_vetoes_clutter_and_edges_and_accepts_a_clear_roof() -> None:
     assert sum(not c.clear for c in cluttered) >= 6  # most of that roof is too close to an object
 
 
+def test_site_check_knows_a_sweep_that_missed_the_site_from_a_hazard() -> None:
+    """A sweep with a hole under the vehicle (partial) or no returns (empty) leaves the site unmeasured:
+    not clear, and said so, which the recovery loop treats as a sensor gap, not as a veto."""
+    g = _block()
+    low = (0.0, -25.0, -32.0)
+    full = _lidar(g, low)
+    assert check_site(full, low, LEVEL, (0.0, -25.0)).measured
+    cos_off_nadir = full[:, 2] / np.linalg.norm(full[:, :3], axis=1)
+    holed = check_site(full[cos_off_nadir < np.cos(np.radians(15.0))], low, LEVEL, (0.0, -25.0))
+    empty = check_site(full[:0], low, LEVEL, (0.0, -25.0))
+    for check in (holed, empty, check_site(None, low, LEVEL, (0.0, -25.0))):
+        assert not check.measured
+        assert not check.clear
+        assert check.reasons[0] in ("too few returns on the site", "no LiDAR returns")
+
+
 def test_surface_id_on_lidar_degrades_to_the_quadrant_fallback() -> None:
     pos = (0.0, 0.0, -100.0)
     with pytest.raises(DepthError, match="no finite returns"):

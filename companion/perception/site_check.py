@@ -19,6 +19,9 @@ def world_points(
     return np.asarray(pts @ quat_to_matrix(quat).T + np.asarray(pos_ned_m))
 
 
+MIN_SITE_RETURNS = 5  # LiDAR returns within the rotor-clearance disc needed to judge a site
+
+
 @dataclass(frozen=True, slots=True)
 class SiteCheck:
     """Geometry of a landing site from a close-up LiDAR sweep (the geometric veto)."""
@@ -33,6 +36,11 @@ class SiteCheck:
     @property
     def clear(self) -> bool:
         return not self.reasons
+
+    @property
+    def measured(self) -> bool:
+        """The sweep put enough returns on the site to judge it (an empty or partial sweep may not)."""
+        return self.points >= MIN_SITE_RETURNS
 
 
 def _edge_distance(
@@ -84,7 +92,7 @@ def check_site(
     world = world_points(lidar_frd, pos_ned_m, quat)
     d = np.hypot(world[:, 0] - site_ne_m[0], world[:, 1] - site_ne_m[1])
     disc = d <= clearance_m
-    if disc.sum() < 5:
+    if disc.sum() < MIN_SITE_RETURNS:
         return SiteCheck(
             int(disc.sum()), math.nan, math.nan, math.nan, math.nan, ("too few returns on the site",)
         )
