@@ -22,9 +22,10 @@ LiDAR check there is nothing to back an override, so it never happens.
 
 The rule runs the other way too, where a mistake is not recoverable: a remote "yes" does not overrule a
 *binding* onboard "no" (``Decision.binding``): water or lane markings on the site, or any rejection of a
-site measured at street level. A model taken in by an empty road, an elevated highway deck or a sign
-painted on a roof ("LAND HERE") is outvoted there; elsewhere its judgement stands over the onboard
-tier's softer doubts (a hazard score, a blob the LiDAR shows is flat).
+site measured at street level. A model taken in by an empty road or an elevated highway deck is
+outvoted there. On a roof its judgement stands over the onboard tier's softer doubts (a hazard score, a
+blob the LiDAR shows is flat), and the LiDAR check decides: a model that believes a "LAND HERE" painted
+on a cluttered roof descends only where the rotor disc is clear.
 """
 
 from __future__ import annotations
