@@ -192,8 +192,10 @@ def test_image_rays_through_the_neighbours_plane_give_the_march_s_answer(scenari
             dirs = body_to_neu(rays, q)
             march = cast_rays(g.height, p.maps, p.h_max, g.res, g.n0, g.e0, origin, dirs, t_max)
             planes = cast_rays(g.height, p.maps, p.h_max, g.res, g.n0, g.e0, origin, dirs, t_max, row)
-            for a, b in zip(march, planes, strict=True):
+            tiles = cast_rays(g.height, p.maps, p.h_max, g.res, g.n0, g.e0, origin, dirs, t_max, row, 8)
+            for a, b, c in zip(march, planes, tiles, strict=True):
                 np.testing.assert_array_equal(a, b)
+                np.testing.assert_array_equal(a, c)
             hits += int((march[3] != HIT_MISS).sum())
     assert hits > 100_000  # not vacuous
 

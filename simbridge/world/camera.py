@@ -28,6 +28,7 @@ CAMERA_TO_BODY = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
 _RAYS_BODY: dict[tuple[int, int, float], tuple[np.ndarray, np.ndarray]] = {}
 MAX_RANGE_M = 600.0
 SENSOR_NOISE = 0.008  # sigma of the sensor noise, in units of full scale
+IMAGE_TILE = 8  # pixels a side of the tiles whose ray bundles ``cast_rays`` proves at once
 
 
 @dataclass(frozen=True, slots=True)
@@ -481,7 +482,7 @@ def render(
     origin = np.array([[pos_ned_m[0], pos_ned_m[1], -pos_ned_m[2]]])
     ts, ii, jj, kinds, steps = cast_rays(
         grid.height, pyramid.maps, pyramid.h_max,
-        grid.res, grid.n0, grid.e0, origin, dirs, MAX_RANGE_M, camera.width_px,
+        grid.res, grid.n0, grid.e0, origin, dirs, MAX_RANGE_M, camera.width_px, IMAGE_TILE,
     )  # fmt: skip
     sun = np.asarray(sun_neu, dtype=np.float64)
     shadow.ensure(ii, jj)

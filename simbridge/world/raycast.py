@@ -29,6 +29,7 @@ COARSE_SHIFT = 2  # coarse cells are 4 x 4 fine cells
 COARSE = 1 << COARSE_SHIFT
 LEVELS = 8  # jump radii of 1, 2, 4, ... 128 coarse cells (0.8 m ... 102.4 m at 0.2 m resolution)
 _BIG = 1e30
+FINE_BACK_M = 2.4  # horizontal travel back from a plane hit proven cell by cell (``_plane_clear``)
 
 
 @njit(cache=True)
@@ -103,23 +104,22 @@ class Pyramid:
 
 @njit(cache=True, fastmath=True, nogil=True, inline="always")
 def _plane_clear(
-    maps: np.ndarray, h_max: float, coarse_m: float, inv_c: float, pn: float, pe: float, hp: float,
-    tp: float, dn: float, de: float, sink: float,
+    height: np.ndarray, maps: np.ndarray, h_max: float, res: float, coarse_m: float, inv_c: float,
+    pn: float, pe: float, pi: int, pj: int, hp: float, tp: float, dn: float, de: float, sink: float,
 ) -> bool:  # fmt: skip
     """Whether a ray reaching height ``hp`` at grid point ``(pn, pe)`` (metres from the grid's
-    corner) after ``tp`` of travel along ``(dn, de, -sink)`` passes over everything before it.
+    corner, in cell ``(pi, pj)``) after ``tp`` of travel along ``(dn, de, -sink)`` passes over
+    everything before it.
 
-    Walked back from that point toward the origin in pieces that double: max map ``k`` bounds every
-    cell within ``R_k = 2**k`` coarse cells (Chebyshev) of its coarse cell, so one lookup at the
-    middle of a piece ``2 R_k`` long bounds all of the piece; the piece is clear when that bound
-    is below the ray's lowest point on it, the end nearer the hit. The first piece, within ``R_0``
-    of the hit, must hold nothing above ``hp``. No piece is needed past the origin or above
-    ``h_max``. Any doubt is a ``False``: the march decides."""
-    brows, bcols = maps.shape[1], maps.shape[2]
-    bi = min(int(pn * inv_c), brows - 1)
-    bj = min(int(pe * inv_c), bcols - 1)
-    if maps[0, bi, bj] > hp:
-        return False
+    Walked back from that point toward the origin. First, fine cell by fine cell for
+    ``FINE_BACK_M`` of horizontal travel: each cell must be lower than the ray where the ray is
+    lowest in it (the edge nearer the hit). Beside a wall, a parapet or a car that is the only
+    proof that works, since every max map's window there holds the obstacle. Then in pieces that
+    grow: max map ``k`` bounds every cell within ``R_k = 2**k`` coarse cells (Chebyshev) of its
+    coarse cell, so one lookup at the middle of a piece ``2 R_k`` long bounds all of the piece,
+    which is clear when that bound is below the ray's lowest point on it, the end nearer the hit.
+    Each piece tries twice the last one's length and halves until its bound clears. No piece is
+    needed past the origin or above ``h_max``. Any doubt is a ``False``: the march decides."""
     hd = math.sqrt(dn * dn + de * de)
     if hd < 1e-9:
         return True  # straight down: the ray is above hp everywhere before the hit
@@ -127,28 +127,154 @@ def _plane_clear(
     ue = de / hd
     slope = sink / hd
     travelled = tp * hd  # horizontal distance back to the origin
+    brows, bcols = maps.shape[1], maps.shape[2]
+    bi = min(int(pn * inv_c), brows - 1)
+    bj = min(int(pe * inv_c), bcols - 1)
+    fine = maps[0, bi, bj] > hp  # something near the hit stands above it: go cell by cell first
     s = coarse_m  # horizontal distance back from the hit proven clear so far
-    lvl = 0
-    while s < travelled:
-        low = hp + s * slope
-        if low > h_max:
+    while True:
+        if fine:
+            # beside a wall, a parapet or a car every max map's window holds it: prove the first
+            # stretch cell by cell (each cell lower than the ray at its edge nearer the hit)
+            rows, cols = height.shape
+            i = pi
+            j = pj
+            step_i = -1 if un > 0.0 else 1
+            step_j = -1 if ue > 0.0 else 1
+            x_n = ((i * res if un > 0.0 else (i + 1) * res) - pn) / -un if abs(un) > 1e-12 else _BIG
+            x_e = ((j * res if ue > 0.0 else (j + 1) * res) - pe) / -ue if abs(ue) > 1e-12 else _BIG
+            dx_n = res / abs(un) if abs(un) > 1e-12 else _BIG
+            dx_e = res / abs(ue) if abs(ue) > 1e-12 else _BIG
+            s = min(travelled, FINE_BACK_M)
+            while True:
+                if x_n < x_e:
+                    x = x_n
+                    i += step_i
+                    x_n += dx_n
+                else:
+                    x = x_e
+                    j += step_j
+                    x_e += dx_e
+                if x >= s:
+                    break
+                if i < 0 or i >= rows or j < 0 or j >= cols:
+                    return True  # left the grid walking back: nothing between it and the origin
+                low = hp + x * slope
+                if low > h_max:
+                    return True
+                if height[i, j] >= low:
+                    return False
+        lvl = 0
+        failed = False
+        while s < travelled:
+            low = hp + s * slope
+            if low > h_max:
+                return True
+            while True:  # the longest piece (up to twice the last) whose bound is below the ray
+                r = coarse_m * (1 << lvl)
+                back = s + r
+                qi = min(max(int((pn - back * un) * inv_c), 0), brows - 1)
+                qj = min(max(int((pe - back * ue) * inv_c), 0), bcols - 1)
+                if maps[lvl, qi, qj] < low:
+                    break
+                if lvl == 0:
+                    failed = True
+                    break
+                lvl -= 1
+            if failed:
+                break
+            s = back + r
+            if lvl < LEVELS - 1:
+                lvl += 1
+        if not failed:
             return True
-        r = coarse_m * (1 << lvl)
-        back = s + r
-        qi = min(max(int((pn - back * un) * inv_c), 0), brows - 1)
-        qj = min(max(int((pe - back * ue) * inv_c), 0), bcols - 1)
-        if maps[lvl, qi, qj] >= low:
+        if fine or s >= FINE_BACK_M:
             return False
-        s = back + r
-        if lvl < LEVELS - 1:
-            lvl += 1
+        fine = True  # the pieces failed near the hit: try the fine walk there once
+
+
+@njit(cache=True, fastmath=True, nogil=True, inline="always")
+def _bundle_clear(
+    maps: np.ndarray, h_max: float, coarse_m: float, inv_c: float, on: float, oe: float, ou: float,
+    size_n: float, size_e: float, hp: float, dirs: np.ndarray, c00: int, c01: int, c10: int, c11: int,
+) -> bool:  # fmt: skip
+    """Whether every ray of a tile of image rays (``c00`` ... ``c11``: its corner rays) passes over
+    everything above the plane at height ``hp`` before reaching it: then a ray whose cell at the
+    plane is that high hits its top there, and any other needs marching from the plane down only.
+
+    ``on, oe`` are the origin in metres from the grid's corner. The rays of a tile cross any level
+    ``z`` in the quad ``O + (ou - z) W``, where ``W`` is the quad of the corner rays' horizontal
+    run per metre of descent, so between two levels they stay in one box: the max map whose window
+    holds that box bounds it in one lookup. The bundle is walked up from the plane in layers that
+    double while their bound clears (halved when it does not); a layer holding anything as high
+    as its bottom fails the proof (only the plane itself may touch it). No layer is needed above
+    ``h_max``. The footprint must lie on the grid. Any doubt is a ``False``."""
+    if ou <= hp:
+        return False
+    top = min(h_max, ou)
+    if hp >= top:
+        return True
+    wn_lo = _BIG
+    wn_hi = -_BIG
+    we_lo = _BIG
+    we_hi = -_BIG
+    for c in (c00, c01, c10, c11):
+        du = dirs[c, 2]
+        if du > -1e-9:
+            return False
+        wn = dirs[c, 0] / -du
+        we = dirs[c, 1] / -du
+        wn_lo = min(wn_lo, wn)
+        wn_hi = max(wn_hi, wn)
+        we_lo = min(we_lo, we)
+        we_hi = max(we_hi, we)
+    s_hi = ou - hp
+    if on + s_hi * wn_lo < 0.0 or on + s_hi * wn_hi >= size_n:
+        return False
+    if oe + s_hi * we_lo < 0.0 or oe + s_hi * we_hi >= size_e:
+        return False
+    brows, bcols = maps.shape[1], maps.shape[2]
+    run = max(abs(wn_lo), abs(wn_hi), abs(we_lo), abs(we_hi), 1e-3)
+    dz0 = max(coarse_m, s_hi * max(wn_hi - wn_lo, we_hi - we_lo)) / run  # the box moves a footprint
+    dz = dz0
+    z_a = hp
+    while z_a < top:
+        while True:  # the thickest layer (up to twice the last) whose bound is below its bottom
+            z_b = min(z_a + dz, top)
+            s_hi = ou - z_a
+            s_lo = ou - z_b
+            n_lo = on + min(s_hi * wn_lo, s_lo * wn_lo) - 1e-6
+            n_hi = on + max(s_hi * wn_hi, s_lo * wn_hi) + 1e-6
+            e_lo = oe + min(s_hi * we_lo, s_lo * we_lo) - 1e-6
+            e_hi = oe + max(s_hi * we_hi, s_lo * we_hi) + 1e-6
+            ci0 = max((math.floor(n_lo * inv_c)), 0)
+            ci1 = min((math.floor(n_hi * inv_c)), brows - 1)
+            cj0 = max((math.floor(e_lo * inv_c)), 0)
+            cj1 = min((math.floor(e_hi * inv_c)), bcols - 1)
+            if ci0 > ci1 or cj0 > cj1:
+                break  # the layer's box is off the grid: nothing there
+            ci = (ci0 + ci1) >> 1
+            cj = (cj0 + cj1) >> 1
+            reach = max(ci1 - ci, ci - ci0, cj1 - cj, cj - cj0)
+            lvl = 0
+            while (1 << lvl) < reach:
+                lvl += 1
+            if lvl < LEVELS:
+                bound = maps[lvl, ci, cj]
+                if bound < z_a or (z_a == hp and bound <= hp):
+                    break
+            if dz <= dz0 * 0.25:
+                return False
+            dz *= 0.5
+        z_a = z_b
+        dz *= 2.0
     return True
 
 
 @njit(cache=True, fastmath=True, nogil=True)
 def cast_rays(
     height: np.ndarray, maps: np.ndarray, h_max: float, res: float, n0: float, e0: float,
-    origins: np.ndarray, dirs: np.ndarray, t_max: float, row: int = 0,
+    origins: np.ndarray, dirs: np.ndarray, t_max: float, row: int = 0, tile: int = 0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
     """Cast rays; ``dirs`` is (N, 3) unit (north, east, up); ``origins`` is (N, 3), or (1, 3) for all.
 
@@ -156,29 +282,127 @@ def cast_rays(
     hits, the ray's step (+1/-1) across the boundary it crossed (the wall faces ``-step``).
 
     ``row`` > 0 (one origin only): the rays are an image, row-major with ``row`` rays per row, and
-    each ray first tries the plane of its left or upper neighbour's top hit (``_plane_hit``): most
-    pixels see the same roof or street as their neighbours, and proving that costs a few max-map
-    lookups instead of a march. The answer is the march's either way.
+    each ray first tries the plane of its left or upper neighbour's top hit (``_plane_clear``):
+    most pixels see the same roof or street as their neighbours, and proving that costs a few
+    max-map lookups instead of a march.
 
-    The march is written inside the loop on purpose: a numba call per ray that passes the arrays
-    costs eight atomic reference-count updates, more than the whole march over open ground.
+    ``tile`` > 0 as well (a full image of ``row`` columns): the image is cut in ``tile`` x ``tile``
+    tiles. Each tile's centre ray is marched; where it hit a top, the tile's whole bundle is proven
+    clear above that plane at once (``_bundle_clear``), and then each of its rays costs one cell
+    lookup if it lands on the plane, or a march from the plane down if the plane has a hole there.
+    Tiles the proof fails for, and what is left, are marched ray by ray as above.
+
+    The answer is the march's in every mode, ray for ray.
     """
     n = dirs.shape[0]
-    rows, cols = height.shape
-    brows, bcols = maps.shape[1], maps.shape[2]
-    one_origin = origins.shape[0] == 1
     ts = np.full(n, t_max, dtype=np.float32)
     ii = np.full(n, -1, dtype=np.int32)
     jj = np.full(n, -1, dtype=np.int32)
     kinds = np.full(n, HIT_MISS, dtype=np.int8)
     steps = np.zeros(n, dtype=np.int8)
+    t_start = np.zeros(n, dtype=np.float64)
+    out = (ts, ii, jj, kinds, steps, t_start)
+    one_origin = origins.shape[0] == 1
+    coherent = row > 0 and one_origin
+    if not (coherent and tile > 0):
+        _march(height, maps, h_max, res, n0, e0, origins, dirs, t_max, row if coherent else 0,
+               np.arange(n), out)  # fmt: skip
+        return ts, ii, jj, kinds, steps
+    # ---- tiles: centres first, then the planes they prove, then the rest
+    width = row
+    height_px = n // width
+    across = (width + tile - 1) // tile
+    down = (height_px + tile - 1) // tile
+    centres = np.empty(across * down, np.int64)
+    for ti in range(down):
+        for tj in range(across):
+            r0, c0 = ti * tile, tj * tile
+            centres[ti * across + tj] = ((r0 + min(r0 + tile, height_px) - 1) >> 1) * width + (
+                (c0 + min(c0 + tile, width) - 1) >> 1
+            )
+    _march(height, maps, h_max, res, n0, e0, origins, dirs, t_max, 0, centres, out)
+    rows, cols = height.shape
+    on = origins[0, 0] - n0  # metres from the grid's corner
+    oe = origins[0, 1] - e0
+    ou = origins[0, 2]
+    inv_res = 1.0 / res
+    coarse_m = COARSE * res
+    left = np.zeros(n, np.bool_)
+    for ti in range(down):
+        r0 = ti * tile
+        r1 = min(r0 + tile, height_px)
+        for tj in range(across):
+            c0 = tj * tile
+            c1 = min(c0 + tile, width)
+            centre = centres[ti * across + tj]
+            proven = False
+            hp = 0.0
+            if kinds[centre] == HIT_TOP:
+                hp = height[ii[centre], jj[centre]]
+                proven = _bundle_clear(
+                    maps, h_max, coarse_m, 1.0 / coarse_m, on, oe, ou, rows * res, cols * res, hp, dirs,
+                    r0 * width + c0, r0 * width + c1 - 1, (r1 - 1) * width + c0, (r1 - 1) * width + c1 - 1,
+                )  # fmt: skip
+            for r in range(r0, r1):
+                for k in range(r * width + c0, r * width + c1):
+                    if k == centre:
+                        continue
+                    if not proven:
+                        left[k] = True
+                        continue
+                    du = dirs[k, 2]
+                    tp = (ou - hp) / -du
+                    pi = _cell(origins[0, 0] + tp * dirs[k, 0] - n0, inv_res, rows)
+                    pj = _cell(origins[0, 1] + tp * dirs[k, 1] - e0, inv_res, cols)
+                    if tp <= t_max and pi >= 0 and pj >= 0 and height[pi, pj] == hp:
+                        ts[k] = tp
+                        ii[k] = pi
+                        jj[k] = pj
+                        kinds[k] = HIT_TOP
+                    else:
+                        if pi >= 0 and pj >= 0:
+                            t_start[k] = tp  # a hole in the plane: march from it down
+                        left[k] = True
+    _march(height, maps, h_max, res, n0, e0, origins, dirs, t_max, width, np.nonzero(left)[0], out)
+    return ts, ii, jj, kinds, steps
+
+
+@njit(cache=True, fastmath=True, nogil=True, inline="always")
+def _cell(p: float, inv_res: float, cells: int) -> int:
+    """The cell holding ``p`` (metres from the grid's corner) along one axis, or -1 when ``p`` is
+    within a hundred-thousandth of a cell of a boundary: there the march's own sums decide which side it is on
+    (rays through the corners of a regular grid are common, from a camera at a round position)."""
+    x = p * inv_res
+    c = int(x)
+    f = x - c
+    if f < 1e-5 or f > 1.0 - 1e-5 or c < 0 or c >= cells:
+        return -1
+    return c
+
+
+@njit(cache=True, fastmath=True, nogil=True)
+def _march(
+    height: np.ndarray, maps: np.ndarray, h_max: float, res: float, n0: float, e0: float,
+    origins: np.ndarray, dirs: np.ndarray, t_max: float, row: int, order: np.ndarray,
+    out: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+) -> None:  # fmt: skip
+    """March rays ``order`` (ascending when ``row`` > 0) into ``out`` = (distance, cell row, cell
+    column, kind, step, start): each from its ``start`` distance, which the caller proved clear.
+    ``row`` > 0: image rays, and each first tries its left or upper neighbour's plane.
+
+    The march is written inside the loop on purpose: a numba call per ray that passes the arrays
+    costs eight atomic reference-count updates, more than the whole march over open ground."""
+    ts, ii, jj, kinds, steps, t_starts = out
+    rows, cols = height.shape
+    brows, bcols = maps.shape[1], maps.shape[2]
+    one_origin = origins.shape[0] == 1
     size_n = rows * res
     size_e = cols * res
     coarse_m = COARSE * res
     inv_res = 1.0 / res
     inv_coarse = 1.0 / coarse_m
     coherent = row > 0 and one_origin
-    for k in range(n):
+    for k in order:
         r = 0 if one_origin else k
         on = origins[r, 0]
         oe = origins[r, 1]
@@ -186,32 +410,59 @@ def cast_rays(
         dn = dirs[k, 0]
         de = dirs[k, 1]
         du = dirs[k, 2]
-        if coherent and du < 0.0:
-            # ---- the plane of the left neighbour's top hit, else the upper neighbour's
-            g = k - 1 if k % row != 0 and kinds[k - 1] == HIT_TOP else k - row
-            if g >= 0 and kinds[g] == HIT_TOP:
+        t_start = t_starts[k]
+        if coherent and du < 0.0 and t_start == 0.0:
+            # ---- the plane of the left neighbour's hit, else the upper neighbour's
+            g = k - 1 if k % row != 0 and kinds[k - 1] != HIT_MISS else k - row
+            if g >= 0 and (kinds[g] == HIT_WALL_N or kinds[g] == HIT_WALL_E):
+                # a wall: where this ray crosses the same face, the cell behind must stand above it
+                wall_n = kinds[g] == HIT_WALL_N
+                st = steps[g]
+                d_ax = dn if wall_n else de
+                if (d_ax > 1e-12 and st > 0) or (d_ax < -1e-12 and st < 0):
+                    cell = ii[g] if wall_n else jj[g]
+                    bnd = (n0 if wall_n else e0) + (cell + 1 if st < 0 else cell) * res
+                    tw = (bnd - (on if wall_n else oe)) * (1.0 / d_ax)
+                    zw = ou + tw * du
+                    pn = on + tw * dn - n0
+                    pe = oe + tw * de - e0
+                    if 0.0 < tw <= t_max and 0.0 <= pn < size_n and 0.0 <= pe < size_e:
+                        pi = ii[g] if wall_n else _cell(pn, inv_res, rows)
+                        pj = _cell(pe, inv_res, cols) if wall_n else jj[g]
+                        if pi >= 0 and pj >= 0 and height[pi, pj] >= zw and _plane_clear(
+                            height, maps, h_max, res, coarse_m, inv_coarse,
+                            pn, pe, pi, pj, zw, tw, dn, de, -du,
+                        ):  # fmt: skip
+                            ts[k] = tw
+                            ii[k] = pi
+                            jj[k] = pj
+                            kinds[k] = kinds[g]
+                            steps[k] = st
+                            continue
+            elif g >= 0 and kinds[g] == HIT_TOP:
                 hp = height[ii[g], jj[g]]
                 tp = (ou - hp) / -du
                 pn = on + tp * dn - n0
                 pe = oe + tp * de - e0
                 if 0.0 < tp <= t_max and 0.0 <= pn < size_n and 0.0 <= pe < size_e:
-                    pi = min(int(pn * inv_res), rows - 1)
-                    pj = min(int(pe * inv_res), cols - 1)
-                    if height[pi, pj] == hp and _plane_clear(
-                        maps, h_max, coarse_m, inv_coarse, pn, pe, hp, tp, dn, de, -du
-                    ):
+                    pi = _cell(pn, inv_res, rows)
+                    pj = _cell(pe, inv_res, cols)
+                    if pi >= 0 and pj >= 0 and height[pi, pj] == hp and _plane_clear(
+                        height, maps, h_max, res, coarse_m, inv_coarse,
+                        pn, pe, pi, pj, hp, tp, dn, de, -du,
+                    ):  # fmt: skip
                         ts[k] = tp
                         ii[k] = pi
                         jj[k] = pj
                         kinds[k] = HIT_TOP
                         continue
         # ---- clip to the grid's box and to the slab below h_max
-        t0 = 0.0
+        t0 = t_start
         t1 = t_max
         if ou > h_max:
             if du >= 0.0:
                 continue
-            t0 = (ou - h_max) / -du
+            t0 = max(t0, (ou - h_max) / -du)
         inside = True
         for axis in range(2):
             o = on - n0 if axis == 0 else oe - e0
@@ -317,4 +568,3 @@ def cast_rays(
             if hd > 1e-6 and t >= fine_left:
                 jumping = True
                 # stay on the exact boundary we just crossed: (i, j) stays valid for a top test
-    return ts, ii, jj, kinds, steps
