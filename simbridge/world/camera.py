@@ -151,7 +151,7 @@ _FACADE_RGB = np.array(
 )  # fmt: skip
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, fastmath=True, inline="always")
 def _hash2(a: int, b: int, salt: int) -> float:
     """Deterministic value in [0, 1) for an integer lattice point."""
     h = (a * 374761393 + b * 668265263 + salt * 2147483647) & 0xFFFFFFFF
@@ -160,7 +160,7 @@ def _hash2(a: int, b: int, salt: int) -> float:
     return (h & 0xFFFFFF) / 16777216.0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, fastmath=True, inline="always")
 def _value_noise(x: float, y: float, salt: int) -> float:
     """Smooth value noise in [0, 1) at lattice spacing 1."""
     ix = math.floor(x)
@@ -176,7 +176,13 @@ def _value_noise(x: float, y: float, salt: int) -> float:
     return (a * (1 - fx) + b * fx) * (1 - fy) + (c * (1 - fx) + d * fx) * fy
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=True, inline="always")
+def _wrap(x: float, period: float) -> float:
+    """``x % period`` for a positive period, without the float modulo's slow path."""
+    return x - period * math.floor(x / period)
+
+
+@njit(cache=True, fastmath=True, inline="always")
 def _texture(mat: int, pn: float, pe: float, r: float, g: float, b: float) -> tuple[float, float, float]:
     """Procedural albedo of a material at world point (north, east), from its base colour."""
     k = 1.0
@@ -189,7 +195,7 @@ def _texture(mat: int, pn: float, pe: float, r: float, g: float, b: float) -> tu
             + 0.15 * _value_noise(pn * 0.3, pe * 0.3, 3)
             + 0.05 * _hash2(math.floor(pn * 20), math.floor(pe * 20), 4)
         )
-        if (pn % 3.0) < 0.06 or (pe % 3.0) < 0.06:
+        if _wrap(pn, 3.0) < 0.06 or _wrap(pe, 3.0) < 0.06:
             k *= 0.75
     elif mat == 3:  # tar
         k = (
@@ -199,13 +205,13 @@ def _texture(mat: int, pn: float, pe: float, r: float, g: float, b: float) -> tu
         )
     elif mat == 4:  # membrane: seams every 1.5 m
         k = 0.95 + 0.05 * _value_noise(pn * 0.5, pe * 0.5, 7)
-        if (pe % 1.5) < 0.04:
+        if _wrap(pe, 1.5) < 0.04:
             k *= 0.85
     elif mat == 5:  # tiles
         row = math.floor(pn / 0.3)
         off = 0.15 if row % 2 == 0 else 0.0
         k = 0.82 + 0.3 * _hash2(row, math.floor((pe + off) / 0.3), 8)
-        if (pn % 0.3) < 0.04 or ((pe + off) % 0.3) < 0.03:
+        if _wrap(pn, 0.3) < 0.04 or _wrap(pe + off, 0.3) < 0.03:
             k *= 0.6
     elif mat == 6:  # asphalt
         k = (
@@ -215,7 +221,7 @@ def _texture(mat: int, pn: float, pe: float, r: float, g: float, b: float) -> tu
         )
     elif mat == 8:  # paving stones 0.5 m
         k = 0.88 + 0.2 * _hash2(math.floor(pn * 2), math.floor(pe * 2), 11)
-        if (pn % 0.5) < 0.03 or (pe % 0.5) < 0.03:
+        if _wrap(pn, 0.5) < 0.03 or _wrap(pe, 0.5) < 0.03:
             k *= 0.7
     elif mat == 10:  # grass
         k = (
@@ -229,12 +235,12 @@ def _texture(mat: int, pn: float, pe: float, r: float, g: float, b: float) -> tu
         k = 0.85 + 0.3 * _value_noise(pn * 1.2 + pe * 0.3, pe * 0.9, 15)
     elif mat == 13:  # wood planks 0.2 m
         k = 0.8 + 0.3 * _hash2(math.floor(pe / 0.2), math.floor(pn / 2.0), 16)
-        if (pe % 0.2) < 0.02:
+        if _wrap(pe, 0.2) < 0.02:
             k *= 0.6
     elif mat == 14:  # metal: brushed panels
         k = 0.9 + 0.12 * _hash2(math.floor(pn * 2), math.floor(pe * 2), 17)
     elif mat == 15:  # solar cells
-        if (pn % 1.0) < 0.05 or (pe % 1.7) < 0.05:
+        if _wrap(pn, 1.0) < 0.05 or _wrap(pe, 1.7) < 0.05:
             k = 2.4
         else:
             k = 0.9 + 0.2 * _hash2(math.floor(pn * 6), math.floor(pe * 6), 18)
@@ -262,7 +268,7 @@ def _quantise(value: np.float32, v: np.float32, r: float, sigma: float) -> np.ui
     return np.uint8(0) if val < 0.0 else np.uint8(255) if val > 255.0 else np.uint8(val)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, fastmath=True, nogil=True)
 def shade(
     ts: np.ndarray, ii: np.ndarray, jj: np.ndarray, kinds: np.ndarray, steps: np.ndarray, dirs: np.ndarray,
     origin: np.ndarray, height: np.ndarray, mat: np.ndarray, region: np.ndarray, shadow: np.ndarray,
@@ -340,7 +346,7 @@ def shade(
                 fc = (reg if reg > 0 else i // 7 + j // 11) % facade_rgb.shape[0]
                 r, g, b = facade_rgb[fc, 0], facade_rgb[fc, 1], facade_rgb[fc, 2]
                 along = pe if kind == HIT_WALL_N else pn
-                if reg > 0 and (pu % 3.0) > 1.0 and (pu % 3.0) < 2.4 and (along % 1.6) > 0.4:
+                if reg > 0 and 1.0 < _wrap(pu, 3.0) < 2.4 and _wrap(along, 1.6) > 0.4:
                     r, g, b = 0.16, 0.2, 0.26  # glass
                 st = steps[k]
                 if kind == HIT_WALL_N:
