@@ -29,6 +29,7 @@ COARSE_SHIFT = 2  # coarse cells are 4 x 4 fine cells
 COARSE = 1 << COARSE_SHIFT
 LEVELS = 8  # jump radii of 1, 2, 4, ... 128 coarse cells (0.8 m ... 102.4 m at 0.2 m resolution)
 _BIG = 1e30
+FINE_SCAN_CELLS = 256  # a bundle layer's box up to this many cells is checked cell by cell
 FINE_BACK_M = 2.4  # horizontal travel back from a plane hit proven cell by cell (``_plane_clear``)
 
 
@@ -195,20 +196,28 @@ def _plane_clear(
 
 @njit(cache=True, fastmath=True, nogil=True, inline="always")
 def _bundle_clear(
-    maps: np.ndarray, h_max: float, coarse_m: float, inv_c: float, on: float, oe: float, ou: float,
-    size_n: float, size_e: float, hp: float, dirs: np.ndarray, c00: int, c01: int, c10: int, c11: int,
+    height: np.ndarray, maps: np.ndarray, h_max: float, res: float, on: float, oe: float, ou: float,
+    z0: float, touch: bool, dirs: np.ndarray, c00: int, c01: int, c10: int, c11: int,
+    clip_axis: int, clip_lo: int, clip_hi: int,
 ) -> bool:  # fmt: skip
     """Whether every ray of a tile of image rays (``c00`` ... ``c11``: its corner rays) passes over
-    everything above the plane at height ``hp`` before reaching it: then a ray whose cell at the
-    plane is that high hits its top there, and any other needs marching from the plane down only.
+    everything it meets above height ``z0``, on cells whose index along ``clip_axis`` (0 rows,
+    1 columns, -1 none) lies in ``[clip_lo, clip_hi]``; with ``touch``, cells exactly ``z0`` high
+    are allowed (a plane at ``z0`` the rays end on).
+
+    For a plane at ``hp`` (``z0 = hp``, ``touch``, no clip): a ray whose cell at the plane is that
+    high hits its top there, and any other needs marching from the plane down only. For a wall
+    face (``z0``: the lowest corner ray's crossing; the clip: the cells in front of the face): a
+    ray that crosses the face where the cell behind stands above it hits the wall there.
 
     ``on, oe`` are the origin in metres from the grid's corner. The rays of a tile cross any level
     ``z`` in the quad ``O + (ou - z) W``, where ``W`` is the quad of the corner rays' horizontal
     run per metre of descent, so between two levels they stay in one box: the max map whose window
-    holds that box bounds it in one lookup. The bundle is walked up from the plane in layers that
-    double while their bound clears (halved when it does not); a layer holding anything as high
-    as its bottom fails the proof (only the plane itself may touch it). No layer is needed above
+    holds that box bounds it in one lookup, and where that window reaches too far (beside a wall),
+    a small box is read cell by cell, within the clip. The bundle is walked up from ``z0`` in
+    layers that double while their bound clears (halved when it does not). No layer is needed above
     ``h_max``. The footprint must lie on the grid. Any doubt is a ``False``."""
+    hp = z0
     if ou <= hp:
         return False
     top = min(h_max, ou)
@@ -229,11 +238,15 @@ def _bundle_clear(
         we_lo = min(we_lo, we)
         we_hi = max(we_hi, we)
     s_hi = ou - hp
-    if on + s_hi * wn_lo < 0.0 or on + s_hi * wn_hi >= size_n:
+    if on + s_hi * wn_lo < 0.0 or on + s_hi * wn_hi >= height.shape[0] * res:
         return False
-    if oe + s_hi * we_lo < 0.0 or oe + s_hi * we_hi >= size_e:
+    if oe + s_hi * we_lo < 0.0 or oe + s_hi * we_hi >= height.shape[1] * res:
         return False
+    rows, cols = height.shape
     brows, bcols = maps.shape[1], maps.shape[2]
+    coarse_m = COARSE * res
+    inv_c = 1.0 / coarse_m
+    inv_res = 1.0 / res
     run = max(abs(wn_lo), abs(wn_hi), abs(we_lo), abs(we_hi), 1e-3)
     dz0 = max(coarse_m, s_hi * max(wn_hi - wn_lo, we_hi - we_lo)) / run  # the box moves a footprint
     dz = dz0
@@ -261,7 +274,25 @@ def _bundle_clear(
                 lvl += 1
             if lvl < LEVELS:
                 bound = maps[lvl, ci, cj]
-                if bound < z_a or (z_a == hp and bound <= hp):
+                if bound < z_a or (touch and z_a == hp and bound <= hp):
+                    break
+            # the map's window reaches past the box: beside a wall or an edge, look at the cells
+            fi0 = max(int(n_lo * inv_res), 0)
+            fi1 = min(int(n_hi * inv_res), rows - 1)
+            fj0 = max(int(e_lo * inv_res), 0)
+            fj1 = min(int(e_hi * inv_res), cols - 1)
+            if clip_axis == 0:
+                fi0 = max(fi0, clip_lo)
+                fi1 = min(fi1, clip_hi)
+            elif clip_axis == 1:
+                fj0 = max(fj0, clip_lo)
+                fj1 = min(fj1, clip_hi)
+            if (fi1 - fi0 + 1) * (fj1 - fj0 + 1) <= FINE_SCAN_CELLS:
+                bound = -_BIG
+                for fi in range(fi0, fi1 + 1):
+                    for fj in range(fj0, fj1 + 1):
+                        bound = max(bound, height[fi, fj])
+                if bound < z_a or (touch and z_a == hp and bound <= hp):
                     break
             if dz <= dz0 * 0.25:
                 return False
@@ -325,8 +356,6 @@ def cast_rays(
     on = origins[0, 0] - n0  # metres from the grid's corner
     oe = origins[0, 1] - e0
     ou = origins[0, 2]
-    inv_res = 1.0 / res
-    coarse_m = COARSE * res
     left = np.zeros(n, np.bool_)
     for ti in range(down):
         r0 = ti * tile
@@ -335,36 +364,113 @@ def cast_rays(
             c0 = tj * tile
             c1 = min(c0 + tile, width)
             centre = centres[ti * across + tj]
-            proven = False
-            hp = 0.0
-            if kinds[centre] == HIT_TOP:
+            k00, k01 = r0 * width + c0, r0 * width + c1 - 1  # the corner rays
+            k10, k11 = (r1 - 1) * width + c0, (r1 - 1) * width + c1 - 1
+            kind = kinds[centre]
+            if kind == HIT_TOP:
                 hp = height[ii[centre], jj[centre]]
-                proven = _bundle_clear(
-                    maps, h_max, coarse_m, 1.0 / coarse_m, on, oe, ou, rows * res, cols * res, hp, dirs,
-                    r0 * width + c0, r0 * width + c1 - 1, (r1 - 1) * width + c0, (r1 - 1) * width + c1 - 1,
-                )  # fmt: skip
+                if _bundle_clear(
+                    height, maps, h_max, res, on, oe, ou, hp, True, dirs, k00, k01, k10, k11, -1, 0, 0
+                ):
+                    _plane_tile(height, res, n0, e0, origins, dirs, t_max, hp, r0, r1, c0, c1, width, centre,
+                                out, left)  # fmt: skip
+                    continue
+            elif kind != HIT_MISS:  # a wall
+                wall_n = kind == HIT_WALL_N
+                st = steps[centre]
+                cell = ii[centre] if wall_n else jj[centre]
+                bnd = (n0 if wall_n else e0) + (cell + 1 if st < 0 else cell) * res
+                o_ax = origins[0, 0] if wall_n else origins[0, 1]
+                z_lo = _BIG
+                for c in (k00, k01, k10, k11):
+                    d_ax = dirs[c, 0] if wall_n else dirs[c, 1]
+                    if not ((d_ax > 1e-12 and st > 0) or (d_ax < -1e-12 and st < 0)):
+                        z_lo = -_BIG  # a corner ray runs along or away from the face
+                        break
+                    z_lo = min(z_lo, ou + (bnd - o_ax) * (1.0 / d_ax) * dirs[c, 2])
+                axis = 0 if wall_n else 1
+                front_lo = 0 if st > 0 else cell + 1  # the cells in front of the face
+                front_hi = cell - 1 if st > 0 else (rows if wall_n else cols) - 1
+                if z_lo > -_BIG and _bundle_clear(
+                    height, maps, h_max, res, on, oe, ou, z_lo, False, dirs, k00, k01, k10, k11,
+                    axis, front_lo, front_hi,
+                ):  # fmt: skip
+                    _wall_tile(height, res, n0, e0, origins, dirs, t_max, kind, st, cell, bnd, r0, r1, c0, c1,
+                               width, centre, out, left)  # fmt: skip
+                    continue
             for r in range(r0, r1):
                 for k in range(r * width + c0, r * width + c1):
-                    if k == centre:
-                        continue
-                    if not proven:
-                        left[k] = True
-                        continue
-                    du = dirs[k, 2]
-                    tp = (ou - hp) / -du
-                    pi = _cell(origins[0, 0] + tp * dirs[k, 0] - n0, inv_res, rows)
-                    pj = _cell(origins[0, 1] + tp * dirs[k, 1] - e0, inv_res, cols)
-                    if tp <= t_max and pi >= 0 and pj >= 0 and height[pi, pj] == hp:
-                        ts[k] = tp
-                        ii[k] = pi
-                        jj[k] = pj
-                        kinds[k] = HIT_TOP
-                    else:
-                        if pi >= 0 and pj >= 0:
-                            t_start[k] = tp  # a hole in the plane: march from it down
+                    if k != centre:
                         left[k] = True
     _march(height, maps, h_max, res, n0, e0, origins, dirs, t_max, width, np.nonzero(left)[0], out)
     return ts, ii, jj, kinds, steps
+
+
+@njit(cache=True, fastmath=True, nogil=True, inline="always")
+def _plane_tile(
+    height: np.ndarray, res: float, n0: float, e0: float, origins: np.ndarray, dirs: np.ndarray,
+    t_max: float, hp: float, r0: int, r1: int, c0: int, c1: int, width: int, centre: int,
+    out: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray], left: np.ndarray,
+) -> None:  # fmt: skip
+    """The rays of a tile proven clear above the plane at ``hp``: a top hit where the cell there is
+    that high, else (a hole in the plane) marked ``left`` to march from the plane down."""
+    ts, ii, jj, kinds, _, t_start = out
+    rows, cols = height.shape
+    inv_res = 1.0 / res
+    ou = origins[0, 2]
+    for r in range(r0, r1):
+        for k in range(r * width + c0, r * width + c1):
+            if k == centre:
+                continue
+            tp = (ou - hp) / -dirs[k, 2]
+            pi = _cell(origins[0, 0] + tp * dirs[k, 0] - n0, inv_res, rows)
+            pj = _cell(origins[0, 1] + tp * dirs[k, 1] - e0, inv_res, cols)
+            if tp <= t_max and pi >= 0 and pj >= 0 and height[pi, pj] == hp:
+                ts[k] = tp
+                ii[k] = pi
+                jj[k] = pj
+                kinds[k] = HIT_TOP
+            else:
+                if pi >= 0 and pj >= 0:
+                    t_start[k] = tp  # a hole in the plane: march from it down
+                left[k] = True
+
+
+@njit(cache=True, fastmath=True, nogil=True, inline="always")
+def _wall_tile(
+    height: np.ndarray, res: float, n0: float, e0: float, origins: np.ndarray, dirs: np.ndarray,
+    t_max: float, kind: int, st: int, cell: int, bnd: float, r0: int, r1: int, c0: int, c1: int,
+    width: int, centre: int,
+    out: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray], left: np.ndarray,
+) -> None:  # fmt: skip
+    """The rays of a tile proven clear in front of a wall face (the boundary at ``bnd`` before
+    cell row or column ``cell``, crossed with step ``st``): a wall hit where the cell behind the
+    face stands above the ray, else (over the top, or a gap) marked ``left``."""
+    ts, ii, jj, kinds, steps, _ = out
+    rows, cols = height.shape
+    inv_res = 1.0 / res
+    wall_n = kind == HIT_WALL_N
+    o_ax = origins[0, 0] if wall_n else origins[0, 1]
+    for r in range(r0, r1):
+        for k in range(r * width + c0, r * width + c1):
+            if k == centre:
+                continue
+            tw = (bnd - o_ax) * (1.0 / (dirs[k, 0] if wall_n else dirs[k, 1]))
+            zw = origins[0, 2] + tw * dirs[k, 2]
+            if wall_n:
+                pi = cell
+                pj = _cell(origins[0, 1] + tw * dirs[k, 1] - e0, inv_res, cols)
+            else:
+                pi = _cell(origins[0, 0] + tw * dirs[k, 0] - n0, inv_res, rows)
+                pj = cell
+            if tw <= t_max and pi >= 0 and pj >= 0 and height[pi, pj] >= zw:
+                ts[k] = tw
+                ii[k] = pi
+                jj[k] = pj
+                kinds[k] = kind
+                steps[k] = st
+            else:
+                left[k] = True
 
 
 @njit(cache=True, fastmath=True, nogil=True, inline="always")
