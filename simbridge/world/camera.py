@@ -374,12 +374,14 @@ def shade(
 
 
 @njit(cache=True, nogil=True)
-def _tiles_needed(ii: np.ndarray, jj: np.ndarray, done: np.ndarray, tile: int) -> np.ndarray:
+def _tiles_needed(ii: np.ndarray, jj: np.ndarray, done: np.ndarray, shift: int) -> np.ndarray:
+    """Which shadow tiles (``2**shift`` cells a side) cells ``(ii, jj)`` lie in that are not done
+    (a shift, not a division: this runs over every pixel of every frame)."""
     need = np.zeros(done.shape, np.bool_)
     for k in range(ii.shape[0]):
         if ii[k] >= 0:
-            ti = ii[k] // tile
-            tj = jj[k] // tile
+            ti = ii[k] >> shift
+            tj = jj[k] >> shift
             if not done[ti, tj]:
                 need[ti, tj] = True
     return need
@@ -409,7 +411,8 @@ class ShadowMap:
     city costs only what is looked at. Moving actors add their own shadows (``stamp``/``unstamp``).
     """
 
-    TILE = 256
+    TILE_SHIFT = 8
+    TILE = 1 << TILE_SHIFT
 
     def __init__(self, grid: WorldGrid, pyramid: Pyramid, sun_neu: tuple[float, float, float]) -> None:
         self.grid = grid
@@ -424,7 +427,7 @@ class ShadowMap:
 
     def ensure(self, ii: np.ndarray, jj: np.ndarray) -> None:
         """Compute the tiles containing cells ``(ii, jj)`` (negative indices ignored)."""
-        for ti, tj in zip(*np.nonzero(_tiles_needed(ii, jj, self._done, self.TILE)), strict=True):
+        for ti, tj in zip(*np.nonzero(_tiles_needed(ii, jj, self._done, self.TILE_SHIFT)), strict=True):
             self._compute_tile(int(ti), int(tj))
 
     def ensure_all(self) -> None:
