@@ -364,14 +364,20 @@ def cast_rays(
     on = origins[0, 0] - n0  # metres from the grid's corner
     oe = origins[0, 1] - e0
     ou = origins[0, 2]
-    left = np.zeros(n, np.bool_)
+    # per tile what was proven: 0 nothing, HIT_TOP + 1 the plane at ``level``, a wall kind + 1 the
+    # face at ``level`` (its boundary) before cell row or column ``cell``, crossed with step ``st``
+    proof = np.zeros(across * down, np.int8)
+    level = np.zeros(across * down, np.float64)
+    cell = np.zeros(across * down, np.int64)
+    st = np.zeros(across * down, np.int8)
     for ti in range(down):
         r0 = ti * tile
         r1 = min(r0 + tile, height_px)
         for tj in range(across):
             c0 = tj * tile
             c1 = min(c0 + tile, width)
-            centre = centres[ti * across + tj]
+            t = ti * across + tj
+            centre = centres[t]
             k00, k01 = r0 * width + c0, r0 * width + c1 - 1  # the corner rays
             k10, k11 = (r1 - 1) * width + c0, (r1 - 1) * width + c1 - 1
             kind = kinds[centre]
@@ -380,105 +386,81 @@ def cast_rays(
                 if _bundle_clear(
                     height, maps, h_max, res, on, oe, ou, hp, True, dirs, k00, k01, k10, k11, -1, 0, 0
                 ):
-                    _plane_tile(height, res, n0, e0, origins, dirs, t_max, hp, r0, r1, c0, c1, width, centre,
-                                out, left)  # fmt: skip
-                    continue
+                    proof[t] = HIT_TOP + 1
+                    level[t] = hp
             elif kind != HIT_MISS:  # a wall
                 wall_n = kind == HIT_WALL_N
-                st = steps[centre]
-                cell = ii[centre] if wall_n else jj[centre]
-                bnd = (n0 if wall_n else e0) + (cell + 1 if st < 0 else cell) * res
+                step = steps[centre]
+                c_w = ii[centre] if wall_n else jj[centre]
+                bnd = (n0 if wall_n else e0) + (c_w + 1 if step < 0 else c_w) * res
                 o_ax = origins[0, 0] if wall_n else origins[0, 1]
                 z_lo = _BIG
                 for c in (k00, k01, k10, k11):
                     d_ax = dirs[c, 0] if wall_n else dirs[c, 1]
-                    if not ((d_ax > 1e-12 and st > 0) or (d_ax < -1e-12 and st < 0)):
+                    if not ((d_ax > 1e-12 and step > 0) or (d_ax < -1e-12 and step < 0)):
                         z_lo = -_BIG  # a corner ray runs along or away from the face
                         break
                     z_lo = min(z_lo, ou + (bnd - o_ax) * (1.0 / d_ax) * dirs[c, 2])
                 axis = 0 if wall_n else 1
-                front_lo = 0 if st > 0 else cell + 1  # the cells in front of the face
-                front_hi = cell - 1 if st > 0 else (rows if wall_n else cols) - 1
+                front_lo = 0 if step > 0 else c_w + 1  # the cells in front of the face
+                front_hi = c_w - 1 if step > 0 else (rows if wall_n else cols) - 1
                 if z_lo > -_BIG and _bundle_clear(
                     height, maps, h_max, res, on, oe, ou, z_lo, False, dirs, k00, k01, k10, k11,
                     axis, front_lo, front_hi,
                 ):  # fmt: skip
-                    _wall_tile(height, res, n0, e0, origins, dirs, t_max, kind, st, cell, bnd, r0, r1, c0, c1,
-                               width, centre, out, left)  # fmt: skip
-                    continue
-            for r in range(r0, r1):
-                for k in range(r * width + c0, r * width + c1):
-                    if k != centre:
-                        left[k] = True
-    _march(height, maps, h_max, res, n0, e0, origins, dirs, t_max, width, np.nonzero(left)[0], out)
-    return ts, ii, jj, kinds, steps
-
-
-@njit(cache=True, fastmath=True, nogil=True, inline="always")
-def _plane_tile(
-    height: np.ndarray, res: float, n0: float, e0: float, origins: np.ndarray, dirs: np.ndarray,
-    t_max: float, hp: float, r0: int, r1: int, c0: int, c1: int, width: int, centre: int,
-    out: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray], left: np.ndarray,
-) -> None:  # fmt: skip
-    """The rays of a tile proven clear above the plane at ``hp``: a top hit where the cell there is
-    that high, else (a hole in the plane) marked ``left`` to march from the plane down."""
-    ts, ii, jj, kinds, _, t_start = out
-    rows, cols = height.shape
+                    proof[t] = kind + 1
+                    level[t] = bnd
+                    cell[t] = c_w
+                    st[t] = step
+    # ---- every ray by its tile's proof, in raster order (the arrays stream through the cache)
+    tile_of_col = np.empty(width, np.int64)
+    for c in range(width):
+        tile_of_col[c] = c // tile
+    left = np.zeros(n, np.bool_)
     inv_res = 1.0 / res
-    ou = origins[0, 2]
-    for r in range(r0, r1):
-        for k in range(r * width + c0, r * width + c1):
-            if k == centre:
+    for r in range(height_px):
+        t_row = (r // tile) * across
+        for c in range(width):
+            k = r * width + c
+            t = t_row + tile_of_col[c]
+            if k == centres[t]:
                 continue
-            tp = (ou - hp) / -dirs[k, 2]
-            pi = _cell(origins[0, 0] + tp * dirs[k, 0] - n0, inv_res, rows)
-            pj = _cell(origins[0, 1] + tp * dirs[k, 1] - e0, inv_res, cols)
-            if tp <= t_max and pi >= 0 and pj >= 0 and height[pi, pj] == hp:
-                ts[k] = tp
-                ii[k] = pi
-                jj[k] = pj
-                kinds[k] = HIT_TOP
-            else:
+            got = proof[t] - 1
+            if got == HIT_TOP:
+                hp = level[t]
+                tp = (ou - hp) / -dirs[k, 2]
+                pi = _cell(origins[0, 0] + tp * dirs[k, 0] - n0, inv_res, rows)
+                pj = _cell(origins[0, 1] + tp * dirs[k, 1] - e0, inv_res, cols)
+                if tp <= t_max and pi >= 0 and pj >= 0 and height[pi, pj] == hp:
+                    ts[k] = tp
+                    ii[k] = pi
+                    jj[k] = pj
+                    kinds[k] = HIT_TOP
+                    continue
                 if pi >= 0 and pj >= 0:
                     t_start[k] = tp  # a hole in the plane: march from it down
-                left[k] = True
-
-
-@njit(cache=True, fastmath=True, nogil=True, inline="always")
-def _wall_tile(
-    height: np.ndarray, res: float, n0: float, e0: float, origins: np.ndarray, dirs: np.ndarray,
-    t_max: float, kind: int, st: int, cell: int, bnd: float, r0: int, r1: int, c0: int, c1: int,
-    width: int, centre: int,
-    out: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray], left: np.ndarray,
-) -> None:  # fmt: skip
-    """The rays of a tile proven clear in front of a wall face (the boundary at ``bnd`` before
-    cell row or column ``cell``, crossed with step ``st``): a wall hit where the cell behind the
-    face stands above the ray, else (over the top, or a gap) marked ``left``."""
-    ts, ii, jj, kinds, steps, _ = out
-    rows, cols = height.shape
-    inv_res = 1.0 / res
-    wall_n = kind == HIT_WALL_N
-    o_ax = origins[0, 0] if wall_n else origins[0, 1]
-    for r in range(r0, r1):
-        for k in range(r * width + c0, r * width + c1):
-            if k == centre:
-                continue
-            tw = (bnd - o_ax) * (1.0 / (dirs[k, 0] if wall_n else dirs[k, 1]))
-            zw = origins[0, 2] + tw * dirs[k, 2]
-            if wall_n:
-                pi = cell
-                pj = _cell(origins[0, 1] + tw * dirs[k, 1] - e0, inv_res, cols)
-            else:
-                pi = _cell(origins[0, 0] + tw * dirs[k, 0] - n0, inv_res, rows)
-                pj = cell
-            if tw <= t_max and pi >= 0 and pj >= 0 and height[pi, pj] >= zw:
-                ts[k] = tw
-                ii[k] = pi
-                jj[k] = pj
-                kinds[k] = kind
-                steps[k] = st
-            else:
-                left[k] = True
+            elif got > HIT_TOP:  # a wall face
+                wall_n = got == HIT_WALL_N
+                tw = (level[t] - (origins[0, 0] if wall_n else origins[0, 1])) * (
+                    1.0 / (dirs[k, 0] if wall_n else dirs[k, 1])
+                )
+                zw = ou + tw * dirs[k, 2]
+                if wall_n:
+                    pi = cell[t]
+                    pj = _cell(origins[0, 1] + tw * dirs[k, 1] - e0, inv_res, cols)
+                else:
+                    pi = _cell(origins[0, 0] + tw * dirs[k, 0] - n0, inv_res, rows)
+                    pj = cell[t]
+                if tw <= t_max and pi >= 0 and pj >= 0 and height[pi, pj] >= zw:
+                    ts[k] = tw
+                    ii[k] = pi
+                    jj[k] = pj
+                    kinds[k] = got
+                    steps[k] = st[t]
+                    continue
+            left[k] = True  # not proven, a hole, over the wall's top or a tie: march
+    _march(height, maps, h_max, res, n0, e0, origins, dirs, t_max, width, np.nonzero(left)[0], out)
+    return ts, ii, jj, kinds, steps
 
 
 @njit(cache=True, fastmath=True, nogil=True, inline="always")
