@@ -4,18 +4,25 @@ Cars enter each lane by a Poisson process, drive at their own speed (keeping a g
 and leave at the lane's end: traffic comes and goes. Pedestrians walk back and forth along their
 walkways. Every actor is stamped into the grid as a box of its class, on top of the static world,
 and removed again before the next stamp.
+
+A city has thousands of actors and a frame stamps hundreds of them, so their state lives in flat
+arrays (cars grouped by lane, front first; then pedestrians walkway by walkway), moved and placed by
+numba kernels and stamped by :mod:`simbridge.world.stamping`, with no Python work per actor.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from numba import njit
 
 from simbridge.world.model import Material, SurfaceClass, WorldGrid
 from simbridge.world.raycast import COARSE
+from simbridge.world.stamping import Boxes, Stamp, box_windows, paint_boxes
 from simbridge.world.world import Lane, Walkway
 
 CAR_LENGTH_M, CAR_WIDTH_M, CAR_HEIGHT_M = 4.5, 1.9, 1.5
@@ -38,15 +45,101 @@ def _polyline_lengths(points: tuple[tuple[float, float], ...]) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(seg)])
 
 
-def _point_at(
-    points: tuple[tuple[float, float], ...], cum: np.ndarray, s: float
-) -> tuple[float, float, float]:
-    """Position and heading at arc length ``s`` along a polyline."""
-    k = int(np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(points) - 2))
-    (n1, e1), (n2, e2) = points[k], points[k + 1]
-    seg = cum[k + 1] - cum[k]
-    f = 0.0 if seg == 0 else (s - cum[k]) / seg
-    return n1 + f * (n2 - n1), e1 + f * (e2 - e1), math.atan2(e2 - e1, n2 - n1)
+@dataclass(frozen=True, slots=True)
+class _Paths:
+    """Polylines (the lanes, then the walkways) packed into flat arrays, to place every actor in one
+    kernel call. Per point: the arc length to it along its path, and the heading of the segment it
+    starts with that heading's cosine and sine (by ``math``, as actors' yaws always were)."""
+
+    start: np.ndarray  # int64 (paths + 1,): path p's points are [start[p], start[p + 1])
+    points: np.ndarray  # float64 (points, 2): north, east
+    cum: np.ndarray  # float64 (points,)
+    yaw: np.ndarray  # float64 (points,); 0 at a path's last point
+    cos: np.ndarray
+    sin: np.ndarray
+    length: np.ndarray  # float64 (paths,): each path's total length
+    base: np.ndarray  # float64 (paths,): the height of the surface its actors stand on
+
+    @staticmethod
+    def pack(paths: list[tuple[tuple[tuple[float, float], ...], float]]) -> _Paths:
+        """From (points, surface height) per path. A one-point path becomes that point twice: its
+        actors stand on the point facing north, as they always did."""
+        start, length, base = [0], [], []
+        points: list[tuple[float, float]] = []
+        cum: list[np.ndarray] = []
+        yaw: list[float] = []
+        for pts, height_m in paths:
+            pts = pts if len(pts) > 1 else pts * 2
+            start.append(start[-1] + len(pts))
+            points += pts
+            cum.append(_polyline_lengths(pts))
+            yaw += [math.atan2(e2 - e1, n2 - n1) for (n1, e1), (n2, e2) in itertools.pairwise(pts)] + [0.0]
+            length.append(cum[-1][-1])
+            base.append(height_m)
+        return _Paths(
+            start=np.asarray(start, np.int64),
+            points=np.asarray(points, np.float64).reshape(-1, 2),
+            cum=np.concatenate(cum) if cum else np.zeros(0),
+            yaw=np.asarray(yaw, np.float64),
+            cos=np.asarray([math.cos(y) for y in yaw], np.float64),
+            sin=np.asarray([math.sin(y) for y in yaw], np.float64),
+            length=np.asarray(length, np.float64),
+            base=np.asarray(base, np.float64),
+        )
+
+
+@njit(cache=True)
+def _points_at(
+    start: np.ndarray, points: np.ndarray, cum: np.ndarray, path: np.ndarray, s: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """North and east at arc length ``s[a]`` along path ``path[a]``, and the segment (the index of
+    its first point) that is on, for every ``a``: the segment found as ``np.searchsorted(cum, s,
+    side="right") - 1`` clipped to the path's segments, the point interpolated along it."""
+    n, e, seg = np.empty(len(s)), np.empty(len(s)), np.empty(len(s), np.int64)
+    for a in range(len(s)):
+        first, end = start[path[a]], start[path[a] + 1]
+        lo, hi = first, end
+        while lo < hi:  # the first point past s
+            mid = (lo + hi) // 2
+            if cum[mid] <= s[a]:
+                lo = mid + 1
+            else:
+                hi = mid
+        k = min(max(lo - 1, first), end - 2)
+        d = cum[k + 1] - cum[k]
+        f = 0.0 if d == 0 else (s[a] - cum[k]) / d
+        n[a] = points[k, 0] + f * (points[k + 1, 0] - points[k, 0])
+        e[a] = points[k, 1] + f * (points[k + 1, 1] - points[k, 1])
+        seg[a] = k
+    return n, e, seg
+
+
+@njit(cache=True)
+def _drive(lane: np.ndarray, s: np.ndarray, speed: np.ndarray, dt: float) -> None:
+    """Move each car (grouped by lane, front first) ``dt`` on at its speed, but no closer to the car
+    ahead than a car's length and the minimum gap: in place."""
+    ahead = math.inf
+    for c in range(len(s)):
+        if c == 0 or lane[c] != lane[c - 1]:
+            ahead = math.inf
+        s[c] = min(s[c] + speed[c] * dt, ahead - _MIN_GAP_M - CAR_LENGTH_M)
+        ahead = s[c]
+
+
+def _within(n: np.ndarray, e: np.ndarray, near: tuple[float, float, float]) -> np.ndarray:
+    """Indices of the points within ``near``'s radius of its north and east. ``math.hypot`` decides,
+    as it always has; numpy's hypot, which may round the last bit differently, only preselects."""
+    n0, e0, radius = near
+    maybe = np.flatnonzero(np.hypot(n - n0, e - e0) <= radius + abs(radius) * 1e-12)
+    dn, de = (n[maybe] - n0).tolist(), (e[maybe] - e0).tolist()
+    inside = np.asarray([math.hypot(a, b) <= radius for a, b in zip(dn, de, strict=True)], bool)
+    return np.asarray(maybe[inside])
+
+
+def _columns(rows: list[tuple[float, ...]], dtypes: tuple[type, ...]) -> list[np.ndarray]:
+    """The columns of a table given as rows (possibly none), each as an array of its dtype."""
+    table = np.asarray(rows, np.float64).reshape(-1, len(dtypes))
+    return [np.ascontiguousarray(table[:, k], dtype) for k, dtype in enumerate(dtypes)]
 
 
 class Actors:
@@ -55,91 +148,123 @@ class Actors:
     def __init__(self, lanes: tuple[Lane, ...], walkways: tuple[Walkway, ...], seed: int) -> None:
         self._rng = np.random.default_rng(seed + 7919)
         self._lanes = lanes
-        self._lane_len = [_polyline_lengths(ln.points_ne) for ln in lanes]
-        self._cars: list[list[list[float]]] = [[] for _ in lanes]  # per lane: [s, speed, colour]
-        self._next_arrival = [self._rng.exponential(60.0 / max(ln.arrivals_per_min, 1e-6)) for ln in lanes]
         self._walkways = walkways
-        self._walk_len = [_polyline_lengths(w.points_ne) for w in walkways]
-        self._people: list[list[list[float]]] = []
-        for w, cum in zip(walkways, self._walk_len, strict=True):
-            group = []
+        self._paths = _Paths.pack(
+            [(ln.points_ne, ln.deck_height_m) for ln in lanes]
+            + [(w.points_ne, w.surface_height_m) for w in walkways]
+        )
+        self._next_arrival = np.asarray(
+            [self._rng.exponential(60.0 / max(ln.arrivals_per_min, 1e-6)) for ln in lanes], np.float64
+        )
+        people: list[tuple[float, ...]] = []  # path, s, speed, offset (to the walkway's left), colour
+        for k, w in enumerate(walkways, start=len(lanes)):
             for _ in range(w.count):
-                s0 = float(self._rng.uniform(0, cum[-1]))
+                s0 = float(self._rng.uniform(0, self._paths.length[k]))
                 speed = float(self._rng.uniform(1.0, 1.6)) * float(self._rng.choice([-1, 1]))
                 offset = float(self._rng.uniform(-0.4, 0.4)) * w.width_m
-                group.append([s0, speed, offset, float(self._rng.integers(0, 8))])
-            self._people.append(group)
+                people.append((k, s0, speed, offset, int(self._rng.integers(0, 8))))
+        self._person_path, self._person_s, self._person_speed, self._person_offset, self._person_colour = (
+            _columns(people, (np.int64, np.float64, np.float64, np.float64, np.int64))
+        )
         self.t_s = 0.0
         # warm the roads up so the first frame already has traffic
-        self._prefill()
-        # per stamped actor: window, mask, then the saved height, class, material and region
-        self._stamped: list[tuple[tuple[int, int, int, int], np.ndarray, *tuple[np.ndarray, ...]]] = []
+        self._car_lane, self._car_s, self._car_speed, self._car_colour = self._prefill()
+        self._stamped: Boxes | None = None  # the boxes in the grid now
+        self._saved: Stamp | None = None  # and what they overwrote
 
-    def _prefill(self) -> None:
+    def _prefill(self) -> list[np.ndarray]:
+        """Cars all along every lane, as if traffic had been flowing: lane, position, speed and
+        colour per car, lane by lane, front first."""
+        cars: list[tuple[float, ...]] = []
         for k, ln in enumerate(self._lanes):
-            cum = self._lane_len[k]
+            lane: list[tuple[float, ...]] = []
             s = float(self._rng.exponential(60.0 / max(ln.arrivals_per_min, 1e-6)) * np.mean(ln.speed_m_s))
-            while s < cum[-1]:
-                self._cars[k].append(
-                    [s, float(self._rng.uniform(*ln.speed_m_s)), float(self._rng.integers(0, 8))]
-                )
+            while s < self._paths.length[k]:
+                lane.append((k, s, float(self._rng.uniform(*ln.speed_m_s)), int(self._rng.integers(0, 8))))
                 s += max(
                     _MIN_GAP_M + CAR_LENGTH_M,
                     float(self._rng.exponential(60.0 / ln.arrivals_per_min) * np.mean(ln.speed_m_s)),
                 )
-            self._cars[k].sort(key=lambda c: -c[0])
+            cars += sorted(lane, key=lambda c: -c[1])
+        return _columns(cars, (np.int64, np.float64, np.float64, np.int64))
 
     def advance(self, t_s: float) -> None:
         """Move every actor to simulated time ``t_s`` (monotonic; earlier times are ignored)."""
         dt = t_s - self.t_s
         if dt <= 0:
             return
-        for k, ln in enumerate(self._lanes):
-            cars = self._cars[k]
-            end = self._lane_len[k][-1]
-            ahead = math.inf
-            for car in cars:  # sorted front (largest s) first
-                car[0] = min(car[0] + car[1] * dt, ahead - _MIN_GAP_M - CAR_LENGTH_M)
-                ahead = car[0]
-            self._cars[k] = [c for c in cars if c[0] < end]
-            self._next_arrival[k] -= dt
-            while self._next_arrival[k] <= 0:
-                last = self._cars[k][-1][0] if self._cars[k] else math.inf
-                if last > _MIN_GAP_M + CAR_LENGTH_M:
-                    self._cars[k].append(
-                        [0.0, float(self._rng.uniform(*ln.speed_m_s)), float(self._rng.integers(0, 8))]
-                    )
-                self._next_arrival[k] += float(self._rng.exponential(60.0 / max(ln.arrivals_per_min, 1e-6)))
-        for _w, cum, group in zip(self._walkways, self._walk_len, self._people, strict=True):
-            for p in group:
-                p[0] += p[1] * dt
-                if p[0] < 0 or p[0] > cum[-1]:
-                    p[1] = -p[1]
-                    p[0] = min(max(p[0], 0.0), cum[-1])
+        _drive(self._car_lane, self._car_s, self._car_speed, float(dt))
+        stay = self._car_s < self._paths.length[self._car_lane]
+        if not stay.all():
+            self._car_lane, self._car_s, self._car_speed, self._car_colour = (
+                a[stay] for a in (self._car_lane, self._car_s, self._car_speed, self._car_colour)
+            )
+        self._arrive(dt)
+        s = self._person_s + self._person_speed * dt
+        end = self._paths.length[self._person_path]
+        turn = (s < 0) | (s > end)  # walked off an end: back the other way, from that end
+        self._person_speed[turn] = -self._person_speed[turn]
+        s[turn] = np.minimum(np.maximum(s[turn], 0.0), end[turn])
+        self._person_s = s
         self.t_s = t_s
 
+    def _arrive(self, dt: float) -> None:
+        """Count every lane's next arrival ``dt`` down; a car due enters at the lane's start, unless
+        the last car is still within a car's length and the gap of it (then that arrival is lost)."""
+        self._next_arrival -= dt
+        due = np.flatnonzero(self._next_arrival <= 0).tolist()
+        if not due:
+            return
+        at: list[int] = []  # per new car: where it goes (after its lane's last), lane, speed, colour
+        lane: list[int] = []
+        speed: list[float] = []
+        colour: list[int] = []
+        for k, end in zip(due, np.searchsorted(self._car_lane, due, side="right").tolist(), strict=True):
+            ln = self._lanes[k]
+            last = self._car_s[end - 1] if end > 0 and self._car_lane[end - 1] == k else math.inf
+            while self._next_arrival[k] <= 0:
+                if last > _MIN_GAP_M + CAR_LENGTH_M:
+                    at.append(end)
+                    lane.append(k)
+                    speed.append(float(self._rng.uniform(*ln.speed_m_s)))
+                    colour.append(int(self._rng.integers(0, 8)))
+                    last = 0.0
+                self._next_arrival[k] += float(self._rng.exponential(60.0 / max(ln.arrivals_per_min, 1e-6)))
+        if at:
+            self._car_lane = np.insert(self._car_lane, at, lane)
+            self._car_s = np.insert(self._car_s, at, 0.0)
+            self._car_speed = np.insert(self._car_speed, at, speed)
+            self._car_colour = np.insert(self._car_colour, at, colour)
+
+    def _place(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Every actor's path, north, east and segment (its first point's index): the cars, then the
+        pedestrians, each their offset to the left of their walkway's line."""
+        p = self._paths
+        path = np.concatenate([self._car_lane, self._person_path])
+        n, e, seg = _points_at(p.start, p.points, p.cum, path, np.concatenate([self._car_s, self._person_s]))
+        cars = len(self._car_s)
+        n[cars:] -= p.sin[seg[cars:]] * self._person_offset
+        e[cars:] += p.cos[seg[cars:]] * self._person_offset
+        return path, n, e, seg
+
     def poses(self) -> list[ActorPose]:
-        out = []
-        for k, ln in enumerate(self._lanes):
-            for s, _, colour in self._cars[k]:
-                n, e, yaw = _point_at(ln.points_ne, self._lane_len[k], s)
-                out.append(ActorPose(SurfaceClass.VEHICLE, (n, e), yaw, ln.deck_height_m, int(colour)))
-        for w, cum, group in zip(self._walkways, self._walk_len, self._people, strict=True):
-            for s, _, offset, colour in group:
-                n, e, yaw = _point_at(w.points_ne, cum, s)
-                n, e = n - math.sin(yaw) * offset, e + math.cos(yaw) * offset
-                out.append(ActorPose(SurfaceClass.PEDESTRIAN, (n, e), yaw, w.surface_height_m, int(colour)))
-        return out
+        """Every actor now: the cars lane by lane (front first), then the pedestrians."""
+        path, n, e, seg = self._place()
+        kinds = [SurfaceClass.VEHICLE] * len(self._car_s) + [SurfaceClass.PEDESTRIAN] * len(self._person_s)
+        return [
+            ActorPose(kind, (cn, ce), yaw, base, colour)
+            for kind, cn, ce, yaw, base, colour in zip(
+                kinds, n.tolist(), e.tolist(), self._paths.yaw[seg].tolist(), self._paths.base[path].tolist(),
+                np.concatenate([self._car_colour, self._person_colour]).tolist(), strict=True,
+            )
+        ]  # fmt: skip
 
     # ------------------------------------------------------------------ grid stamping
     def unstamp(self, grid: WorldGrid) -> None:
         """Restore the cells the last stamp covered (last stamped first)."""
-        for (i0, i1, j0, j1), mask, h, c, m, r in reversed(self._stamped):
-            grid.height[i0:i1, j0:j1][mask] = h
-            grid.cls[i0:i1, j0:j1][mask] = c
-            grid.mat[i0:i1, j0:j1][mask] = m
-            grid.region[i0:i1, j0:j1][mask] = r
-        self._stamped = []
+        if self._saved is not None:
+            self._saved.restore(grid)
+        self._stamped = self._saved = None
 
     def envelope(self, grid: WorldGrid) -> np.ndarray:
         """Per coarse cell of ``grid`` (``COARSE`` fine cells square), at least the top of the
@@ -174,35 +299,38 @@ class Actors:
         r = math.ceil(reach_m / coarse_m) + 1  # an actor's reach from its path point, and a cell
         return np.asarray(cv2.dilate(out, np.ones((2 * r + 1, 2 * r + 1), np.uint8)), np.float32)
 
+    def _boxes(self, near: tuple[float, float, float] | None) -> Boxes:
+        """The actors' boxes now, in ``poses()`` order: all, or those within ``near``'s radius."""
+        path, n, e, seg = self._place()
+        which = np.arange(len(n)) if near is None else _within(n, e, near)
+        car = which < len(self._car_s)
+        colour = np.concatenate([self._car_colour, self._person_colour])[which]
+        return Boxes(
+            centre_n=n[which],
+            centre_e=e[which],
+            cos=self._paths.cos[seg[which]],
+            sin=self._paths.sin[seg[which]],
+            length=np.where(car, CAR_LENGTH_M, PERSON_SIZE_M),
+            width=np.where(car, CAR_WIDTH_M, PERSON_SIZE_M),
+            base=self._paths.base[path[which]],
+            tall=np.where(car, CAR_HEIGHT_M, PERSON_HEIGHT_M),
+            cls=np.where(car, SurfaceClass.VEHICLE, SurfaceClass.PEDESTRIAN).astype(np.uint8),
+            mat=np.where(car, Material.CAR_PAINT, Material.CLOTH).astype(np.uint8),
+            region=(-(colour + 1)).astype(
+                np.int32
+            ),  # actors carry their paint colour as a negative region id
+        )
+
     def stamp(
         self, grid: WorldGrid, near: tuple[float, float, float] | None = None
-    ) -> list[tuple[ActorPose, tuple[int, int, int, int]]]:
+    ) -> tuple[Boxes, np.ndarray]:
         """Put the actors into the grid at the current time: all, or those within ``near``'s radius
-        of its north and east. Returns each one stamped with its grid window."""
+        of its north and east. Returns the boxes stamped (those on the grid) and their grid windows
+        ((N, 4): i0, i1, j0, j1)."""
         self.unstamp(grid)
-        poses = self.poses()
-        if near is not None:
-            n0, e0, radius = near
-            poses = [a for a in poses if math.hypot(a.centre_ne[0] - n0, a.centre_ne[1] - e0) <= radius]
-        out = []
-        for a in poses:
-            if a.kind is SurfaceClass.VEHICLE:
-                size, height, mat = (CAR_LENGTH_M, CAR_WIDTH_M), CAR_HEIGHT_M, Material.CAR_PAINT
-            else:
-                size, height, mat = (PERSON_SIZE_M, PERSON_SIZE_M), PERSON_HEIGHT_M, Material.CLOTH
-            got = grid.rect_mask(a.centre_ne, size[0], size[1], a.yaw_rad)
-            if got is None:
-                continue
-            win, mask, _, _ = got
-            i0, i1, j0, j1 = win
-            saved: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] = (
-                grid.height[i0:i1, j0:j1][mask].copy(),
-                grid.cls[i0:i1, j0:j1][mask].copy(),
-                grid.mat[i0:i1, j0:j1][mask].copy(),
-                grid.region[i0:i1, j0:j1][mask].copy(),
-            )
-            self._stamped.append((win, mask, *saved))
-            # actors carry their paint colour as a negative region id: -(colour + 1)
-            grid.paint(win, mask, a.base_height_m + height, a.kind, mat, -(a.colour + 1), "set")
-            out.append((a, win))
-        return out
+        boxes = self._boxes(near)
+        windows = box_windows(grid, boxes)
+        on = (windows[:, 0] < windows[:, 1]) & (windows[:, 2] < windows[:, 3])
+        boxes, windows = boxes.take(on), windows[on]
+        self._stamped, self._saved = boxes, paint_boxes(grid, boxes, windows)
+        return boxes, windows

@@ -3,25 +3,16 @@ and the grader need (max-height pyramid, shadow map). Implements simbridge's Ter
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from simbridge.geo import Quat
 from simbridge.terrain import TouchdownGrade
-from simbridge.world.actors import (
-    CAR_HEIGHT_M,
-    CAR_LENGTH_M,
-    CAR_WIDTH_M,
-    PERSON_HEIGHT_M,
-    PERSON_SIZE_M,
-    Actors,
-)
+from simbridge.world.actors import Actors
 from simbridge.world.camera import CameraModel, Frame, ShadowMap, render
 from simbridge.world.grader import GraderConfig, grade
 from simbridge.world.lidar import LidarModel, rangefinder_m, sweep
-from simbridge.world.model import SurfaceClass
 from simbridge.world.raycast import Pyramid
+from simbridge.world.stamping import raise_pyramid, shadows
 from simbridge.world.world import World
 
 DYNAMIC_LEVELS = 5  # max maps raised per actor per frame (radii to 12.8 m); the rest hold an envelope
@@ -62,27 +53,10 @@ class LiveWorld:
             return
         self.shadow.unstamp()
         self.actors.advance(max(t_s, 0.0))
-        stamped = self.actors.stamp(self.grid, near)
-        sn, se, su = self.sun_neu
-        shadow_len = 1.0 / max(math.tan(math.asin(min(su, 1.0))), 0.05)
-        horiz = math.hypot(sn, se) or 1.0
-        for a, (i0, i1, j0, j1) in stamped:
-            if a.kind is SurfaceClass.VEHICLE:
-                length, width, height = CAR_LENGTH_M, CAR_WIDTH_M, CAR_HEIGHT_M
-            else:
-                length, width, height = PERSON_SIZE_M, PERSON_SIZE_M, PERSON_HEIGHT_M
-            top = a.base_height_m + height
-            self.pyramid.raise_window(i0, i1, j0, j1, top, DYNAMIC_LEVELS)
-            off = height * shadow_len
-            centre = (a.centre_ne[0] - sn / horiz * off / 2, a.centre_ne[1] - se / horiz * off / 2)
-            shade = self.grid.rect_mask(
-                centre, length + off * abs(sn / horiz), width + off * abs(se / horiz), 0.0
-            )
-            if shade is not None:
-                win, mask, _, _ = shade
-                i0, i1, j0, j1 = win
-                under = mask & (self.grid.height[i0:i1, j0:j1] < top - 0.5)  # not the actor's own top
-                self.shadow.stamp(win, under)
+        boxes, windows = self.actors.stamp(self.grid, near)
+        raise_pyramid(self.pyramid, windows, boxes.top, DYNAMIC_LEVELS)
+        for window, mask in shadows(self.grid, boxes, self.sun_neu):
+            self.shadow.stamp(window, mask)
         self.t_s = t_s
         self._near = near
 

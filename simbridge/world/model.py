@@ -213,6 +213,8 @@ class WorldGrid:
 
         Returns ``(window, mask, u, v)``: the grid window (i0, i1, j0, j1), the boolean mask over
         it, and each cell's coordinates along the rectangle's length (u) and width (v) axes.
+        ``simbridge.world.stamping`` repeats this window and test cell by cell for the moving actors:
+        change both together.
         """
         cn, ce = centre_ne
         c, s = math.cos(yaw_rad), math.sin(yaw_rad)

@@ -83,22 +83,6 @@ class Pyramid:
         self.maps = np.ascontiguousarray(np.stack(list(_max_levels(base))).astype(np.float32))
         self.h_max = float(base.max())
 
-    def raise_window(self, i0: int, i1: int, j0: int, j1: int, top_m: float, levels: int = LEVELS) -> None:
-        """Make the first ``levels`` maps cover something ``top_m`` high on fine cells
-        ``[i0, i1) x [j0, j1)``.
-
-        The maps only have to bound the grid from above, so moving actors raise them where they
-        are stamped and never lower them: the march stays exact, only a little less quick.
-        """
-        rows, cols = self.maps.shape[1:]
-        b_i0, b_i1 = i0 >> COARSE_SHIFT, ((i1 - 1) >> COARSE_SHIFT) + 1
-        b_j0, b_j1 = j0 >> COARSE_SHIFT, ((j1 - 1) >> COARSE_SHIFT) + 1
-        for k in range(levels):
-            r = 1 << k
-            blk = self.maps[k, max(b_i0 - r, 0) : min(b_i1 + r, rows), max(b_j0 - r, 0) : min(b_j1 + r, cols)]
-            np.maximum(blk, top_m, out=blk)
-        self.h_max = max(self.h_max, top_m)
-
     def raise_envelope(self, coarse_top: np.ndarray, from_level: int) -> None:
         """Raise maps ``from_level`` and up, once, over everything that may ever stand on the grid
         (``coarse_top``: per coarse cell, the top of the tallest actor that can come there; -1e9
