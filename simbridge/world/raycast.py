@@ -38,6 +38,7 @@ COARSE = 1 << COARSE_SHIFT
 LEVELS = 8  # jump radii of 1, 2, 4, ... 128 coarse cells (0.8 m ... 102.4 m at 0.2 m resolution)
 _BIG = 1e30
 FINE_SCAN_CELLS = 256  # a bundle layer's box up to this many cells is checked cell by cell
+FLOOR_M = -50.0  # nothing in a world lies lower: a bundle's floor stops here
 FINE_BACK_M = 2.4  # horizontal travel back from a plane hit proven cell by cell (``_plane_clear``)
 
 
@@ -187,6 +188,97 @@ def _plane_clear(
 
 
 @njit(cache=True, fastmath=True, nogil=True, inline="always")
+def _bundle_runs(
+    dirs: np.ndarray, c00: int, c01: int, c10: int, c11: int
+) -> tuple[bool, float, float, float, float]:
+    """Whether the corner rays all go down, and the box of their horizontal run per metre of
+    descent (north low, high; east low, high): every ray of the tile runs within it."""
+    wn_lo = _BIG
+    wn_hi = -_BIG
+    we_lo = _BIG
+    we_hi = -_BIG
+    for c in (c00, c01, c10, c11):
+        du = dirs[c, 2]
+        if du > -1e-9:
+            return False, 0.0, 0.0, 0.0, 0.0
+        wn = dirs[c, 0] / -du
+        we = dirs[c, 1] / -du
+        wn_lo = min(wn_lo, wn)
+        wn_hi = max(wn_hi, wn)
+        we_lo = min(we_lo, we)
+        we_hi = max(we_hi, we)
+    return True, wn_lo, wn_hi, we_lo, we_hi
+
+
+@njit(cache=True, fastmath=True, nogil=True, inline="always")
+def _layer_box(
+    on: float, oe: float, ou: float, wn_lo: float, wn_hi: float, we_lo: float, we_hi: float,
+    z_a: float, z_b: float,
+) -> tuple[float, float, float, float]:  # fmt: skip
+    """The box (metres from the grid's corner, a micrometre wider) every ray of a bundle stays in
+    between levels ``z_a < z_b``: north low, high; east low, high."""
+    s_hi = ou - z_a
+    s_lo = ou - z_b
+    return (
+        on + min(s_hi * wn_lo, s_lo * wn_lo) - 1e-6,
+        on + max(s_hi * wn_hi, s_lo * wn_hi) + 1e-6,
+        oe + min(s_hi * we_lo, s_lo * we_lo) - 1e-6,
+        oe + max(s_hi * we_hi, s_lo * we_hi) + 1e-6,
+    )
+
+
+@njit(cache=True, fastmath=True, nogil=True, inline="always")
+def _box_bound(maps: np.ndarray, inv_c: float, n_lo: float, n_hi: float, e_lo: float, e_hi: float) -> float:
+    """An upper bound of every cell in a box from one max-map lookup (the smallest window holding
+    it): ``-_BIG`` when the box is off the grid, ``_BIG`` when no window is large enough."""
+    brows, bcols = maps.shape[1], maps.shape[2]
+    ci0 = max(math.floor(n_lo * inv_c), 0)
+    ci1 = min(math.floor(n_hi * inv_c), brows - 1)
+    cj0 = max(math.floor(e_lo * inv_c), 0)
+    cj1 = min(math.floor(e_hi * inv_c), bcols - 1)
+    if ci0 > ci1 or cj0 > cj1:
+        return -_BIG
+    ci = (ci0 + ci1) >> 1
+    cj = (cj0 + cj1) >> 1
+    reach = max(ci1 - ci, ci - ci0, cj1 - cj, cj - cj0)
+    lvl = 0
+    while (1 << lvl) < reach:
+        lvl += 1
+    return maps[lvl, ci, cj] if lvl < LEVELS else _BIG
+
+
+@njit(cache=True, fastmath=True, nogil=True, inline="always")
+def _bundle_floor(
+    maps: np.ndarray, h_max: float, res: float, on: float, oe: float, ou: float, dirs: np.ndarray,
+    c00: int, c01: int, c10: int, c11: int,
+) -> float:  # fmt: skip
+    """How low a tile's bundle of rays is proven clear, from the top down (layers that double
+    while the max maps clear them): every ray of the tile may start its march at that level. The
+    top of the grid (or the origin) when nothing below it is proven."""
+    top = min(h_max, ou)
+    down, wn_lo, wn_hi, we_lo, we_hi = _bundle_runs(dirs, c00, c01, c10, c11)
+    if not down:
+        return top
+    coarse_m = COARSE * res
+    inv_c = 1.0 / coarse_m
+    run = max(abs(wn_lo), abs(wn_hi), abs(we_lo), abs(we_hi), 1e-3)
+    dz0 = max(coarse_m, ou * max(wn_hi - wn_lo, we_hi - we_lo)) / run
+    dz = dz0
+    z_b = top
+    while z_b > FLOOR_M:
+        z_a = z_b - dz
+        n_lo, n_hi, e_lo, e_hi = _layer_box(on, oe, ou, wn_lo, wn_hi, we_lo, we_hi, z_a, z_b)
+        if _box_bound(maps, inv_c, n_lo, n_hi, e_lo, e_hi) < z_a:
+            z_b = z_a
+            dz *= 2.0
+        elif dz <= dz0 * 0.25:
+            break
+        else:
+            dz *= 0.5
+    return max(z_b, FLOOR_M)
+
+
+@njit(cache=True, fastmath=True, nogil=True, inline="always")
 def _bundle_clear(
     height: np.ndarray, maps: np.ndarray, h_max: float, res: float, on: float, oe: float, ou: float,
     z0: float, touch: bool, dirs: np.ndarray, c00: int, c01: int, c10: int, c11: int,
@@ -215,27 +307,15 @@ def _bundle_clear(
     top = min(h_max, ou)
     if hp >= top:
         return True
-    wn_lo = _BIG
-    wn_hi = -_BIG
-    we_lo = _BIG
-    we_hi = -_BIG
-    for c in (c00, c01, c10, c11):
-        du = dirs[c, 2]
-        if du > -1e-9:
-            return False
-        wn = dirs[c, 0] / -du
-        we = dirs[c, 1] / -du
-        wn_lo = min(wn_lo, wn)
-        wn_hi = max(wn_hi, wn)
-        we_lo = min(we_lo, we)
-        we_hi = max(we_hi, we)
+    down, wn_lo, wn_hi, we_lo, we_hi = _bundle_runs(dirs, c00, c01, c10, c11)
+    if not down:
+        return False
     s_hi = ou - hp
     if on + s_hi * wn_lo < 0.0 or on + s_hi * wn_hi >= height.shape[0] * res:
         return False
     if oe + s_hi * we_lo < 0.0 or oe + s_hi * we_hi >= height.shape[1] * res:
         return False
     rows, cols = height.shape
-    brows, bcols = maps.shape[1], maps.shape[2]
     coarse_m = COARSE * res
     inv_c = 1.0 / coarse_m
     inv_res = 1.0 / res
@@ -246,28 +326,10 @@ def _bundle_clear(
     while z_a < top:
         while True:  # the thickest layer (up to twice the last) whose bound is below its bottom
             z_b = min(z_a + dz, top)
-            s_hi = ou - z_a
-            s_lo = ou - z_b
-            n_lo = on + min(s_hi * wn_lo, s_lo * wn_lo) - 1e-6
-            n_hi = on + max(s_hi * wn_hi, s_lo * wn_hi) + 1e-6
-            e_lo = oe + min(s_hi * we_lo, s_lo * we_lo) - 1e-6
-            e_hi = oe + max(s_hi * we_hi, s_lo * we_hi) + 1e-6
-            ci0 = max((math.floor(n_lo * inv_c)), 0)
-            ci1 = min((math.floor(n_hi * inv_c)), brows - 1)
-            cj0 = max((math.floor(e_lo * inv_c)), 0)
-            cj1 = min((math.floor(e_hi * inv_c)), bcols - 1)
-            if ci0 > ci1 or cj0 > cj1:
-                break  # the layer's box is off the grid: nothing there
-            ci = (ci0 + ci1) >> 1
-            cj = (cj0 + cj1) >> 1
-            reach = max(ci1 - ci, ci - ci0, cj1 - cj, cj - cj0)
-            lvl = 0
-            while (1 << lvl) < reach:
-                lvl += 1
-            if lvl < LEVELS:
-                bound = maps[lvl, ci, cj]
-                if bound < z_a or (touch and z_a == hp and bound <= hp):
-                    break
+            n_lo, n_hi, e_lo, e_hi = _layer_box(on, oe, ou, wn_lo, wn_hi, we_lo, we_hi, z_a, z_b)
+            bound = _box_bound(maps, inv_c, n_lo, n_hi, e_lo, e_hi)
+            if bound < z_a or (touch and z_a == hp and bound <= hp):
+                break
             # the map's window reaches past the box: beside a wall or an edge, look at the cells
             fi0 = max(int(n_lo * inv_res), 0)
             fi1 = min(int(n_hi * inv_res), rows - 1)
@@ -396,6 +458,8 @@ def cast_rays(
                     level[t] = bnd
                     cell[t] = c_w
                     st[t] = step
+            if proof[t] == 0:  # not proven: its rays march, from as low as the bundle is clear
+                level[t] = _bundle_floor(maps, h_max, res, on, oe, ou, dirs, k00, k01, k10, k11)
     # ---- every ray by its tile's proof, in raster order (the arrays stream through the cache)
     tile_of_col = np.empty(width, np.int64)
     for c in range(width):
@@ -442,6 +506,8 @@ def cast_rays(
                     kinds[k] = got
                     steps[k] = st[t]
                     continue
+            elif dirs[k, 2] < 0.0 and level[t] < ou:
+                t_start[k] = (ou - level[t]) / -dirs[k, 2]  # the bundle is clear down to its floor
             left[k] = True  # not proven, a hole, over the wall's top or a tie: march
     _march(height, maps, h_max, res, n0, e0, origins, dirs, t_max, width, np.nonzero(left)[0], out)
     return ts, ii, jj, kinds, steps
@@ -491,7 +557,7 @@ def _march(
         de = dirs[k, 1]
         du = dirs[k, 2]
         t_start = t_starts[k]
-        if coherent and du < 0.0 and t_start == 0.0:
+        if coherent and du < 0.0:
             # ---- the plane of the left neighbour's hit, else the upper neighbour's
             g = k - 1 if k % row != 0 and kinds[k - 1] != HIT_MISS else k - row
             if g >= 0 and (kinds[g] == HIT_WALL_N or kinds[g] == HIT_WALL_E):
