@@ -98,7 +98,7 @@ class Pyramid:
 
 @njit(cache=True, fastmath=True, nogil=True, inline="always")
 def _plane_clear(
-    height: np.ndarray, maps: np.ndarray, h_max: float, res: float, coarse_m: float, inv_c: float,
+    height: np.ndarray, maps: np.ndarray, clear_above: float, res: float, coarse_m: float, inv_c: float,
     pn: float, pe: float, pi: int, pj: int, hp: float, tp: float, dn: float, de: float, sink: float,
 ) -> bool:  # fmt: skip
     """Whether a ray reaching height ``hp`` at grid point ``(pn, pe)`` (metres from the grid's
@@ -113,7 +113,8 @@ def _plane_clear(
     coarse cell, so one lookup at the middle of a piece ``2 R_k`` long bounds all of the piece,
     which is clear when that bound is below the ray's lowest point on it, the end nearer the hit.
     Each piece tries twice the last one's length and halves until its bound clears. No piece is
-    needed past the origin or above ``h_max``. Any doubt is a ``False``: the march decides."""
+    needed past the origin or above ``clear_above``, a height above which the ray is known clear
+    (the grid's top, or a tile bundle's floor). Any doubt is a ``False``: the march decides."""
     hd = math.sqrt(dn * dn + de * de)
     if hd < 1e-9:
         return True  # straight down: the ray is above hp everywhere before the hit
@@ -154,7 +155,7 @@ def _plane_clear(
                 if i < 0 or i >= rows or j < 0 or j >= cols:
                     return True  # left the grid walking back: nothing between it and the origin
                 low = hp + x * slope
-                if low > h_max:
+                if low > clear_above:
                     return True
                 if height[i, j] >= low:
                     return False
@@ -162,7 +163,7 @@ def _plane_clear(
         failed = False
         while s < travelled:
             low = hp + s * slope
-            if low > h_max:
+            if low > clear_above:
                 return True
             while True:  # the longest piece (up to twice the last) whose bound is below the ray
                 r = coarse_m * (1 << lvl)
@@ -558,6 +559,7 @@ def _march(
         du = dirs[k, 2]
         t_start = t_starts[k]
         if coherent and du < 0.0:
+            clear_above = ou + t_start * du if t_start > 0.0 else h_max  # proven clear above this
             # ---- the plane of the left neighbour's hit, else the upper neighbour's
             g = k - 1 if k % row != 0 and kinds[k - 1] != HIT_MISS else k - row
             if g >= 0 and (kinds[g] == HIT_WALL_N or kinds[g] == HIT_WALL_E):
@@ -576,7 +578,7 @@ def _march(
                         pi = ii[g] if wall_n else _cell(pn, inv_res, rows)
                         pj = _cell(pe, inv_res, cols) if wall_n else jj[g]
                         if pi >= 0 and pj >= 0 and height[pi, pj] >= zw and _plane_clear(
-                            height, maps, h_max, res, coarse_m, inv_coarse,
+                            height, maps, clear_above, res, coarse_m, inv_coarse,
                             pn, pe, pi, pj, zw, tw, dn, de, -du,
                         ):  # fmt: skip
                             ts[k] = tw
@@ -594,7 +596,7 @@ def _march(
                     pi = _cell(pn, inv_res, rows)
                     pj = _cell(pe, inv_res, cols)
                     if pi >= 0 and pj >= 0 and height[pi, pj] == hp and _plane_clear(
-                        height, maps, h_max, res, coarse_m, inv_coarse,
+                        height, maps, clear_above, res, coarse_m, inv_coarse,
                         pn, pe, pi, pj, hp, tp, dn, de, -du,
                     ):  # fmt: skip
                         ts[k] = tp
