@@ -316,9 +316,7 @@ class Actors:
             tall=np.where(car, CAR_HEIGHT_M, PERSON_HEIGHT_M),
             cls=np.where(car, SurfaceClass.VEHICLE, SurfaceClass.PEDESTRIAN).astype(np.uint8),
             mat=np.where(car, Material.CAR_PAINT, Material.CLOTH).astype(np.uint8),
-            region=(-(colour + 1)).astype(
-                np.int32
-            ),  # actors carry their paint colour as a negative region id
+            region=(-(colour + 1)).astype(np.int32),  # actors carry their paint colour as a negative id
         )
 
     def stamp(

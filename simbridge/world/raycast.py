@@ -290,7 +290,7 @@ def _bundle_clear(
     1 columns, -1 none) lies in ``[clip_lo, clip_hi]``; with ``touch``, cells exactly ``z0`` high
     are allowed (a plane at ``z0`` the rays end on).
 
-    For a plane at ``hp`` (``z0 = hp``, ``touch``, no clip): a ray whose cell at the plane is that
+    For a plane at ``z0`` (``touch``, no clip): a ray whose cell at the plane is that
     high hits its top there, and any other needs marching from the plane down only. For a wall
     face (``z0``: the lowest corner ray's crossing; the clip: the cells in front of the face): a
     ray that crosses the face where the cell behind stands above it hits the wall there.
@@ -302,16 +302,15 @@ def _bundle_clear(
     a small box is read cell by cell, within the clip. The bundle is walked up from ``z0`` in
     layers that double while their bound clears (halved when it does not). No layer is needed above
     ``h_max``. The footprint must lie on the grid. Any doubt is a ``False``."""
-    hp = z0
-    if ou <= hp:
+    if ou <= z0:
         return False
     top = min(h_max, ou)
-    if hp >= top:
+    if z0 >= top:
         return True
     down, wn_lo, wn_hi, we_lo, we_hi = _bundle_runs(dirs, c00, c01, c10, c11)
     if not down:
         return False
-    s_hi = ou - hp
+    s_hi = ou - z0
     if on + s_hi * wn_lo < 0.0 or on + s_hi * wn_hi >= height.shape[0] * res:
         return False
     if oe + s_hi * we_lo < 0.0 or oe + s_hi * we_hi >= height.shape[1] * res:
@@ -323,13 +322,13 @@ def _bundle_clear(
     run = max(abs(wn_lo), abs(wn_hi), abs(we_lo), abs(we_hi), 1e-3)
     dz0 = max(coarse_m, s_hi * max(wn_hi - wn_lo, we_hi - we_lo)) / run  # the box moves a footprint
     dz = dz0
-    z_a = hp
+    z_a = z0
     while z_a < top:
         while True:  # the thickest layer (up to twice the last) whose bound is below its bottom
             z_b = min(z_a + dz, top)
             n_lo, n_hi, e_lo, e_hi = _layer_box(on, oe, ou, wn_lo, wn_hi, we_lo, we_hi, z_a, z_b)
             bound = _box_bound(maps, inv_c, n_lo, n_hi, e_lo, e_hi)
-            if bound < z_a or (touch and z_a == hp and bound <= hp):
+            if bound < z_a or (touch and z_a == z0 and bound <= z0):
                 break
             # the map's window reaches past the box: beside a wall or an edge, look at the cells
             fi0 = max(int(n_lo * inv_res), 0)
@@ -347,7 +346,7 @@ def _bundle_clear(
                 for fi in range(fi0, fi1 + 1):
                     for fj in range(fj0, fj1 + 1):
                         bound = max(bound, height[fi, fj])
-                if bound < z_a or (touch and z_a == hp and bound <= hp):
+                if bound < z_a or (touch and z_a == z0 and bound <= z0):
                     break
             if dz <= dz0 * 0.25:
                 return False
@@ -560,50 +559,47 @@ def _march(
         t_start = t_starts[k]
         if coherent and du < 0.0:
             clear_above = ou + t_start * du if t_start > 0.0 else h_max  # proven clear above this
-            # ---- the plane of the left neighbour's hit, else the upper neighbour's
+            # ---- the plane of the left neighbour's hit, else the upper neighbour's: where this ray
+            # meets it (a wall face: the cell behind standing above the ray; a top: as high), the
+            # hit is the march's if the way there is clear
             g = k - 1 if k % row != 0 and kinds[k - 1] != HIT_MISS else k - row
-            if g >= 0 and (kinds[g] == HIT_WALL_N or kinds[g] == HIT_WALL_E):
-                # a wall: where this ray crosses the same face, the cell behind must stand above it
-                wall_n = kinds[g] == HIT_WALL_N
-                st = steps[g]
+            kind = kinds[g] if g >= 0 else HIT_MISS
+            th = zh = pn = pe = 0.0  # where the ray meets the plane: distance, height, point
+            pi = pj = -1
+            if kind > HIT_TOP:
+                wall_n = kind == HIT_WALL_N
                 d_ax = dn if wall_n else de
-                if (d_ax > 1e-12 and st > 0) or (d_ax < -1e-12 and st < 0):
+                if (d_ax > 1e-12 and steps[g] > 0) or (d_ax < -1e-12 and steps[g] < 0):
                     cell = ii[g] if wall_n else jj[g]
-                    bnd = (n0 if wall_n else e0) + (cell + 1 if st < 0 else cell) * res
-                    tw = (bnd - (on if wall_n else oe)) * (1.0 / d_ax)
-                    zw = ou + tw * du
-                    pn = on + tw * dn - n0
-                    pe = oe + tw * de - e0
-                    if 0.0 < tw <= t_max and 0.0 <= pn < size_n and 0.0 <= pe < size_e:
+                    bnd = (n0 if wall_n else e0) + (cell + 1 if steps[g] < 0 else cell) * res
+                    th = (bnd - (on if wall_n else oe)) * (1.0 / d_ax)
+                    zh = ou + th * du
+                    pn = on + th * dn - n0
+                    pe = oe + th * de - e0
+                    if 0.0 < th <= t_max and 0.0 <= pn < size_n and 0.0 <= pe < size_e:
                         pi = ii[g] if wall_n else _cell(pn, inv_res, rows)
                         pj = _cell(pe, inv_res, cols) if wall_n else jj[g]
-                        if pi >= 0 and pj >= 0 and height[pi, pj] >= zw and _plane_clear(
-                            height, maps, clear_above, res, coarse_m, inv_coarse,
-                            pn, pe, pi, pj, zw, tw, dn, de, -du,
-                        ):  # fmt: skip
-                            ts[k] = tw
-                            ii[k] = pi
-                            jj[k] = pj
-                            kinds[k] = kinds[g]
-                            steps[k] = st
-                            continue
-            elif g >= 0 and kinds[g] == HIT_TOP:
-                hp = height[ii[g], jj[g]]
-                tp = (ou - hp) / -du
-                pn = on + tp * dn - n0
-                pe = oe + tp * de - e0
-                if 0.0 < tp <= t_max and 0.0 <= pn < size_n and 0.0 <= pe < size_e:
+                        if pi >= 0 and pj >= 0 and height[pi, pj] < zh:
+                            pi = -1
+            elif kind == HIT_TOP:
+                zh = height[ii[g], jj[g]]
+                th = (ou - zh) / -du
+                pn = on + th * dn - n0
+                pe = oe + th * de - e0
+                if 0.0 < th <= t_max and 0.0 <= pn < size_n and 0.0 <= pe < size_e:
                     pi = _cell(pn, inv_res, rows)
                     pj = _cell(pe, inv_res, cols)
-                    if pi >= 0 and pj >= 0 and height[pi, pj] == hp and _plane_clear(
-                        height, maps, clear_above, res, coarse_m, inv_coarse,
-                        pn, pe, pi, pj, hp, tp, dn, de, -du,
-                    ):  # fmt: skip
-                        ts[k] = tp
-                        ii[k] = pi
-                        jj[k] = pj
-                        kinds[k] = HIT_TOP
-                        continue
+                    if pi >= 0 and pj >= 0 and height[pi, pj] != zh:
+                        pi = -1
+            if pi >= 0 and pj >= 0 and _plane_clear(
+                height, maps, clear_above, res, coarse_m, inv_coarse, pn, pe, pi, pj, zh, th, dn, de, -du,
+            ):  # fmt: skip
+                ts[k] = th
+                ii[k] = pi
+                jj[k] = pj
+                kinds[k] = kind
+                steps[k] = steps[g] if kind > HIT_TOP else 0
+                continue
         # ---- clip to the grid's box and to the slab below h_max
         t0 = t_start
         t1 = t_max
