@@ -55,6 +55,8 @@ def params_from(cfg: CompanionConfig) -> RecoveryParams:
         blind_descent_agl_m=r.blind_descent_agl_m,
         sensor_loss_s=r.sensor_loss_s,
         link_loss_s=r.link_loss_s,
+        extra_rounds=r.extra_rounds,
+        explore_reserve_pct=r.explore_reserve_pct,
         surface=SurfaceParams(
             cell_px=pc.cell_px,
             window_cells=pc.window_cells,
@@ -64,6 +66,8 @@ def params_from(cfg: CompanionConfig) -> RecoveryParams:
             edge_margin_m=pc.edge_margin_m,
             max_candidates=pc.max_candidates,
             extend_with_image=pc.extend_with_image,
+            strip_min_length_m=pc.strip_min_length_m,
+            strip_min_aspect=pc.strip_min_aspect,
         ),
         depth_source=_depth_source(cfg),
         context=cfg.reasoner.context,

@@ -204,6 +204,8 @@ class RecoveryConfig(_Section):
     blind_descent_agl_m: float = Field(default=70.0, gt=0)
     sensor_loss_s: float = Field(default=30.0, gt=0)
     link_loss_s: float = Field(default=60.0, gt=0)
+    extra_rounds: int = Field(default=4, ge=0)
+    explore_reserve_pct: float = Field(default=40.0, ge=0, le=100)
 
 
 class PerceptionConfig(_Section):
@@ -220,6 +222,8 @@ class PerceptionConfig(_Section):
     max_candidates: int = Field(default=5, ge=1, le=20)
     lidar_range_m: float = Field(default=100.0, gt=0)
     extend_with_image: bool = True
+    strip_min_length_m: float = Field(default=45.0, gt=0)
+    strip_min_aspect: float = Field(default=2.5, gt=1)
 
     @field_validator("window_cells")
     @classmethod

@@ -3,7 +3,11 @@
 One :class:`Recovery` per alarm. Its state is explicit (:class:`State`); every decision is announced
 (STATUSTEXT), recorded, and taken from telemetry, never from sleeps. A round that finds nothing
 explores (climbs, then spirals outward); a target never reached or a site rejected at confirmation
-ends the round; when the round budget runs out the vehicle lands at the best site seen.
+ends the round. When the round budget runs out with nothing acceptable seen, the vehicle explores
+further while its battery allows (``extra_rounds``, ``explore_reserve_pct``), then lands at the least bad
+site it measured (:mod:`companion.site_ledger`), never "here" blindly. A defect of the companion's own
+(any unexpected exception) never leaves the vehicle without a commander: it is announced, recorded with
+its traceback, and the vehicle lands (:meth:`Recovery._fail_safe`).
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ import itertools
 import logging
 import math
 import time
+import traceback
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -31,19 +36,31 @@ from companion.control import (
     TouchedDown,
     VehicleController,
 )
+from companion.faults import FaultHook
 from companion.guidance.descent import height_above_site
 from companion.guidance.frames import PinholeCamera, quat_to_matrix
 from companion.guidance.ipm import IpmError, LidarPixelIndex, pixel_to_ned, pixel_to_ned_flat
 from companion.perception.crops import crop, pad_of, rank_crops, site_box
 from companion.perception.depth import DepthError, DepthSource, LidarDepth
-from companion.perception.site_check import SiteCheck, check_site
-from companion.perception.surface_id import Candidate, SurfaceParams, propose, quadrant_fallback
+from companion.perception.site_check import SiteCheck, check_site, world_points
+from companion.perception.surface_id import (
+    ROOF_HEIGHT_M,
+    Candidate,
+    SurfaceParams,
+    propose,
+    quadrant_fallback,
+)
 from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequest, Reasoner
+from companion.reasoning.onboard import OnboardReasoner, lidar_kind
+from companion.site_ledger import Hazard, LedgerSite, SiteLedger, hazard_of
 from companion.telemetry import TelemetryCache
 
 MAX_REENGAGE = 2
 SENSOR_RETRY_S = 1.0  # between two asks for a frame after one failed
 SITE_RETRIES = 2  # more frames asked for when a LiDAR sweep misses the site before judging it unmeasured
+SEVERITY_CRITICAL = 2  # MAV_SEVERITY_CRITICAL: a defect of the companion's own
+FINAL_LOOKS = 2  # budget spent: unconfirmed roofs looked at closely before landing at the least bad
+MAX_REJECTED_RADIUS_M = 15.0  # water or traffic rules out at most this far around a rejected site
 
 
 class FrameUnavailable(Exception):
@@ -90,6 +107,8 @@ class RecoveryParams:
     land_timeout_s: float = 120.0
     sensor_loss_s: float = 30.0  # wall seconds without a usable frame before landing without sensors
     link_loss_s: float = 60.0  # wall seconds without telemetry before leaving the vehicle to the autopilot
+    extra_rounds: int = 4  # budget spent, nothing acceptable seen: explore this many rounds more at most
+    explore_reserve_pct: float = 40.0  # ... while the battery holds more than this (unknown: it does)
 
 
 class Record(Protocol):
@@ -150,10 +169,14 @@ class Recovery:
         self.criticality = alarm.criticality
         self.round = 0
         self.best: Site | None = None
-        self.rejected: list[tuple[float, float]] = []
+        self.rejected: list[tuple[float, float, float]] = []  # north, east, radius (metres)
         self._explore_step = 0
         self._reengaged = 0
         self._descending: tuple[tuple[float, float, float], Candidate] | None = None
+        self.ledger = SiteLedger(self.p.rejected_radius_m)
+        self.extra = 0  # rounds flown past the budget (nothing acceptable seen)
+        self._onboard = OnboardReasoner()  # judges every measured site for the ledger, whoever decides
+        self._fault = FaultHook.from_env()
 
     @property
     def budget(self) -> int:
@@ -179,11 +202,13 @@ class Recovery:
         try:
             await self.ctl.engage()
             resume: tuple[tuple[float, float, float], Candidate] | None = None
-            while resume is not None or self.round < self.budget:
+            while resume is not None or self.round < self.budget or self._may_extend():
                 try:
                     if resume is not None:  # the link came back mid-descent: same site, confirm first
                         landed = await self._confirm_and_descend(*resume)
                     else:
+                        if self.round >= self.budget:
+                            await self._extend()
                         self.round += 1
                         self._descending = None
                         landed = await self._round()
@@ -202,7 +227,7 @@ class Recovery:
                     # policy: no sensors, no new site; the alarm still stands, so come down: at the
                     # best site measured so far (flown to on the autopilot's position hold), else here
                     self._say(3, f"{exc}: landing without them")
-                    return await self._land_at_best("sensors lost")
+                    return await self._land_at_best("sensors lost", measure_here=False)
                 if landed:
                     return Outcome(State.LANDED, self.round, self._site_ned(), "landed")
             return await self._land_at_best("round budget spent")
@@ -222,6 +247,86 @@ class Recovery:
             self._say(2, f"aborted: {exc}")
             await self.ctl.release()
             return Outcome(State.ABORTED, self.round, None, str(exc))
+        except Exception as exc:  # a defect of the companion's own: never leave the vehicle uncommanded
+            return await self._fail_safe(exc)
+
+    # ------------------------------------------------------------------ when nothing was accepted
+    def _may_extend(self) -> bool:
+        """Policy: the budget is spent, but nothing acceptable (a roof with nothing against it) was
+        seen: explore further, ``extra_rounds`` at most, while the battery holds more than
+        ``explore_reserve_pct`` (an unknown level does not stop it: the rounds are bounded anyway)."""
+        best = self.ledger.best_hazard()
+        if best is not None and best.acceptable:
+            return False
+        if self.extra >= self.p.extra_rounds:
+            return False
+        battery = self.tm.state.battery_pct
+        return not (math.isfinite(battery) and battery <= self.p.explore_reserve_pct)
+
+    async def _extend(self) -> None:
+        """One round past the budget: step outward to a view not yet judged, then look again."""
+        self.extra += 1
+        best = self.ledger.best_hazard()
+        seen = (
+            "nothing measured" if best is None else f"the best seen is {best.name.lower().replace('_', ' ')}"
+        )
+        battery = self.tm.state.battery_pct
+        charge = f", battery {battery:.0f} %" if math.isfinite(battery) else ""
+        self._say(4, f"budget spent, {seen}: exploring further ({self.extra}/{self.p.extra_rounds}{charge})")
+        self.record.record_event(
+            "extend",
+            {"round": self.round, "extra": self.extra, "best_hazard": None if best is None else best.name},
+        )
+        await self._explore(outward=True)
+
+    async def _fail_safe(self, exc: Exception) -> Outcome:
+        """Policy for a defect of the companion's own (an exception no stage expects): announce it
+        (STATUSTEXT, critical), record it with its traceback, and land: at the best site already
+        measured (accepted, else the ledger's least bad; nothing is measured anew), else with the
+        autopilot's land mode where the vehicle is. Should that landing fail too, land mode once more,
+        then the vehicle is left to the autopilot."""
+        where = self.state.value
+        text = f"{type(exc).__name__}: {exc}"
+        self.log.error("defect in the recovery (%s): %s", where, text, exc_info=exc)
+        self.record.record_event(
+            "defect",
+            {
+                "round": self.round,
+                "state": where,
+                "error": text,
+                "traceback": "".join(traceback.format_exception(exc)),
+            },
+        )
+        self._say(SEVERITY_CRITICAL, f"internal error in {where}: {text}"[:120] + ": landing")
+        site = self._fallback_site()
+        try:
+            try:
+                if site is not None:
+                    await self._fly_over(site, "best site measured")
+                await self._final_land()
+            except (TouchedDown, OperatorTakeover):
+                raise
+            except Exception as again:  # the landing itself failed: the autopilot's land mode, once more
+                self.log.error("fail-safe landing failed (%r): autopilot land mode", again)
+                self.record.record_event(
+                    "defect", {"round": self.round, "state": "land", "error": repr(again)}
+                )
+                await self._final_land()
+        except TouchedDown:
+            self._set(State.LANDED)
+        except OperatorTakeover as taken:
+            self._set(State.ABORTED)
+            await self.ctl.release()
+            return Outcome(State.ABORTED, self.round, None, f"defect ({text}), then {taken}")
+        except Exception as last:
+            self._set(State.ABORTED)
+            self._say(SEVERITY_CRITICAL, "fail-safe landing failed: the autopilot has the vehicle")
+            with contextlib.suppress(Exception):
+                await self.ctl.release()
+            return Outcome(State.ABORTED, self.round, None, f"defect ({text}); landing failed ({last!r})")
+        return Outcome(
+            State.LANDED, self.round, site.ned_m if site is not None else None, f"defect ({text}): landed"
+        )
 
     async def _reengage(self, exc: AutopilotFailsafe) -> None:
         """Policy: the autopilot's own failsafe (e.g. a lost setpoint stream) is re-engaged from where
@@ -270,6 +375,7 @@ class Recovery:
         repeated every ``SENSOR_RETRY_S``, each failure recorded. Raises ``SensorsLost`` after
         ``sensor_loss_s`` without one."""
         self._set(State.ACQUIRE)
+        self._fault.check("acquire", self.round)
         since = time.monotonic()
         for attempt in itertools.count():
             try:
@@ -299,13 +405,13 @@ class Recovery:
             return False
         self._set(State.RANK)
         ranking, chosen = await self._rank(candidates, frame)
+        if frame.image_rgb is not None:
+            await asyncio.to_thread(self._note_candidates, candidates, frame, camera)
         choice = candidates[chosen] if chosen is not None else None
         if choice is None:
             await self._explore()
             return False
         target = await asyncio.to_thread(self._ipm, choice, frame, camera)
-        if self.best is None:
-            self.best = Site(target, choice)
         n, e, d = self.tm.state.pos_ned_m
         dist = math.hypot(target[0] - n, target[1] - e)
         bearing = _compass(math.degrees(math.atan2(target[1] - e, target[0] - n)))
@@ -313,6 +419,7 @@ class Recovery:
         self._say(6, f"site {choice.index} {kind} {dist:.0f} m {bearing}")
         self._say(6, ranking.rationale[:200])
         self._set(State.MOVE)
+        self._fault.check("move", self.round)
         try:
             await self.ctl.goto(
                 target[0],
@@ -337,7 +444,7 @@ class Recovery:
                 self._say(4, f"site {choice.index} contested: {decision.rationale[:110]}")
                 return False
             if not decision.accept:
-                self.rejected.append((target[0], target[1]))
+                self.rejected.append((target[0], target[1], self._rejected_radius(target, choice)))
                 if (
                     self.best is not None
                     and math.dist(self.best.ned_m[:2], target[:2]) < self.p.rejected_radius_m
@@ -363,6 +470,7 @@ class Recovery:
             if height_m <= self.p.final_land_m:
                 return await self._land()
             self._set(State.DESCEND)
+            self._fault.check("descend", self.round)
             step_m = self.p.descent_fraction * height_m
             new_d = d + step_m
             self._say(6, f"descending {step_m:.0f} m, {decision.rationale[:80]}")
@@ -410,36 +518,154 @@ class Recovery:
 
     async def _land(self) -> bool:
         self._set(State.LAND)
+        self._fault.check("land", self.round)
+        await self._final_land()
+        return True
+
+    async def _final_land(self) -> None:
+        self._set(State.LAND)
         self._say(5, "final approach: autopilot land mode")
         await self.ctl.land(self.p.land_timeout_s)
         self._set(State.LANDED)
         self._say(5, "landed")
-        return True
 
-    async def _land_at_best(self, reason: str) -> Outcome:
-        if self.best is None:
-            n, e, _ = self.tm.state.pos_ned_m
-            self._say(4, f"{reason} with no site: landing here")
+    async def _land_at_best(self, reason: str, *, measure_here: bool = True) -> Outcome:
+        """Land at the accepted site, else at the least bad one measured (:mod:`companion.site_ledger`),
+        judging the spot under the vehicle too when sensors allow (``measure_here``); "here" only when
+        nothing at all was measured, and said so."""
+        if measure_here and self.best is None:
+            for _ in range(FINAL_LOOKS):
+                site = self._fallback_site()
+                if site is None or site.closeup or site.candidate is None or not site.hazard.acceptable:
+                    break
+                # a roof seen only from afar, nothing against it: look closely before coming down
+                self._say(5, f"{reason}: a closer look at {site.label}, never confirmed")
+                await self._fly_over(site, site.label)
+                if await self._confirm_and_descend(site.ned_m, site.candidate):
+                    return Outcome(
+                        State.LANDED, self.round, self._site_ned(), f"{reason}: landed after a closer look"
+                    )
+            await self._measure_here()
+        site = self._fallback_site()
+        if site is None and not self.ledger.sites:
+            self._say(4, f"{reason} with nothing measured: landing here")
+        elif site is None:
+            self._say(4, f"{reason}, only water or traffic measured elsewhere: landing here")
         else:
-            n, e, _ = self.best.ned_m
-            self._say(4, f"{reason}: landing at the best site seen, {self.best.candidate.index}")
-            _, _, d = self.tm.state.pos_ned_m
-            try:
-                await self.ctl.goto(
-                    n,
-                    e,
-                    d,
-                    tolerance_m=self.p.arrival_tolerance_m,
-                    speed_m_s=self.p.arrival_speed_m_s,
-                    timeout_s=self.p.move_timeout_s,
-                )
-            except TargetTimeout:
-                self._say(4, "best site not reached: landing here")
+            where = "here" if site.label == "here" else f"at {site.label}"
+            self._say(
+                4, f"{reason}: landing {where} ({site.hazard.name.lower().replace('_', ' ')}: {site.why})"
+            )
+            self.record.record_event(
+                "fallback_site",
+                {
+                    "round": self.round,
+                    "reason": reason,
+                    "chosen": site.to_json(),
+                    "sites": [s.to_json() for s in self.ledger.sites],
+                },
+            )
+            await self._fly_over(site, "the chosen site")
         await self._land()
-        return Outcome(State.LANDED, self.round, self._site_ned(), reason)
+        return Outcome(State.LANDED, self.round, site.ned_m if site is not None else None, reason)
 
-    async def _explore(self, blind: bool = False) -> None:
+    def _fallback_site(self) -> LedgerSite | None:
+        """The accepted site, else the ledger's least bad, else None."""
+        if self.best is not None:
+            label = f"site {self.best.candidate.index}"
+            return LedgerSite(
+                self.best.ned_m, Hazard.ACCEPTED, "confirmed for descent", self.round, True, label=label
+            )
+        n, e, _ = self.tm.state.pos_ned_m
+        site = self.ledger.least_bad((n, e))
+        if site is not None and site.hazard > Hazard.UNKNOWN and not self.ledger.near((n, e)):
+            return None  # only water or traffic measured, and not here: unknown beats known bad
+        return site
+
+    async def _fly_over(self, site: LedgerSite, what: str) -> None:
+        n, e, _ = site.ned_m
+        _, _, d = self.tm.state.pos_ned_m
+        try:
+            await self.ctl.goto(
+                n,
+                e,
+                d,
+                tolerance_m=self.p.arrival_tolerance_m,
+                speed_m_s=self.p.arrival_speed_m_s,
+                timeout_s=self.p.move_timeout_s,
+            )
+        except TargetTimeout:
+            self._say(4, f"{what} not reached: landing here")
+
+    async def _measure_here(self) -> None:
+        """Judge the spot under the vehicle (one frame, no waiting: a missing frame skips it) into the
+        ledger, so that "here" competes with the sites measured before on what is there."""
+        try:
+            frame = await self._frames()
+        except FrameUnavailable:
+            return
+        n, e, d = self.tm.state.pos_ned_m
+        check = await asyncio.to_thread(check_site, frame.lidar_frd, frame.pos_ned_m, frame.quat_wxyz, (n, e))
+        rng = frame.rangefinder_m if math.isfinite(frame.rangefinder_m) else self.tm.state.rangefinder_m
+        ground_d = -check.surface_up_m if check.measured else d + rng
+        if not math.isfinite(ground_d):
+            return
+        target = (n, e, ground_d)
+        up_m = _height_above_surroundings(frame, check) if check.measured else None
+        kinds = await asyncio.to_thread(self._judge, frame, check, target, up_m, False)
+        hazard = hazard_of(
+            kinds,
+            accepted=False,
+            street_level=up_m is None or up_m < ROOF_HEIGHT_M,
+            strip=False,
+            judged=check.measured or frame.image_rgb is not None,
+        )
+        self.ledger.add(
+            LedgerSite(
+                target, hazard, ", ".join(kinds) or "nothing seen against it", self.round, True, label="here"
+            )
+        )
+
+    def _judge(
+        self,
+        frame: Any,
+        check: SiteCheck,
+        target: tuple[float, float, float],
+        up_m: float | None,
+        strip: bool,
+    ) -> tuple[str, ...]:
+        """What the onboard tier sees against a site (``Decision.hazards``), from the close-up of
+        ``frame`` around it and the LiDAR check; the LiDAR's kind alone without an image. A worker-
+        thread job."""
+        if frame.image_rgb is None:
+            return (lidar_kind(check),) if check.measured and not check.clear else ()
+        closeup = self._closeup(frame.image_rgb, frame, target)
+        request = ConfirmRequest(closeup, check if check.measured else None, site_up_m=up_m, site_strip=strip)
+        return self._onboard.confirm_sync(request).hazards
+
+    def _note_candidates(self, candidates: list[Candidate], frame: Any, camera: PinholeCamera) -> None:
+        """Every measured candidate of a round into the ledger, judged from afar: the onboard tier's
+        view of the frame around its site, as a confirmation would see it (a worker-thread job)."""
+        for c in candidates:
+            if c.fallback or c.site_ned_m is None:
+                continue
+            up_m = c.height_above_m if math.isfinite(c.height_above_m) else None
+            kinds = self._judge(frame, _UNMEASURED, c.site_ned_m, up_m, c.strip)
+            hazard = hazard_of(
+                kinds, accepted=False, street_level=not c.elevated and not c.strip, strip=c.strip
+            )
+            why = ", ".join(kinds) or "nothing seen against it from afar"
+            self.ledger.add(
+                LedgerSite(
+                    c.site_ned_m, hazard, why, self.round, False, c.edge_distance_m, f"site {c.index}", c
+                )
+            )
+
+    async def _explore(self, blind: bool = False, *, outward: bool = False) -> None:
         """Nothing survived screening: climb for a wider view, then step outward on a spiral.
+
+        ``outward``: a round past the budget (nothing acceptable seen here): climb to
+        ``explore_max_alt_m`` first when lower (clear of the roofs around), then step outward.
 
         ``blind``: the LiDAR returned nothing at all. When the rangefinder agrees that the ground is
         far (beyond ``blind_descent_agl_m``), everything below is out of the LiDAR's range: climbing
@@ -449,6 +675,16 @@ class Recovery:
         self._set(State.EXPLORE)
         n, e, d = self.tm.state.pos_ned_m
         alt = self.tm.state.rangefinder_m
+        if outward and math.isfinite(alt) and alt < self.p.explore_max_alt_m - 1.0:
+            climb = self.p.explore_max_alt_m - alt
+            self._say(6, f"climbing {climb:.0f} m to look farther")
+            with contextlib.suppress(TargetTimeout):
+                await self.ctl.goto(
+                    n, e, d - climb, tolerance_m=1.0, speed_m_s=0.5, timeout_s=self.p.move_timeout_s
+                )
+            n, e, d = self.tm.state.pos_ned_m
+        if outward:
+            alt = math.inf  # straight to the spiral's next step
         if blind and math.isfinite(alt) and alt > self.p.blind_descent_agl_m + 5.0:
             drop = alt - self.p.blind_descent_agl_m
             target = (n, e, d + drop)
@@ -467,6 +703,7 @@ class Recovery:
 
     def _surface_id(self, frame: Any, camera: PinholeCamera) -> list[Candidate]:
         """Candidates from the configured depth source; the quadrant fallback when it has nothing."""
+        self._fault.check("surface_id", self.round)
         try:
             cands, _depth = propose(
                 self.p.depth_source,
@@ -487,6 +724,7 @@ class Recovery:
         """The reasoner's order of the candidates, from their crops (the configured context variant),
         and the one the vehicle flies to: the first in that order that is not a fallback crop (a
         quadrant has no measured site). Both go to the record's ``rank`` event (``order``, ``chosen``)."""
+        self._fault.check("rank", self.round)
         image = frame.image_rgb
         names: list[str] = []
         if image is None:
@@ -527,7 +765,9 @@ class Recovery:
     async def _confirm(
         self, check: SiteCheck, frame: Any, target: tuple[float, float, float], choice: Candidate
     ) -> Decision:
-        """Reasoner and geometric veto on a close-up of the site (the cascade arbitrates)."""
+        """Reasoner and geometric veto on a close-up of the site (the cascade arbitrates); the verdict
+        goes to the ledger too, with what the onboard tier saw against the site whoever decided."""
+        self._fault.check("confirm", self.round)
         image = frame.image_rgb
         if image is None and not check.measured:
             # neither sensor judged the site: not a reason to strike it off (contested: asked again)
@@ -553,8 +793,27 @@ class Recovery:
                     critical=self.criticality == Criticality.CRITICAL,
                     site_ne_m=(target[0], target[1]),
                     site_up_m=choice.height_above_m if math.isfinite(choice.height_above_m) else None,
+                    site_strip=choice.strip,
                 )
             )
+        up_m = choice.height_above_m if math.isfinite(choice.height_above_m) else None
+        if decision.tier == self._onboard.name or image is None:
+            kinds = decision.hazards or ((lidar_kind(check),) if check.measured and not check.clear else ())
+        else:  # a remote tier decided: the ledger still wants the onboard tier's view of the site
+            kinds = await asyncio.to_thread(self._judge, frame, check, target, up_m, choice.strip)
+        hazard = hazard_of(
+            kinds,
+            accepted=decision.accept,
+            street_level=not choice.elevated and not choice.strip,
+            strip=choice.strip,
+            judged=image is not None or check.measured,
+        )
+        why = decision.rationale[:160] if not decision.accept else "confirmed for descent"
+        self.ledger.add(
+            LedgerSite(
+                target, hazard, why, self.round, True, choice.edge_distance_m, f"site {choice.index}", choice
+            )
+        )
         self.record.record_event(
             "confirm",
             {
@@ -564,6 +823,7 @@ class Recovery:
                 "tier": decision.tier,
                 "latency_s": decision.latency_s,
                 "site_ned_m": list(target),
+                "hazard": hazard.name.lower(),
                 "image": closeup_name,
                 "check": {
                     "points": check.points,
@@ -602,10 +862,21 @@ class Recovery:
     def _near_rejected(self, c: Candidate) -> bool:
         if c.site_ned_m is None:
             return False
-        return any(math.dist(c.site_ned_m[:2], r) < self.p.rejected_radius_m for r in self.rejected)
+        return any(math.dist(c.site_ned_m[:2], (n, e)) < r for n, e, r in self.rejected)
+
+    def _rejected_radius(self, target: tuple[float, float, float], choice: Candidate) -> float:
+        """How far a rejected site rules out candidates: ``rejected_radius_m``; for water or a traffic
+        lane, the surface's own size (half the side of a square of its area, up to
+        ``MAX_REJECTED_RADIUS_M``): another point of the same harbour or street is no better."""
+        site = self.ledger.near((target[0], target[1]))
+        radius = self.p.rejected_radius_m
+        if site is not None and site.hazard >= Hazard.TRAFFIC and math.isfinite(choice.area_m2):
+            radius = max(radius, min(MAX_REJECTED_RADIUS_M, 0.5 * math.sqrt(choice.area_m2)))
+        return radius
 
     def _ipm(self, c: Candidate, frame: Any, camera: PinholeCamera) -> tuple[float, float, float]:
         """The chosen pixel -> world point through the LiDAR; the flat-ground fallback without it."""
+        self._fault.check("ipm", self.round)
         u, v = c.centre_px
         try:
             index = LidarPixelIndex(frame.lidar_frd, camera)
@@ -636,6 +907,20 @@ def site_closeup(
         return image
     half = int(camera.fx * half_m / dist)
     return crop(image, site_box(uv[0, 0], uv[0, 1], half, camera.width, camera.height))
+
+
+_UNMEASURED = SiteCheck(0, math.nan, math.nan, math.nan, math.nan, ("not measured",))
+
+
+def _height_above_surroundings(frame: Any, check: SiteCheck) -> float | None:
+    """How far the measured surface under a site stands above the lowest tenth of the sweep's returns
+    (what Surface ID calls elevation), or None without enough returns."""
+    if frame.lidar_frd is None or len(frame.lidar_frd) < 20:
+        return None
+    up = -world_points(frame.lidar_frd, frame.pos_ned_m, frame.quat_wxyz)[:, 2]
+    if len(up) < 20:
+        return None
+    return float(check.surface_up_m - np.percentile(up, 10))
 
 
 def _lidar_silent(lidar_frd: Any) -> bool:

@@ -20,7 +20,12 @@ depth map -> per-cell flatness (:mod:`companion.perception.flatness`) -> morphol
   spare first. Area counts up to ``score_area_m2`` (beyond it a site is not safer, only bigger); fill
   keeps a sprawling street network, whose box is mostly buildings, behind a roof, whose box is the roof;
   metric surfaces less than ``roof_height_m`` above their surroundings score ``ground_level_factor``
-  times less (streets, plazas and parking lots carry traffic and people even when they look empty).
+  times less (streets, plazas and parking lots carry traffic and people even when they look empty);
+- ``length_m``, ``width_m``: the smallest rectangle holding the surface on its own level (each cell's
+  ray met with the level plane at the surface's median height; extended cells included); an elevated
+  surface at least ``strip_min_length_m`` long and ``strip_min_aspect`` times as long as wide is a
+  ``strip`` (a highway deck, a bridge, a ramp: a long band across the view, where a roof is a closed
+  shape) and scores as street level does.
 
 A box contained in another candidate's box is dropped when both surfaces lie at the same height
 (within ``same_surface_m``: a fragment of the same surface, split off by clutter; a roof inside the
@@ -50,6 +55,7 @@ from companion.perception.image_extend import ImageCells, extend_unmeasured
 __all__ = ["Candidate", "SurfaceParams", "propose", "quadrant_fallback", "surface_id"]
 
 LEVEL = (1.0, 0.0, 0.0, 0.0)
+ROOF_HEIGHT_M = 3.0  # a surface this far above its surroundings is elevated (default of SurfaceParams)
 _K3 = np.ones((3, 3), np.uint8)
 
 
@@ -71,8 +77,10 @@ class SurfaceParams:
     same_surface_m: float = 1.0  # contained boxes this close in height are the same surface
     same_surface_rel: float = 0.02  # the same for relative depth (fraction of the depth range)
     extend_with_image: bool = True  # grow metric surfaces over unmeasured cells that look the same
-    roof_height_m: float = 3.0  # a surface this far above its surroundings is elevated (a roof)
+    roof_height_m: float = ROOF_HEIGHT_M  # a surface this far above its surroundings is elevated (a roof)
     ground_level_factor: float = 0.5  # score factor for surfaces at street level (traffic, people)
+    strip_min_length_m: float = 45.0  # an elevated surface this long ...
+    strip_min_aspect: float = 2.5  # ... and this many times longer than wide is a deck, not a roof
 
 
 @dataclass(frozen=True, slots=True)
@@ -92,6 +100,14 @@ class Candidate:
     landable_area_m2: float = math.nan
     score: float = 0.0
     measured_share: float = 1.0  # of the area, measured by depth (the rest extended from the image)
+    length_m: float = math.nan  # the surface's extent on its own level: the long side of the smallest
+    width_m: float = math.nan  # rectangle holding it, and the short side (metres; NaN without metric depth)
+    strip: bool = False  # elevated, long and narrow: a highway deck, a bridge, a ramp (not a roof)
+
+    @property
+    def elevated(self) -> bool:
+        """A roof: measured at least 3 m above its surroundings, and not a strip (a deck carries traffic)."""
+        return math.isfinite(self.height_above_m) and self.height_above_m >= ROOF_HEIGHT_M and not self.strip
 
     def to_json(self) -> dict[str, Any]:
         def num(v: float, nd: int) -> float | None:
@@ -111,6 +127,9 @@ class Candidate:
                 "height_above_m": num(self.height_above_m, 2),
                 "edge_distance_m": num(self.edge_distance_m, 2),
                 "measured_share": round(self.measured_share, 3),
+                "length_m": num(self.length_m, 1),
+                "width_m": num(self.width_m, 1),
+                "strip": self.strip,
                 "site_ned_m": None if self.site_ned_m is None else [round(v, 2) for v in self.site_ned_m],
             },
         }
@@ -135,6 +154,20 @@ def _ellipse(radius: int) -> np.ndarray:
     return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
 
 
+def _nonempty_box(box: tuple[int, int, int, int], camera: PinholeCamera) -> tuple[int, int, int, int]:
+    """``box`` at least one pixel wide and tall inside the image. A landable part that is a single
+    cell exactly at the margin has no reach past its centre: its box would have no width (a city
+    flight's recovery once died cropping one), so it keeps the pixel at that centre."""
+    x0, y0, x1, y1 = box
+    if x1 <= x0:
+        x0 = min(max(x0, 0), camera.width - 1)
+        x1 = x0 + 1
+    if y1 <= y0:
+        y0 = min(max(y0, 0), camera.height - 1)
+        y1 = y0 + 1
+    return x0, y0, x1, y1
+
+
 def _contained(inner: tuple[int, int, int, int], outer: tuple[int, int, int, int]) -> bool:
     return inner[0] >= outer[0] and inner[1] >= outer[1] and inner[2] <= outer[2] and inner[3] <= outer[3]
 
@@ -149,6 +182,7 @@ def _component(
     pos_ned_m: tuple[float, float, float] | None,
     ground_up_m: float | None,
     extra: np.ndarray | None = None,
+    quat_wxyz: tuple[float, float, float, float] = LEVEL,
 ) -> tuple[Candidate, float] | None:
     """Geometry, box and level (median height, or relative depth) of one component.
 
@@ -211,11 +245,14 @@ def _component(
     # Sub-cell box: the edge distance falls by one cell per cell outward, so the margin is crossed
     # ``(edge - margin) / scale`` cells (at most one) past a landable cell's centre.
     reach = np.clip((edge_m[lr, lc] - margin) / unit, 0.0, 1.0)
-    box = (
-        round(max((c0 + lc + 0.5 - reach).min() * s, 0)),
-        round(max((r0 + lr + 0.5 - reach).min() * s, 0)),
-        round(min((c0 + lc + 0.5 + reach).max() * s, camera.width)),
-        round(min((r0 + lr + 0.5 + reach).max() * s, camera.height)),
+    box = _nonempty_box(
+        (
+            round(max((c0 + lc + 0.5 - reach).min() * s, 0)),
+            round(max((r0 + lr + 0.5 - reach).min() * s, 0)),
+            round(min((c0 + lc + 0.5 + reach).max() * s, camera.width)),
+            round(min((r0 + lr + 0.5 + reach).max() * s, camera.height)),
+        ),
+        camera,
     )
     centre = (float((c0 + bj + 0.5) * s), float((r0 + bi + 0.5) * s))
     fill = float(land.sum()) / float((lr.max() - lr.min() + 1) * (lc.max() - lc.min() + 1))
@@ -238,7 +275,10 @@ def _component(
             float(pos_ned_m[2] + ned[bi, bj, 2]),
         )
     level = float(np.median(up[comp]))
-    if not level - low >= p.roof_height_m:  # NaN (nothing around it measured) counts as street level
+    length, width = _extent_m(body, (r0, c0), s, camera, quat_wxyz, -level)
+    elevated = level - low >= p.roof_height_m  # NaN (nothing around it measured) counts as street level
+    strip = bool(elevated and length >= p.strip_min_length_m and length >= p.strip_min_aspect * width)
+    if not elevated or strip:
         score *= p.ground_level_factor
     cand = Candidate(
         0,
@@ -253,8 +293,38 @@ def _component(
         landable_area_m2=landable,
         score=score,
         measured_share=measured_share,
+        length_m=length,
+        width_m=width,
+        strip=strip,
     )
     return cand, level
+
+
+def _extent_m(
+    body: np.ndarray,
+    offset: tuple[int, int],
+    cell_px: int,
+    camera: PinholeCamera,
+    quat_wxyz: tuple[float, float, float, float],
+    below_m: float,
+) -> tuple[float, float]:
+    """Length and width (metres) of the smallest rectangle holding a surface's cells, each cell's
+    centre ray met with the level plane ``below_m`` under the camera: the measured cells and those
+    the image extended alike. ``(nan, nan)`` when the plane is not below the camera."""
+    if not below_m > 0.0:
+        return math.nan, math.nan
+    rr, cc = np.nonzero(body)
+    x = ((cc + offset[1] + 0.5) * cell_px - camera.cx) / camera.fx
+    y = ((rr + offset[0] + 0.5) * cell_px - camera.cy) / camera.fy
+    m = quat_to_matrix(quat_wxyz) @ CAMERA_TO_BODY  # camera -> level NED
+    rays = m @ np.stack([x, y, np.ones_like(x)])
+    down = rays[2] > 1e-6
+    if down.sum() < 3:
+        return math.nan, math.nan
+    ne = (rays[:2, down] * (below_m / rays[2, down])).T.astype(np.float32)
+    (_cx, _cy), (a, b), _angle = cv2.minAreaRect(ne)
+    cell_m = cell_px * below_m / camera.fx  # the rectangle runs through the outer cells' centres
+    return max(a, b) + cell_m, min(a, b) + cell_m
 
 
 _SEED_LEVEL_M = 0.3  # measured cells this close to a flat surface's level are that surface
@@ -414,7 +484,7 @@ def surface_id(
                     r0, c0, r1, c1 = max(r0, 0), max(c0, 0), min(r1, rows), min(c1, cols)
                     comp = labels[r0:r1, c0:c1] == c
                     extra = ext[r0:r1, c0:c1]
-        cand = _component(comp, (r0, c0), fl, depth, camera, p, pos_ned_m, ground_up_m, extra)
+        cand = _component(comp, (r0, c0), fl, depth, camera, p, pos_ned_m, ground_up_m, extra, quat_wxyz)
         if cand is not None:
             found.append(cand)
     found.sort(key=lambda cl: -cl[0].score)

@@ -20,6 +20,7 @@ from companion.perception.site_check import SiteCheck
 from companion.perception.surface_id import Candidate
 
 __all__ = [
+    "HAZARD_KINDS",
     "ConfirmRequest",
     "DeadlineExceeded",
     "Decision",
@@ -91,6 +92,7 @@ class ConfirmRequest:
     critical: bool = False
     site_ne_m: tuple[float, float] | None = None  # where the site is, for the lone-"no" rule
     site_up_m: float | None = None  # the site's height above its surroundings (Surface ID), if measured
+    site_strip: bool = False  # Surface ID measured the site on an elevated strip (a deck, not a roof)
     deadline: float | None = None
     transcript: list[dict[str, Any]] | None = field(default=None, compare=False)
 
@@ -113,8 +115,26 @@ class Decision:
     # eligible, and the lone-"no" rule (companion/reasoning/cascade.py) may accept it on a later round
     contested: bool = False
     # an onboard "no" that no other tier's "yes" may overrule: water or lane markings on the site, or any
-    # rejection of a site measured at street level (DESIGN.md: roads stay risky even when empty)
+    # rejection of a site measured at street level or on an elevated strip (DESIGN.md: roads stay risky
+    # even when empty)
     binding: bool = False
+    # what the onboard tier saw against the site, by kind (``HAZARD_KINDS``); empty from other tiers
+    hazards: tuple[str, ...] = ()
+
+
+# The kinds of ``Decision.hazards``: what the recovery's least-bad-site policy ranks sites by.
+HAZARD_KINDS = (
+    "lidar_obstacle",  # the LiDAR check: an object in the rotor disc
+    "lidar_rough",
+    "lidar_edge",
+    "water",
+    "vegetation",
+    "markings",  # lane markings (a painted line at street level or on a deck)
+    "street_asphalt",  # asphalt at street level or on a deck: a road, a car park
+    "raised",  # people, vehicles, rooftop objects
+    "raised_lines",  # pipes, rails
+    "hazard",  # the total hazard score over its limit
+)
 
 
 class Reasoner(Protocol):

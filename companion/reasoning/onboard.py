@@ -22,9 +22,14 @@ markings, a site measured at street level that is mostly asphalt (``max_street_a
 park, empty for now), more than ``max_raised`` raised objects (people, vehicles, clutter, or their shadows),
 pipes or rails, or a total hazard over ``max_hazard``. When Surface ID measured the site ``roof_height_m``
 or more above its surroundings (``ConfirmRequest.site_up_m``), its asphalt look and road texture do not
-count: a dark, even tar roof looks like a road, but no road runs on a roof. A "no" for water or lane
-markings, or any "no" for a site measured at street level (``site_up_m`` under ``roof_height_m``: streets,
-plazas, car parks), is *binding*: the cascade lets no remote tier's "yes" overrule it. ``critical=True``
+count: a dark, even tar roof looks like a road, but no road runs on a roof. An elevated *strip*
+(``ConfirmRequest.site_strip``: Surface ID measured a long narrow band, a highway deck or a bridge) is
+no roof: it is judged as street level is, where a single painted line (``lane_lines >= 1``) vetoes the
+site whatever its texture. A "no" for water or lane markings, or any "no" for a site measured at street
+level or on a strip (streets, plazas, car parks, decks), is *binding*: the cascade lets no remote
+tier's "yes" overrule it. ``Decision.hazards`` names the kinds of what vetoed the site (water,
+markings, street_asphalt, raised, lidar_obstacle, ...): the recovery's ledger of measured sites ranks
+them by it (docs/recovery.md). ``critical=True``
 relaxes two things a little and never water or lane markings: the total hazard limit rises from
 ``max_hazard`` to ``max_hazard_critical`` (flat patches, asphalt-like texture, busy edges), and when the
 LiDAR check is clear (nothing taller than 0.3 m inside the rotor disc) one raised object in view is
@@ -58,6 +63,7 @@ __all__ = [
     "Ranking",
     "Reasoner",
     "geometry_score",
+    "lidar_kind",
 ]
 
 
@@ -117,7 +123,14 @@ def geometry_score(c: Candidate, w: GeometryWeights | None = None) -> tuple[floa
     s = 0.0
     h = c.height_above_m
     if math.isfinite(h):
-        if h >= w.roof_height_m:
+        if h >= w.roof_height_m and c.strip:
+            # long and narrow up in the air: a highway deck, a bridge or a ramp, where traffic runs
+            s += w.street_level
+            notes.append(
+                f"elevated strip {h:.0f} m up, {c.length_m:.0f} x {c.width_m:.0f} m "
+                "(a deck or a bridge: traffic)"
+            )
+        elif h >= w.roof_height_m:
             s += w.elevated
             notes.append(f"elevated flat roof {h:.0f} m up")
         else:
@@ -210,29 +223,42 @@ class OnboardReasoner:
         lidar_clear = check is not None and check.clear
         relax = request.critical
         max_raised = p.max_raised_critical if relax and lidar_clear else p.max_raised
-        vetoes: list[str] = []
+        vetoes: list[tuple[str, str]] = []  # (kind, what was seen)
         categorical = False  # water or a road's markings: no other tier's yes overrules them
         if check is not None and not check.clear:
-            vetoes.append("LiDAR: " + "; ".join(check.reasons))
+            vetoes.append((lidar_kind(check), "LiDAR: " + "; ".join(check.reasons)))
         if cues.water_share > p.max_water:
-            vetoes.append(f"water ({100 * cues.water_share:.0f} % of the site)")
+            vetoes.append(("water", f"water ({100 * cues.water_share:.0f} % of the site)"))
             categorical = True
         if cues.vegetation_share > p.max_vegetation:
-            vetoes.append(f"vegetation ({100 * cues.vegetation_share:.0f} %)")
-        if cues.line_length > p.max_markings:
-            vetoes.append(f"lane markings ({cues.lane_lines}): a road stays risky even when empty")
-            categorical = True
-        elevated = request.site_up_m is not None and request.site_up_m >= self.weights.roof_height_m
+            vetoes.append(("vegetation", f"vegetation ({100 * cues.vegetation_share:.0f} %)"))
+        # A roof is a surface measured well above its surroundings that is not a long narrow strip
+        # (a highway deck, a bridge: traffic runs there). Streets and decks are judged alike.
+        roof = request.site_up_m is not None and request.site_up_m >= self.weights.roof_height_m
+        elevated = roof and not request.site_strip
         street_level = request.site_up_m is not None and not elevated
+        where = "on an elevated strip (a deck)" if roof and request.site_strip else "at street level"
+        if cues.line_length > p.max_markings:
+            vetoes.append(
+                ("markings", f"lane markings ({cues.lane_lines}): a road stays risky even when empty")
+            )
+            categorical = True
+        elif street_level and cues.lane_lines >= 1:
+            # Off a roof a single painted line is a road's (or a car park's): no texture outvotes it.
+            vetoes.append(("markings", f"a painted line {where}: a road stays risky even when empty"))
+            categorical = True
         if street_level and cues.asphalt_share > p.max_street_asphalt:
             vetoes.append(
-                f"asphalt at street level ({100 * cues.asphalt_share:.0f} %): a road or a car park, "
-                "where traffic comes back"
+                (
+                    "street_asphalt",
+                    f"asphalt {where} ({100 * cues.asphalt_share:.0f} %): a road or a car park, "
+                    "where traffic comes back",
+                )
             )
         if cues.raised_blobs > max_raised:
-            vetoes.append(cues.phrase("raised"))
+            vetoes.append(("raised", cues.phrase("raised")))
         if cues.raised_line_length > p.max_raised_lines:
-            vetoes.append(cues.phrase("lines_raised"))
+            vetoes.append(("raised_lines", cues.phrase("lines_raised")))
         limit = p.max_hazard_critical if relax else p.max_hazard
         # A surface measured well above its surroundings is a roof: a dark, even tar roof looks like
         # asphalt, but no road runs there. (Lane markings still veto: an elevated highway deck.)
@@ -241,7 +267,7 @@ class OnboardReasoner:
         hazard = sum(v for _name, v in terms)
         if not vetoes and hazard > limit:
             seen = ", ".join(cues.phrase(name) for name, _v in terms[:3])
-            vetoes.append(f"hazard {hazard:.1f} over {limit:.1f}: {seen}")
+            vetoes.append(("hazard", f"hazard {hazard:.1f} over {limit:.1f}: {seen}"))
         accept = not vetoes
         if accept:
             why = f"site clear: {_geometry_phrase(check)}; image: {', '.join(cues.observations()[:3])}"
@@ -250,15 +276,33 @@ class OnboardReasoner:
             if elevated and any(name in street for name, _v in cues.terms):
                 why += f" (dark asphalt-like surface {request.site_up_m:.0f} m up: a tar roof, not a road)"
         else:
-            why = "rejected: " + "; ".join(vetoes)
+            why = "rejected: " + "; ".join(text for _kind, text in vetoes)
             if check is None:
                 why += " (no LiDAR: judged from the image alone)"
         binding = not accept and (categorical or street_level)
+        kinds = tuple(dict.fromkeys(kind for kind, _text in vetoes))
         if request.transcript is not None:
             request.transcript.append(
-                {"tier": self.name, "cues": cues.to_json(), "accept": accept, "binding": binding}
+                {
+                    "tier": self.name,
+                    "cues": cues.to_json(),
+                    "accept": accept,
+                    "binding": binding,
+                    "hazards": kinds,
+                }
             )
-        return Decision(accept, why, self.name, time.perf_counter() - t0, binding=binding)
+        return Decision(accept, why, self.name, time.perf_counter() - t0, binding=binding, hazards=kinds)
+
+
+def lidar_kind(check: SiteCheck) -> str:
+    """The ``Decision.hazards`` kind of a LiDAR veto: an object in the rotor disc before roughness
+    before an edge (the worst of what the check found)."""
+    text = " ".join(check.reasons)
+    if "object" in text:
+        return "lidar_obstacle"
+    if "rough" in text:
+        return "lidar_rough"
+    return "lidar_edge"
 
 
 def _geometry_phrase(check: SiteCheck | None) -> str:
