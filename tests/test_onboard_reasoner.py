@@ -22,6 +22,7 @@ from companion.perception.depth import LidarDepth
 from companion.perception.site_check import SiteCheck
 from companion.perception.surface_id import Candidate, propose
 from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequest, Reasoner
+from companion.reasoning.image_cues import analyse
 from companion.reasoning.onboard import ConfirmParams, GeometryWeights, OnboardReasoner, geometry_score
 from simbridge.world.camera import Frame
 from simbridge.world.live import LiveWorld
@@ -307,6 +308,9 @@ def test_onboard_geometry_score_terms() -> None:
     relative = dataclasses.replace(base, **unknown)
     assert geometry_score(relative, w) == (0.0, "no metric geometry")
     assert geometry_score(dataclasses.replace(base, fallback=True), w)[0] == 0.0
+    deck, words = geometry_score(dataclasses.replace(base, strip=True, length_m=118.0, width_m=9.0), w)
+    assert deck == pytest.approx(street)  # an elevated strip scores as street level does, not as a roof
+    assert "elevated strip 20 m up, 118 x 9 m" in words
 
 
 # ------------------------------------------------------------------------------------------ confirm
@@ -477,3 +481,58 @@ def test_onboard_confirm_takes_a_measured_roof_for_a_tar_roof_not_a_road(
     deck, deck_check = close_up(city, (0.0, -80.0), 9.0, height_m, weather)
     deck_cut = site_cut(city, deck, height_m)
     assert not ONBOARD.confirm_sync(ConfirmRequest(deck_cut, deck_check, site_up_m=9.0)).accept
+
+
+def _painted_line_site(length_frac: float) -> np.ndarray:
+    """A light, even paving close-up (200 px square) with one short painted line across its middle."""
+    rng = np.random.default_rng(0)
+    img = np.clip(rng.normal(150, 6, (200, 200, 3)), 0, 255).astype(np.uint8)
+    half = round(200 * length_frac / 2)
+    img[99:102, 100 - half : 100 + half] = 245
+    return img
+
+
+@pytest.mark.parametrize("length_frac", [0.06, 0.1])
+def test_onboard_confirm_a_painted_line_off_a_roof_vetoes_whatever_the_texture(length_frac: float) -> None:
+    """One short painted line, too little paint for the lane-marking limit: on a roof it is no reason to
+    refuse (a seam, a stain), but at street level or on an elevated strip it is a road's (issue 17: a
+    sidewalk accepted as "uniform gravel or tile texture" though the close-up saw a painted line)."""
+    image = _painted_line_site(length_frac)
+    cues = analyse(image, site=True)
+    assert cues.lane_lines >= 1
+    assert cues.line_length <= ONBOARD.confirm_params.max_markings  # too little for the old rule
+    roof = ONBOARD.confirm_sync(ConfirmRequest(image, None, site_up_m=20.0))
+    assert roof.accept, roof.rationale
+    street = ONBOARD.confirm_sync(ConfirmRequest(image, None, site_up_m=0.0))
+    assert (street.accept, street.binding) == (False, True), street.rationale
+    assert "a painted line at street level" in street.rationale
+    assert street.hazards == ("markings",)
+    deck = ONBOARD.confirm_sync(ConfirmRequest(image, None, site_up_m=9.0, site_strip=True))
+    assert (deck.accept, deck.binding) == (False, True), deck.rationale
+    assert "a painted line on an elevated strip" in deck.rationale
+
+
+@pytest.mark.parametrize("height_m", [10.0, 30.0])
+@pytest.mark.parametrize("weather", ["clear", "rain"])
+def test_onboard_confirm_an_elevated_strip_is_no_tar_roof(
+    scene: LiveWorld, height_m: float, weather: str
+) -> None:
+    """The clear tar roof that passes as a roof (site_up_m 20 m) is refused once Surface ID measured it
+    as an elevated strip: a dark, even surface up on a deck is a carriageway, and the refusal binds."""
+    frame, check = close_up(scene, (70.0, -35.0), 20.0, height_m, weather)
+    cut = site_cut(scene, frame, height_m)
+    assert ONBOARD.confirm_sync(ConfirmRequest(cut, check, site_up_m=20.0)).accept
+    deck = ONBOARD.confirm_sync(ConfirmRequest(cut, check, site_up_m=20.0, site_strip=True))
+    assert (deck.accept, deck.binding) == (False, True), deck.rationale
+    assert "on an elevated strip" in deck.rationale
+    assert "street_asphalt" in deck.hazards
+
+
+def test_onboard_confirm_names_what_vetoed_the_site_by_kind(city: LiveWorld) -> None:
+    frame, check = close_up(city, (0.0, 150.0), -0.8, 20.0)  # the harbour
+    water = ONBOARD.confirm_sync(ConfirmRequest(site_cut(city, frame, 20.0), check, site_up_m=0.0))
+    assert "water" in water.hazards
+    roof, roof_check = close_up(city, (0.0, -27.0), 22.0, 20.0)
+    clear = ONBOARD.confirm_sync(ConfirmRequest(site_cut(city, roof, 20.0), roof_check, site_up_m=22.0))
+    assert clear.accept
+    assert clear.hazards == ()

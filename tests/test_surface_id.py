@@ -404,3 +404,47 @@ def test_the_image_never_extends_across_measured_cells() -> None:
         params=EXTEND,
     )
     assert all(c.measured_share == 1.0 for c in cands)
+
+
+@pytest.mark.parametrize("agl_m", [60.0, 90.0])
+def test_an_elevated_highway_deck_is_a_strip_and_a_roof_is_not(agl_m: float) -> None:
+    """scenario1's highway deck (16 m wide, 9 m up, running north-south at east -80 m) crosses the view
+    as a long band: Surface ID measures it as an elevated strip, which scores as street level; the clear
+    gravel roof beside it (40 x 30 m, 22 m up) is a closed shape, a roof. (From 40 m the view is 45 m
+    tall: no deck shows its length there, and the painted line decides at confirmation.)"""
+    from simbridge.scenarios import load_scenario
+    from simbridge.world.live import LiveWorld
+    from simbridge.world.model import SurfaceClass as C
+
+    world = load_scenario("scenario1", 0).terrain
+    assert isinstance(world, LiveWorld)
+    pos, quat = (0.0, -55.0, -(9.0 + agl_m)), (1.0, 0.0, 0.0, 0.0)
+    rng = np.random.default_rng(3)
+    image = world.camera_frame(pos, quat, 0.0, "clear", rng).rgb
+    lidar = world.lidar_sweep(pos, quat, 0.0, rng)
+    cm = world.camera
+    camera = PinholeCamera.from_hfov(cm.width_px, cm.height_px, cm.hfov_deg)
+    cands, _ = propose(
+        LidarDepth(), camera, image=image, lidar_frd=lidar, quat_wxyz=quat, pos_ned_m=pos, ground_up_m=pos[2]
+    )
+
+    def on(c: Candidate) -> C:
+        assert c.site_ned_m is not None
+        ij = world.grid.index(c.site_ned_m[0], c.site_ned_m[1])
+        assert ij is not None
+        return C(int(world.grid.cls[ij]))
+
+    decks = [c for c in cands if on(c) == C.HIGHWAY]
+    roofs = [c for c in cands if on(c) == C.ROOF_FLAT]
+    assert decks, [(on(c).name, c.height_above_m) for c in cands]
+    assert roofs, [(on(c).name, c.height_above_m) for c in cands]
+    for deck in decks:
+        assert deck.height_above_m > 3.0
+        assert deck.strip, (deck.length_m, deck.width_m)
+        assert not deck.elevated
+        assert deck.length_m > 2.5 * deck.width_m
+        assert deck.to_json()["geometry"]["strip"] is True
+    for roof in roofs:
+        assert not roof.strip, (roof.length_m, roof.width_m)
+        assert roof.elevated
+        assert roof.length_m < 45.0
