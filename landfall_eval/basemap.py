@@ -11,7 +11,7 @@ map shows the static world.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -81,12 +81,16 @@ class BaseMap:
         cls: (rows, cols) uint8 SurfaceClass of each pixel (the mode of the cells it covers).
         extent_ne_m: (north_min, north_max, east_min, east_max) scenario metres the picture covers.
         px_m: metres per pixel (the same north and east).
+        world_digest: the fingerprint of the whole static world drawn from
+            (:meth:`simbridge.world.model.WorldGrid.digest`, as in simbridge's episode log), or None
+            when unknown (a bare grid, the flat scenario).
     """
 
     rgb: np.ndarray
     cls: np.ndarray
     extent_ne_m: tuple[float, float, float, float]
     px_m: float
+    world_digest: str | None = None
 
     def __post_init__(self) -> None:
         rows, cols = self.cls.shape
@@ -128,7 +132,8 @@ def basemap(
 
     Args:
         scenario: a simbridge scenario name (``scenario1``, ``city``, a ``.toml`` path, ...).
-        seed: the world seed (the procedural city depends on it; the curated scenarios do not).
+        seed: the world seed: for ``city`` the city seed (simbridge ``--city-seed``), for a scenario
+            file the seed of its furniture (rubble, park trees, parked cars: simbridge ``--seed``).
         bounds_ne_m: (north_min, north_max, east_min, east_max) metres to draw, clipped to the world;
             None draws the whole world. The picture snaps outward to whole blocks of cells, so it may
             reach past the bounds by less than one pixel (never past the world's edge by more).
@@ -154,7 +159,10 @@ def basemap(
     from simbridge.scenarios import load_scenario
     from simbridge.world.live import LiveWorld
 
-    terrain = load_scenario(scenario, seed).terrain
+    if scenario == "city":  # the city of this seed; the episode seed only moves actors, left out below
+        terrain = load_scenario(scenario, 0, city_seed=seed).terrain
+    else:
+        terrain = load_scenario(scenario, seed).terrain
     if not isinstance(terrain, LiveWorld):  # the flat scenario: open ground everywhere
         h = _FLAT_HALF_M
         n_min, n_max, e_min, e_max = bounds_ne_m if bounds_ne_m is not None else (-h, h, -h, h)
@@ -162,7 +170,7 @@ def basemap(
         grid = WorldGrid.empty((n_min, n_max), (e_min, e_max), res)
     else:
         terrain.actors.unstamp(terrain.grid)  # the static world: no traffic or pedestrians
-        grid = terrain.grid
+        return replace(grid_basemap(terrain.grid, bounds_ne_m, max_px), world_digest=terrain.world_digest)
     return grid_basemap(grid, bounds_ne_m, max_px)
 
 

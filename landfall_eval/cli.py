@@ -29,7 +29,7 @@ from typing import Any
 
 from tqdm import tqdm
 
-from landfall_eval.episode import EpisodeSpec, EpisodeTimes, run_episode
+from landfall_eval.episode import EpisodeSpec, EpisodeTimes, describe_last_state, run_episode
 from landfall_eval.grading import summarise
 from landfall_eval.launches import halton_launches
 
@@ -77,6 +77,19 @@ def _positive(kind: type, what: str) -> Callable[[str], Any]:
     return parse
 
 
+def _non_negative_int(what: str) -> Callable[[str], int]:
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{what} must be a whole number, got {text!r}") from None
+        if value < 0:
+            raise argparse.ArgumentTypeError(f"{what} must be >= 0, got {text}")
+        return value
+
+    return parse
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="companion-bench",
@@ -119,7 +132,10 @@ def build_parser() -> argparse.ArgumentParser:
     y = sub.add_parser("city", parents=[common, flying], help="full pipeline from Halton launch points")
     y.add_argument("--seeds", type=_positive(int, "--seeds"), default=20, help="number of launch points")
     y.add_argument("--start-index", type=int, default=0, metavar="K", help="first Halton index (default 0)")
-    y.add_argument("--city-seed", type=int, default=0, help="seed of the procedural city")
+    y.add_argument(
+        "--city-seed", type=_non_negative_int("--city-seed"), default=0, metavar="S",
+        help="seed of the procedural city: every episode flies this city (simbridge --city-seed)",
+    )  # fmt: skip
     return ap
 
 
@@ -148,7 +164,8 @@ def _line(entry: dict[str, Any]) -> str:
     verdict = "SAFE" if entry.get("safe") else "UNSAFE"
     if entry.get("outcome") != "landed":
         verdict = str(entry.get("outcome")).upper()
-    extra = f" ({entry['error']})" if entry.get("error") else ""
+    last = describe_last_state(entry.get("last_state"))
+    extra = f" ({entry['error']}{'; last: ' + last if last else ''})" if entry.get("error") else ""
     reasons = "; ".join(entry.get("reasons") or [])
     ttd = entry.get("time_to_touchdown_s")
     took = f", {ttd:.0f} s" if isinstance(ttd, (int, float)) else ""

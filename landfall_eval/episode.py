@@ -21,7 +21,7 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
@@ -33,9 +33,11 @@ __all__ = [
     "EpisodeTimes",
     "JsonlTail",
     "ProcessSample",
+    "describe_last_state",
     "free_port",
     "run_episode",
     "send_alarm",
+    "simbridge_command",
     "sped_up_env",
     "stop_process",
 ]
@@ -50,7 +52,9 @@ class EpisodeSpec:
     """What one episode flies. ``seed`` seeds the world's traffic, the sensors' noise and the wind.
 
     ``launch`` (north, east, height above ground) overrides the scenario's launch point (the city);
-    ``launch_index`` is its index in the Halton sequence, ``run`` the repetition of a curated scenario.
+    ``launch_index`` is its index in the Halton sequence, ``run`` the repetition of a curated scenario;
+    ``city_seed`` the procedural city's seed (simbridge ``--city-seed``; every episode of a campaign
+    flies the same city).
     """
 
     kind: str  # "curated" or "city"
@@ -188,6 +192,24 @@ def send_alarm(
         time.sleep(0.5)
 
 
+def simbridge_command(
+    spec: EpisodeSpec, *, udp_port: int, sensors_port: int, episode_log: Path, speed: float
+) -> list[str]:
+    """The ``simbridge`` command line that flies ``spec``: MAVLink to ``udp_port`` on loopback, the
+    sensor stream on ``sensors_port``, the episode log at ``episode_log``, ``speed`` x real time."""
+    cmd = [
+        sys.executable, "-m", "simbridge", "--scenario", spec.scenario, "--seed", str(spec.seed),
+        "--autopilot", spec.autopilot, "--weather", spec.weather, "--speed", f"{speed:g}",
+        "--mavlink", f"udpout:127.0.0.1:{udp_port}", "--sensors", f"127.0.0.1:{sensors_port}",
+        "--episode-log", str(episode_log), "--log-level", "WARNING",
+    ]  # fmt: skip
+    if spec.city_seed is not None:
+        cmd += ["--city-seed", str(spec.city_seed)]
+    if spec.launch is not None:
+        cmd.append("--launch=" + ",".join(f"{v:.2f}" for v in spec.launch))  # "=": it may start with "-"
+    return cmd
+
+
 def run_episode(
     spec: EpisodeSpec,
     workdir: Path,
@@ -201,7 +223,9 @@ def run_episode(
     ``on_line(source, text)`` sees the alarm tool's answer (source ``alarm``) and every line of the
     companion's log (``companion``) as they come. Never raises for what happens in the episode: a
     process that dies, an alarm that is refused or a landing that never comes is an ``outcome`` of
-    ``error`` or ``timeout`` with the ``error`` text.
+    ``error`` or ``timeout`` with the ``error`` text, and ``last_state`` says where the companion and
+    the vehicle stood at the end. ``city_seed`` and ``world_digest`` come from simbridge's episode log:
+    the world it flew.
     """
     times = times or EpisodeTimes()
     workdir.mkdir(parents=True, exist_ok=True)
@@ -213,14 +237,9 @@ def run_episode(
     for stale in (episode_log, comp_log):
         stale.unlink(missing_ok=True)
     udp, tcp = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_STREAM)
-    sim_cmd = [
-        sys.executable, "-m", "simbridge", "--scenario", spec.scenario, "--seed", str(spec.seed),
-        "--autopilot", spec.autopilot, "--weather", spec.weather, "--speed", f"{times.speed:g}",
-        "--mavlink", f"udpout:127.0.0.1:{udp}", "--sensors", f"127.0.0.1:{tcp}",
-        "--episode-log", str(episode_log), "--log-level", "WARNING",
-    ]  # fmt: skip
-    if spec.launch is not None:
-        sim_cmd.append("--launch=" + ",".join(f"{v:.2f}" for v in spec.launch))  # "=": it may start with "-"
+    sim_cmd = simbridge_command(
+        spec, udp_port=udp, sensors_port=tcp, episode_log=episode_log, speed=times.speed
+    )
     comp_cmd = [
         sys.executable, "-m", "companion", "--mavlink", f"udp:{udp}", "--sensors", f"127.0.0.1:{tcp}",
         "--record", str(record_dir), "--reasoner", spec.reasoner,
@@ -233,6 +252,8 @@ def run_episode(
         "kind": spec.kind,
         "scenario": spec.scenario,
         "seed": spec.seed,
+        "city_seed": spec.city_seed,
+        "world_digest": None,
         "launch_index": spec.launch_index,
         "run": spec.run,
         "reasoner": spec.reasoner,
@@ -250,6 +271,8 @@ def run_episode(
     usage = ProcessSample(comp.pid)
     tail = JsonlTail(episode_log)
     states: list[dict[str, Any]] = []
+    header: dict[str, Any] | None = None  # simbridge's start line: the world it flies
+    last_vehicle: dict[str, Any] | None = None  # its latest state line, read to the very end
     touchdown: dict[str, Any] | None = None
     takeover: dict[str, Any] | None = None
     outcome, error = "landed", None
@@ -274,6 +297,9 @@ def run_episode(
                 kind = row.get("event")
                 if kind == "state":
                     states.append(row)
+                    last_vehicle = row
+                elif kind == "start" and header is None:
+                    header = row
                 elif kind == "mode" and takeover is None and row.get("mode") in CONTROL_MODES:
                     takeover = row
                 elif kind == "touchdown" and touchdown is None:
@@ -312,10 +338,19 @@ def run_episode(
             for line in comp_log.read_text(errors="replace").splitlines()[shown:]:
                 on_line("companion", line)
         sim_err.close()
+        for row in tail.lines():  # what simbridge wrote since the last look (all of it, on an early error)
+            if row.get("event") == "state":
+                last_vehicle = row
+            elif row.get("event") == "start" and header is None:
+                header = row
         tail.close()
+    if header is not None:
+        entry["city_seed"] = header.get("city_seed", entry["city_seed"])
+        entry["world_digest"] = header.get("world_digest")
     entry.update(_grade(states, takeover, touchdown, record_dir))
     entry["outcome"] = outcome if touchdown is None or outcome != "timeout" else "landed"
     entry["error"] = error if touchdown is None else None
+    entry["last_state"] = _last_state(_record_events(record_dir), last_vehicle)
     entry["companion"] = {"peak_rss_mb": round(usage.peak_rss_mb, 1), "cpu_s": round(usage.cpu_s, 2)}
     entry["wall_s"] = round(time.monotonic() - t_wall, 2)
     return entry
@@ -388,3 +423,42 @@ def _grade(
             rounds = max(rounds, int(ev.get("round", 0)))
     out.update(calls=calls, rationales=rationales, rounds=rounds)
     return out
+
+
+def _last_state(events: list[dict[str, Any]], vehicle: dict[str, Any] | None) -> dict[str, Any] | None:
+    """Where an episode stood at its end (``last_state`` in docs/bench.md): the companion's last
+    recovery state and round (its flight record's ``state`` events), how its recovery ended (the
+    ``outcome`` event) and the vehicle's last mode, arming, position and height above ground (the
+    episode log's last ``state`` line). None when neither process wrote anything."""
+    state = next((e for e in reversed(events) if e.get("kind") == "state"), None)
+    outcome = next((e for e in reversed(events) if e.get("kind") == "outcome"), None)
+    if state is None and outcome is None and vehicle is None:
+        return None
+    return {
+        "recovery_state": state.get("state") if state is not None else None,
+        "round": state.get("round") if state is not None else None,
+        "outcome_state": outcome.get("state") if outcome is not None else None,
+        "outcome_reason": outcome.get("reason") if outcome is not None else None,
+        "vehicle_t_s": vehicle.get("t_s") if vehicle is not None else None,
+        "vehicle_mode": vehicle.get("mode") if vehicle is not None else None,
+        "vehicle_armed": vehicle.get("armed") if vehicle is not None else None,
+        "vehicle_pos_ned_m": vehicle.get("pos_ned_m") if vehicle is not None else None,
+        "vehicle_agl_m": vehicle.get("agl_m") if vehicle is not None else None,
+    }
+
+
+def describe_last_state(last: object) -> str:
+    """An entry's ``last_state`` in a few words ('' when it has none): the companion's recovery state
+    and round, how its recovery ended, the vehicle's mode and height above ground."""
+    if not isinstance(last, Mapping):
+        return ""
+    parts = []
+    if last.get("recovery_state") is not None:
+        parts.append(f"companion in {last['recovery_state']}, round {last.get('round')}")
+    if last.get("outcome_reason"):
+        parts.append(f"recovery ended: {last['outcome_reason']}")
+    if last.get("vehicle_mode") is not None:
+        agl = last.get("vehicle_agl_m")
+        up = f" {agl:.0f} m above ground" if isinstance(agl, int | float) else ""
+        parts.append(f"vehicle {last['vehicle_mode']}{up}")
+    return "; ".join(parts)

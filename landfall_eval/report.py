@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from landfall_eval.basemap import CLASS_LABEL, CLASS_RGB, BaseMap, basemap
+from landfall_eval.episode import describe_last_state
 from landfall_eval.grading import SURFACES
 from landfall_eval.rationales import Clusters, EmbeddingsUnavailable, cluster_rationales
 from landfall_eval.study import (
@@ -74,6 +75,8 @@ class _Episode:
     id: str
     scenario: str
     seed: int | None
+    city_seed: int | None
+    world_digest: str | None  # the static world it flew (simbridge's episode log)
     group: tuple[str, str]  # (reasoner, context)
     weather: str
     launch_ne: tuple[float, float] | None
@@ -90,6 +93,7 @@ class _Episode:
     peak_rss_mb: float | None
     calls: tuple[tuple[str, str, float | None], ...]  # (stage, tier, latency_s)
     rationales: tuple[tuple[str, str], ...]  # (stage, text)
+    last_state: str  # where an episode that never landed stood at its end ('' when unknown)
 
     @property
     def verdict(self) -> str:
@@ -183,10 +187,9 @@ def write_episode_report(entry: Mapping[str, Any], out_dir: Path, record_dir: Pa
         _table(("", ""), rows),
         "<h2>Trajectory</h2>",
     ]
-    note = _map_figure(ep.scenario, [ep], {}, None, fig_dir / "map.png")
+    notes = _map_figure(ep.scenario, [ep], {}, None, fig_dir / "map.png")
     parts.append(_img("map.png", f"bird's-eye map of {ep.scenario} with the trajectory"))
-    if note:
-        parts.append(f'<p class="note">{_e(note)}</p>')
+    parts += notes
     parts.append(rounds_html(record_dir, fig_dir) if record_dir is not None else "")
     page = _PAGE.format(title=_e(f"Landfall episode {entry.get('id', '')}"), body="\n".join(parts))
     path = out_dir / "report.html"
@@ -207,6 +210,8 @@ def _episode(number: int, raw: Mapping[str, Any], config: Mapping[str, Any]) -> 
         id=str(raw.get("id", "?")),
         scenario=str(raw.get("scenario", "?")),
         seed=int(s) if (s := _num(raw.get("seed"))) is not None else None,
+        city_seed=int(c) if (c := _num(raw.get("city_seed"))) is not None else None,
+        world_digest=d if isinstance(d := raw.get("world_digest"), str) else None,
         group=(
             str(raw.get("reasoner", config.get("reasoner", "?"))),
             str(raw.get("context", config.get("context", "?"))),
@@ -234,6 +239,7 @@ def _episode(number: int, raw: Mapping[str, Any], config: Mapping[str, Any]) -> 
             for r in _list(raw.get("rationales"))
             if isinstance(r, Mapping) and str(r.get("text") or "").strip()
         ),
+        last_state=describe_last_state(raw.get("last_state")),
     )
 
 
@@ -268,6 +274,7 @@ table {{ border-collapse: collapse; margin: 0.6em 0 1.2em; }}
 th, td {{ border: 1px solid #d1d5db; padding: 3px 8px; text-align: left; vertical-align: top; }}
 th {{ background: #f3f4f6; }} td.n {{ text-align: right; font-variant-numeric: tabular-nums; }}
 img {{ max-width: 100%; border: 1px solid #e5e7eb; }} .note {{ color: #6b7280; font-style: italic; }}
+.warning {{ color: #b91c1c; font-weight: bold; }}
 blockquote {{ margin: 0.2em 0 0.2em 1em; color: #374151; }}
 </style></head><body>
 {body}
@@ -444,10 +451,8 @@ def _landings(
     used: set[str] = set()
     for scenario, group in sorted(by_scenario.items()):
         name = _unique(f"map_{_slug(scenario)}.png", used)
-        note = _map_figure(scenario, group, config, basemaps.get(scenario), fig_dir / name)
-        out += [f"<h3>{_e(scenario)}</h3>", _img(name, f"bird's-eye map of {scenario}")]
-        if note:
-            out.append(f'<p class="note">{_e(note)}</p>')
+        notes = _map_figure(scenario, group, config, basemaps.get(scenario), fig_dir / name)
+        out += [f"<h3>{_e(scenario)}</h3>", _img(name, f"bird's-eye map of {scenario}"), *notes]
     _surface_figure(eps, fig_dir / "surfaces.png")
     _rounds_figure(eps, fig_dir / "rounds.png")
     out += [
@@ -527,7 +532,8 @@ def _episode_table(eps: list[_Episode]) -> str:
     rows = [
         (e.number, e.id, e.scenario, *e.group, e.weather, e.outcome, e.surface,
          "yes" if e.verdict == "safe" else "no", _f(None if e.rounds is None else float(e.rounds), 0),
-         _f(e.time_to_touchdown_s, 1, " s"), "; ".join(e.reasons) + (f" (error: {e.error})" * bool(e.error)))
+         _f(e.time_to_touchdown_s, 1, " s"), "; ".join(e.reasons) + (f" (error: {e.error})" * bool(e.error))
+         + (f" (last: {e.last_state})" * bool(e.verdict == "none" and e.last_state)))
         for e in eps
     ]  # fmt: skip
     head = ("#", "id", "scenario", "reasoner", "context", "weather", "outcome", "surface", "safe", "rounds",
@@ -573,8 +579,9 @@ def _save(fig: Figure, path: Path) -> None:
 
 def _map_figure(
     scenario: str, eps: list[_Episode], config: Mapping[str, Any], bm: BaseMap | None, path: Path
-) -> str:
-    """Draw one scenario's map; returns a note for the page ('' when all went as planned)."""
+) -> list[str]:
+    """Draw one scenario's map; returns the notes and warnings for the page, as HTML paragraphs
+    (none when all went as planned)."""
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
@@ -587,6 +594,7 @@ def _map_figure(
         except ValueError as exc:  # an unknown scenario, or bounds outside its world
             log.warning("no background for the %s map: %s", scenario, exc)
             note = f"No background map: {exc}"
+    warning = _world_mismatch(scenario, seed, eps, bm)
     aspect = (bounds[3] - bounds[2]) / (bounds[1] - bounds[0])
     # no layout engine: it squeezes a fixed-aspect map with a tall legend; the tight bbox frames it all
     fig = _figure(min(max(8.0 * aspect, 4.0), 14.0), 8.0, layout=None)
@@ -612,7 +620,29 @@ def _map_figure(
     if surface:
         legend.get_texts()[len(verdicts) + 1].set_fontweight("bold")
     _save(fig, path)
-    return note
+    lines = (("warning", warning), ("note", note))
+    return [f'<p class="{cls}">{_e(text)}</p>' for cls, text in lines if text]
+
+
+def _world_mismatch(scenario: str, seed: int, eps: list[_Episode], bm: BaseMap | None) -> str:
+    """A warning when episodes that should have flown the mapped world flew another (their
+    ``world_digest`` differs from the map's): every episode of a city (one campaign, one city),
+    those of a scenario file whose seed is the map's (its furniture follows the seed). '' when all
+    agree or the digests are unknown."""
+    if bm is None or bm.world_digest is None:
+        return ""
+    meant = [e for e in eps if e.world_digest is not None and (scenario == "city" or e.seed == seed)]
+    other = [e for e in meant if e.world_digest != bm.world_digest]
+    if not other:
+        return ""
+    digests = ", ".join(sorted({str(e.world_digest) for e in other})[:3])
+    numbers = ", ".join(f"#{e.number}" for e in other[:10]) + (", ..." if len(other) > 10 else "")
+    what = f"city seed {seed}" if scenario == "city" else f"seed {seed}"
+    return (
+        f"Warning: this map is the {scenario} of {what} (world digest {bm.world_digest}), but "
+        f"{len(other)} of {len(meant)} episodes flew another world (digest {digests}; episodes {numbers}): "
+        "their tracks are drawn over a world they did not fly."
+    )
 
 
 def _map_bounds(eps: list[_Episode]) -> tuple[float, float, float, float]:
@@ -687,8 +717,13 @@ def _rgb01(rgb: tuple[int, int, int]) -> tuple[float, float, float]:
 
 
 def _world_seed(scenario: str, eps: list[_Episode], config: Mapping[str, Any]) -> int:
-    if scenario == "city" and (s := _num(config.get("city_seed"))) is not None:
-        return int(s)
+    """The seed of the world to draw: a city's city seed (the run's, else its episodes' most common),
+    a scenario file's first episode seed (its furniture follows the episode seed)."""
+    if scenario == "city":
+        if (s := _num(config.get("city_seed"))) is not None:
+            return int(s)
+        seeds = Counter(e.city_seed for e in eps if e.city_seed is not None)
+        return seeds.most_common(1)[0][0] if seeds else 0
     return next((e.seed for e in eps if e.seed is not None), 0)
 
 

@@ -43,6 +43,17 @@ def _launch(text: str) -> tuple[float, ...]:
     return values
 
 
+def non_negative_seed(text: str) -> int:
+    """An argparse type: a whole number >= 0 (argparse names the flag in its error)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="simbridge",
@@ -73,7 +84,18 @@ def build_parser() -> argparse.ArgumentParser:
         help="launch point (metres from the scenario origin) and height above ground",
     )
     p.add_argument(
-        "--seed", type=int, default=0, help="seed for every random choice (same seed, same episode)"
+        "--seed",
+        type=int,
+        default=0,
+        help="the episode's seed: traffic, sensor noise, wind, a scenario file's furniture "
+        "(same seeds, same episode)",
+    )
+    p.add_argument(
+        "--city-seed",
+        type=non_negative_seed,
+        default=0,
+        metavar="N",
+        help="seed of the procedural city (--scenario city): one city seed, one city, whatever --seed",
     )
     p.add_argument("--speed", type=float, default=1.0, help="simulated seconds per wall second")
     p.add_argument(
@@ -139,6 +161,7 @@ def config_from_args(args: argparse.Namespace) -> SimConfig:
         autopilot=args.autopilot,
         scenario=args.scenario,
         seed=args.seed,
+        city_seed=args.city_seed,
         speed=args.speed,
         start=args.start,
         episode_log=args.episode_log,

@@ -3,6 +3,11 @@
 Every line has ``t_s`` (simulated seconds). State lines have ``"event": "state"``; event lines
 name the event: ``armed``, ``disarmed``, ``mode`` (``mode``: the new mode's name), ``failsafe``,
 ``touchdown`` (``pos_ned_m``, ``surface``, ``safe``, ``reasons``), ``start`` and ``stop``.
+
+The first line, ``start``, says what was flown: ``scenario``, ``autopilot``, ``seed`` (the episode's),
+``city_seed`` (the procedural city's; null for other scenarios), ``world_digest`` (16 hex digits
+fingerprinting the static world, :meth:`simbridge.world.model.WorldGrid.digest`; null for ``flat``),
+``start`` and ``home_ned_m``. Episodes with equal digests flew the same world.
 """
 
 from __future__ import annotations

@@ -13,6 +13,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from simbridge.cli import non_negative_seed
 from simbridge.geo import euler_to_quat
 
 
@@ -34,7 +35,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--scenario", required=True, help="flat is blind; scenario1, scenario2, city or a .toml path"
     )
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="the episode's seed: traffic and sensor noise")
+    p.add_argument(
+        "--city-seed", type=non_negative_seed, default=0, metavar="N", help="seed of the procedural city"
+    )
     p.add_argument("--weather", choices=("clear", "fog", "rain"), default="clear")
     p.add_argument(
         "--pose",
@@ -59,7 +63,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from simbridge.world.live import LiveWorld
 
     try:
-        scenario = load_scenario(args.scenario, args.seed)
+        scenario = load_scenario(args.scenario, args.seed, city_seed=args.city_seed)
     except ValueError as exc:
         parser.error(str(exc))
     world = scenario.terrain

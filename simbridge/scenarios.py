@@ -1,14 +1,18 @@
 """Named scenarios: the world, where the vehicle starts, and where home is.
 
 ``flat`` is open ground; ``scenario1`` and ``scenario2`` are the curated city blocks (TOML files in
-simbridge/world/scenarios/); ``city`` is the procedural city for a seed; any path ending in ``.toml``
-is loaded as a scenario file. Scenario coordinates are NED metres from the scenario origin; the
+simbridge/world/scenarios/); ``city`` is the procedural city of ``city_seed``; any path ending in
+``.toml`` is loaded as a scenario file. Scenario coordinates are NED metres from the scenario origin; the
 launch point is above the origin unless the scenario (or ``launch``) says otherwise.
+
+Two seeds (DESIGN.md section 7): the episode's ``seed`` drives the traffic and pedestrians (and, in
+simbridge, the sensor noise and the wind); the city's own ``city_seed`` draws the city, so one campaign
+flies one city. A scenario file's random furniture (rubble, park trees, parked cars) comes from ``seed``.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from simbridge.terrain import FlatTerrain, Terrain
@@ -21,6 +25,7 @@ class Scenario:
     launch_ne_m: tuple[float, float] = (0.0, 0.0)
     launch_height_m: float = 100.0  # above the ground under the launch point
     launch_yaw_rad: float = 0.0
+    world_digest: str | None = None  # the static world's fingerprint (WorldGrid.digest); None when flat
 
 
 def scenario_names() -> list[str]:
@@ -34,11 +39,21 @@ def load_scenario(
     seed: int,
     launch: tuple[float, ...] | None = None,
     world_kwargs: dict[str, object] | None = None,
+    *,
+    city_seed: int = 0,
 ) -> Scenario:
     """Build a scenario; ``launch`` = (north, east[, height above ground]) overrides its launch point.
 
+    Args:
+        name: ``flat``, a built-in scenario, ``city`` or a ``.toml`` path.
+        seed: the episode's seed: the actors everywhere, a scenario file's furniture too.
+        launch: (north, east[, height above ground]) metres, overriding the launch point.
+        world_kwargs: keyword arguments for :class:`~simbridge.world.live.LiveWorld` (sensor models).
+        city_seed: the procedural city's seed (``city`` only; ignored otherwise).
+
     Raises:
-        ValueError: an unknown name (the message lists the known ones) or a bad scenario file.
+        ValueError: an unknown name (the message lists the known ones), a bad scenario file or a
+            negative ``city_seed``.
     """
     if name == "flat":
         sc = Scenario(name="flat", terrain=FlatTerrain())
@@ -48,7 +63,7 @@ def load_scenario(
         if name == "city":
             from simbridge.world.city import generate_city
 
-            world = generate_city(seed)
+            world = generate_city(city_seed)  # CityError (a ValueError) for a negative seed
         else:
             from simbridge.world.scenario_file import BUILTIN_SCENARIO_DIR, load_scenario_file
 
@@ -59,11 +74,18 @@ def load_scenario(
                     f"unknown scenario {name!r}; known scenarios: {known}, or a path to a .toml file"
                 )
             world = load_scenario_file(path, seed)
-        live = LiveWorld(world, **(world_kwargs or {}))  # type: ignore[arg-type]
-        sc = Scenario(world.name, live, world.launch_ne_m, world.launch_height_m, world.launch_yaw_rad)
+        live = LiveWorld(world, actor_seed=seed, **(world_kwargs or {}))  # type: ignore[arg-type]
+        sc = Scenario(
+            world.name,
+            live,
+            world.launch_ne_m,
+            world.launch_height_m,
+            world.launch_yaw_rad,
+            world_digest=live.world_digest,
+        )
     if launch is not None:
         if len(launch) not in (2, 3):
             raise ValueError(f"launch must be N,E or N,E,HEIGHT, got {launch}")
         height = launch[2] if len(launch) == 3 else sc.launch_height_m
-        sc = Scenario(sc.name, sc.terrain, (launch[0], launch[1]), height, sc.launch_yaw_rad)
+        sc = replace(sc, launch_ne_m=(launch[0], launch[1]), launch_height_m=height)
     return sc

@@ -34,7 +34,8 @@ class SimConfig:
     mavlink: str = "udpout:127.0.0.1:14550"
     autopilot: str = "px4"
     scenario: str = "flat"
-    seed: int = 0
+    seed: int = 0  # the episode: traffic, sensor noise, wind (and a scenario file's furniture)
+    city_seed: int = 0  # the procedural city (scenario "city"): one campaign, one city
     speed: float = 1.0
     start: str = "air"
     episode_log: Path | None = None
@@ -52,6 +53,8 @@ class SimConfig:
             raise ValueError(f"--speed must be > 0, got {self.speed}")
         if self.start not in ("air", "ground"):
             raise ValueError(f"--start must be 'air' or 'ground', got {self.start!r}")
+        if self.city_seed < 0:
+            raise ValueError(f"--city-seed must be >= 0, got {self.city_seed}")
         if not 1 <= self.system_id <= 255:
             raise ValueError(f"system id must be 1..255, got {self.system_id}")
         if self.weather not in ("clear", "fog", "rain"):
@@ -64,7 +67,9 @@ class SimBridge:
     def __init__(self, config: SimConfig, logger: logging.Logger | None = None) -> None:
         self.config = config
         self.log = logger or logging.getLogger("simbridge")
-        self.scenario: Scenario = load_scenario(config.scenario, config.seed, config.launch)
+        self.scenario: Scenario = load_scenario(
+            config.scenario, config.seed, config.launch, city_seed=config.city_seed
+        )
         rng = np.random.default_rng(config.seed)
         wind = WindModel(config.wind, rng) if config.wind != WindConfig() else None
         self.vehicle = Vehicle(config.origin, self.scenario.terrain, wind=wind)
@@ -102,6 +107,8 @@ class SimBridge:
                 "scenario": sc.name,
                 "autopilot": config.autopilot,
                 "seed": config.seed,
+                "city_seed": config.city_seed if config.scenario == "city" else None,
+                "world_digest": sc.world_digest,
                 "start": config.start,
                 "home_ned_m": list(self.home_ned_m),
             },
@@ -230,11 +237,12 @@ class SimBridge:
         cfg = self.config
         dt = Vehicle.DT_S
         self.log.info(
-            "simbridge %s on %s (local UDP port %d): scenario %s, seed %d, speed %.1fx, start %s",
+            "simbridge %s on %s (local UDP port %d): scenario %s%s, seed %d, speed %.1fx, start %s",
             cfg.autopilot,
             cfg.mavlink,
             self.link.local_port,
             cfg.scenario,
+            f" (city seed {cfg.city_seed})" if cfg.scenario == "city" else "",
             cfg.seed,
             cfg.speed,
             cfg.start,

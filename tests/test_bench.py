@@ -12,7 +12,7 @@ from typing import Any
 
 import pytest
 
-from landfall_eval.episode import _grade
+from landfall_eval.episode import EpisodeSpec, EpisodeTimes, _grade, run_episode
 from landfall_eval.grading import (
     SURFACES,
     kinematic_lower_bound_s,
@@ -21,12 +21,17 @@ from landfall_eval.grading import (
     trapezoid_time_s,
 )
 from landfall_eval.launches import halton_launches
+from simbridge.scenarios import load_scenario
 
 EPISODE_KEYS = {
     "id", "kind", "scenario", "seed", "launch_index", "run", "reasoner", "context", "weather", "autopilot",
     "launch_ned_m", "touchdown_ned_m", "surface", "safe", "reasons", "outcome", "error", "rounds",
     "time_to_touchdown_s", "kinematic_lower_bound_s", "kinematic_ratio", "calls", "rationales",
-    "trajectory_ne_m", "companion", "wall_s",
+    "trajectory_ne_m", "companion", "wall_s", "city_seed", "world_digest", "last_state",
+}  # fmt: skip
+LAST_STATE_KEYS = {
+    "recovery_state", "round", "outcome_state", "outcome_reason", "vehicle_t_s", "vehicle_mode",
+    "vehicle_armed", "vehicle_pos_ned_m", "vehicle_agl_m",
 }  # fmt: skip
 
 
@@ -234,6 +239,34 @@ def test_city_episode_starts_at_its_halton_point(tmp_path: Path) -> None:
     assert e["surface"] != "no_landing"
     assert isinstance(e["safe"], bool)
     assert e["rounds"] >= 1
+    assert set(e) >= EPISODE_KEYS, EPISODE_KEYS - set(e)
+    assert e["city_seed"] == 0  # --city-seed's default: the city every episode of the run flies
+    assert e["world_digest"] == load_scenario("city", 3, city_seed=0).world_digest
+    assert set(e["last_state"]) == LAST_STATE_KEYS
+    assert e["last_state"]["outcome_state"] == "landed"
+    assert e["last_state"]["round"] == e["rounds"]
+
+
+@pytest.mark.slow
+def test_episode_that_never_lands_says_where_it_stood(tmp_path: Path) -> None:
+    spec = EpisodeSpec("city", "city", 5, launch_index=5, city_seed=2)
+    e = run_episode(spec, tmp_path / "ep", times=EpisodeTimes(speed=2.0, sim_s=1.0))
+    why = f"{e['error']}\n{_log_tail(tmp_path / 'ep' / 'companion.log')}"
+    assert e["outcome"] == "timeout", why
+    assert e["error"] == "no touchdown within 1 simulated seconds"
+    assert e["touchdown_ned_m"] is None
+    assert (e["seed"], e["city_seed"]) == (5, 2)
+    assert e["world_digest"] == load_scenario("city", 0, city_seed=2).world_digest
+    last = e["last_state"]
+    assert set(last) == LAST_STATE_KEYS
+    mid_recovery = {"acquire", "surface_id", "rank", "move", "confirm", "explore", "descend"}
+    assert last["recovery_state"] in mid_recovery
+    assert last["round"] >= 0
+    assert last["vehicle_mode"] == "OFFBOARD"  # the companion had control, px4
+    assert last["vehicle_armed"] is True
+    assert last["vehicle_agl_m"] > 50.0  # still up near the launch height
+    assert last["vehicle_t_s"] > 0.0
+    assert len(last["vehicle_pos_ned_m"]) == 3
 
 
 def test_bad_arguments_and_a_foreign_results_file_are_refused(tmp_path: Path) -> None:

@@ -3,6 +3,8 @@ and the grader need (max-height pyramid, shadow map). Implements simbridge's Ter
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 
 from simbridge.geo import Quat
@@ -20,7 +22,12 @@ SEEN_MARGIN_M = 60.0  # actors stamped this far beyond what a sensor's pose says
 
 
 class LiveWorld:
-    """``sync(t)`` moves the actors; sensors and grading call it themselves with their time."""
+    """``sync(t)`` moves the actors; sensors and grading call it themselves with their time.
+
+    ``actor_seed`` seeds the traffic and the pedestrians (the episode's seed); by default the world's
+    own seed. ``world_digest`` fingerprints the static world (:meth:`World.digest`), taken before the
+    first actor is stamped into the grid.
+    """
 
     def __init__(
         self,
@@ -29,17 +36,24 @@ class LiveWorld:
         camera: CameraModel | None = None,
         lidar: LidarModel | None = None,
         grader: GraderConfig | None = None,
+        actor_seed: int | None = None,
     ) -> None:
         self.world = world
         self.grid = world.grid
+        self.actor_seed = world.seed if actor_seed is None else actor_seed
         self.camera = camera or CameraModel()
         self.lidar = lidar or LidarModel()
         self.grader = grader or GraderConfig()
         self.sun_neu = world.sun.direction_neu()
-        self.pyramid = Pyramid(self.grid.height)
-        self.shadow = ShadowMap(self.grid, self.pyramid, self.sun_neu)
-        self.actors = Actors(world.lanes, world.walkways, world.seed)
-        self.pyramid.raise_envelope(self.actors.envelope(self.grid), DYNAMIC_LEVELS)
+        # the digest (0.2 s for a city) is hashed alongside the pyramid: hashlib lets go of the GIL, and
+        # nothing here writes to the grid until the first sync stamps the actors
+        with ThreadPoolExecutor(max_workers=1, thread_name_prefix="world-digest") as pool:
+            digest = pool.submit(world.digest)
+            self.pyramid = Pyramid(self.grid.height)
+            self.shadow = ShadowMap(self.grid, self.pyramid, self.sun_neu)
+            self.actors = Actors(world.lanes, world.walkways, self.actor_seed)
+            self.pyramid.raise_envelope(self.actors.envelope(self.grid), DYNAMIC_LEVELS)
+            self.world_digest = digest.result()
         self.t_s = -1.0
         self._near: tuple[float, float, float] | None = None
         self.sync(0.0)

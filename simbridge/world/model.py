@@ -12,6 +12,7 @@ Painting primitives take scenario coordinates (north, east, metres) and shapes r
 from __future__ import annotations
 
 import enum
+import hashlib
 import itertools
 import math
 from dataclasses import dataclass
@@ -384,5 +385,19 @@ class WorldGrid:
         self.paint(win, mask, heights, cls, mat, region, "max")
 
     # ------------------------------------------------------------------ queries
+    def digest(self) -> str:
+        """A short stable fingerprint of the world: 16 hex digits of BLAKE2b over the grid's placement
+        (origin, resolution, shape) and the bytes of its height and class rasters. Two grids with the
+        same digest are the same world for the sensors' geometry and for grading (materials, which only
+        tint the camera's textures, are left out). Take it before actors are stamped: it fingerprints
+        whatever the arrays hold now. About 0.2 s for a 1.2 km city at 0.2 m (6000 x 6000 cells).
+        """
+        h = hashlib.blake2b(digest_size=8)
+        rows, cols = self.shape
+        h.update(f"{self.n0!r},{self.e0!r},{self.res!r},{rows},{cols};".encode())
+        for a, dtype in ((self.height, "<f4"), (self.cls, np.uint8)):  # little-endian: one digest everywhere
+            h.update(np.ascontiguousarray(a, dtype=dtype).data)  # no copy: the array's own buffer
+        return h.hexdigest()
+
     def memory_bytes(self) -> int:
         return int(self.height.nbytes + self.cls.nbytes + self.mat.nbytes + self.region.nbytes)

@@ -81,3 +81,7 @@ class World:
     lanes: tuple[Lane, ...] = ()
     walkways: tuple[Walkway, ...] = ()
     description: str = ""
+
+    def digest(self) -> str:
+        """The static world's fingerprint (:meth:`WorldGrid.digest`): call it before actors are stamped."""
+        return self.grid.digest()
