@@ -59,7 +59,6 @@ MAX_REENGAGE = 2
 SENSOR_RETRY_S = 1.0  # between two asks for a frame after one failed
 SITE_RETRIES = 2  # more frames asked for when a LiDAR sweep misses the site before judging it unmeasured
 SEVERITY_CRITICAL = 2  # MAV_SEVERITY_CRITICAL: a defect of the companion's own
-FINAL_LOOKS = 2  # budget spent: unconfirmed roofs looked at closely before landing at the least bad
 MAX_REJECTED_RADIUS_M = 15.0  # water or traffic rules out at most this far around a rejected site
 
 
@@ -206,9 +205,9 @@ class Recovery:
                 try:
                     if resume is not None:  # the link came back mid-descent: same site, confirm first
                         landed = await self._confirm_and_descend(*resume)
+                    elif self.round >= self.budget:
+                        landed = await self._extra_round()
                     else:
-                        if self.round >= self.budget:
-                            await self._extend()
                         self.round += 1
                         self._descending = None
                         landed = await self._round()
@@ -252,32 +251,54 @@ class Recovery:
 
     # ------------------------------------------------------------------ when nothing was accepted
     def _may_extend(self) -> bool:
-        """Policy: the budget is spent, but nothing acceptable (a roof with nothing against it) was
-        seen: explore further, ``extra_rounds`` at most, while the battery holds more than
+        """Policy: the budget is spent and nothing acceptable was judged close up (a roof with nothing
+        against it): go on, ``extra_rounds`` at most, while the battery holds more than
         ``explore_reserve_pct`` (an unknown level does not stop it: the rounds are bounded anyway)."""
-        best = self.ledger.best_hazard()
-        if best is not None and best.acceptable:
+        if self.best is not None:
+            return False
+        site = self.ledger.least_bad()
+        if site is not None and site.hazard.acceptable and site.closeup:
             return False
         if self.extra >= self.p.extra_rounds:
             return False
         battery = self.tm.state.battery_pct
         return not (math.isfinite(battery) and battery <= self.p.explore_reserve_pct)
 
-    async def _extend(self) -> None:
-        """One round past the budget: step outward to a view not yet judged, then look again."""
+    async def _extra_round(self) -> bool:
+        """A round past the budget: a closer look at the best roof seen only from afar (nothing seen
+        against it: flown to and confirmed as any round would), or, with none, a step outward to a view
+        not yet judged and a round there. True when it landed."""
         self.extra += 1
-        best = self.ledger.best_hazard()
-        seen = (
-            "nothing measured" if best is None else f"the best seen is {best.name.lower().replace('_', ' ')}"
-        )
+        self.round += 1
+        self._descending = None
+        n, e, _ = self.tm.state.pos_ned_m
+        site = self.ledger.least_bad((n, e))
         battery = self.tm.state.battery_pct
         charge = f", battery {battery:.0f} %" if math.isfinite(battery) else ""
-        self._say(4, f"budget spent, {seen}: exploring further ({self.extra}/{self.p.extra_rounds}{charge})")
+        count = f"{self.extra}/{self.p.extra_rounds}{charge}"
+        look = site is not None and site.hazard.acceptable and not site.closeup and site.candidate is not None
         self.record.record_event(
             "extend",
-            {"round": self.round, "extra": self.extra, "best_hazard": None if best is None else best.name},
+            {
+                "round": self.round,
+                "extra": self.extra,
+                "best": None if site is None else site.to_json(),
+                "action": "closer look" if look else "explore",
+            },
         )
+        if look:
+            assert site is not None
+            self._say(5, f"budget spent: a closer look at {site.label}, seen only from afar ({count})")
+            await self._fly_over(site, site.label)
+            return await self._confirm_and_descend(site.ned_m, site.candidate)
+        seen = (
+            "nothing measured"
+            if site is None
+            else f"the best seen is {site.hazard.name.lower().replace('_', ' ')}"
+        )
+        self._say(4, f"budget spent, {seen}: exploring further ({count})")
         await self._explore(outward=True)
+        return await self._round()
 
     async def _fail_safe(self, exc: Exception) -> Outcome:
         """Policy for a defect of the companion's own (an exception no stage expects): announce it
@@ -534,17 +555,6 @@ class Recovery:
         judging the spot under the vehicle too when sensors allow (``measure_here``); "here" only when
         nothing at all was measured, and said so."""
         if measure_here and self.best is None:
-            for _ in range(FINAL_LOOKS):
-                site = self._fallback_site()
-                if site is None or site.closeup or site.candidate is None or not site.hazard.acceptable:
-                    break
-                # a roof seen only from afar, nothing against it: look closely before coming down
-                self._say(5, f"{reason}: a closer look at {site.label}, never confirmed")
-                await self._fly_over(site, site.label)
-                if await self._confirm_and_descend(site.ned_m, site.candidate):
-                    return Outcome(
-                        State.LANDED, self.round, self._site_ned(), f"{reason}: landed after a closer look"
-                    )
             await self._measure_here()
         site = self._fallback_site()
         if site is None and not self.ledger.sites:
