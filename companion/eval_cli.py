@@ -43,6 +43,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from companion.config import ReasonerConfig, load_config
 from companion.guidance.frames import PinholeCamera
 from companion.perception.depth import (
     ArrayDepth,
@@ -54,6 +55,7 @@ from companion.perception.depth import (
 )
 from companion.perception.surface_id import Candidate, SurfaceParams, propose
 from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequest, Reasoner, ReasonerError
+from companion.reasoning.cascade import Cascade
 from companion.reasoning.tiers import ONBOARD, build_cascade
 
 
@@ -101,23 +103,57 @@ def build_parser() -> argparse.ArgumentParser:
 MAX_RANK_IMAGES = 10
 
 
-def _reasoner_config(args: argparse.Namespace) -> Any:
-    from companion.config import load_config
+def reasoner_config(reasoner: str | None, config: Path | None) -> ReasonerConfig:
+    """The ``[reasoner]`` section of the companion config ``config`` (or the defaults and environment),
+    with ``reasoner`` as the first tier when given. Raises ConfigError (a ValueError) on a bad config or
+    an unknown reasoner name."""
+    overrides = {"reasoner.name": reasoner} if reasoner else {}
+    return load_config(config, os.environ, overrides).reasoner
 
-    overrides = {"reasoner.name": args.reasoner} if args.reasoner else {}
-    return load_config(args.config, os.environ, overrides).reasoner
 
+class Asker:
+    """Rank and confirm requests through one flight cascade, each answered as ``companion-eval`` prints
+    it (see :meth:`ask`). An async context manager: entering builds the cascade (a ConfigError for an
+    unknown tier name), leaving closes its HTTP clients; one cascade serves many requests, one at a time.
 
-async def _ask(args: argparse.Namespace, request: RankRequest | ConfirmRequest) -> tuple[dict[str, Any], int]:
-    cfg = _reasoner_config(args)
-    exchanges: list[dict[str, Any]] = []
-    cascade = build_cascade(cfg, record=lambda kind, fields: exchanges.append(fields))
-    t0 = time.perf_counter()
-    try:
-        if args.no_fallback:
+    Args:
+        cfg: the reasoner config (:func:`reasoner_config`).
+        no_fallback: only the first tier answers; its failure is an error answer, not a hand-over.
+    """
+
+    def __init__(self, cfg: ReasonerConfig, *, no_fallback: bool = False) -> None:
+        self.cfg = cfg
+        self.no_fallback = no_fallback
+        self._exchanges: list[dict[str, Any]] = []
+        self._cascade: Cascade | None = None
+
+    async def __aenter__(self) -> Asker:
+        self._cascade = build_cascade(self.cfg, record=lambda kind, fields: self._exchanges.append(fields))
+        return self
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        if self._cascade is not None:
+            cascade, self._cascade = self._cascade, None
+            await cascade.aclose()
+
+    async def ask(self, request: RankRequest | ConfirmRequest) -> tuple[dict[str, Any], int]:
+        """One answer and the exit status ``companion-eval`` gives it.
+
+        Returns:
+            ``({"ranking": [...] | "confirm": bool, "rationale", "tier", "latency_s", "errors"}, 0)``, where
+            ``errors`` lists the tiers that failed before the answering one (tier, kind, message) and
+            ``latency_s`` is wall seconds for the whole request; with ``no_fallback`` and a failed tier,
+            ``({"error": {"kind", "message"}, "tier", "latency_s"}, 3)``.
+        """
+        cascade = self._cascade
+        if cascade is None:
+            raise RuntimeError("Asker.ask outside its async with block")
+        self._exchanges.clear()  # this request's exchanges only (one request at a time)
+        t0 = time.perf_counter()
+        if self.no_fallback:
             stage = "rank" if isinstance(request, RankRequest) else "confirm"
             tiers = cascade.rank_tiers if stage == "rank" else cascade.confirm_tiers
-            tier: Reasoner = tiers[0] if cfg.name != ONBOARD else cascade.onboard
+            tier: Reasoner = tiers[0] if self.cfg.name != ONBOARD else cascade.onboard
             deadline = time.monotonic() + cascade.deadline_s(stage, request.critical)
             try:
                 async with asyncio.timeout(deadline - time.monotonic()):
@@ -137,16 +173,19 @@ async def _ask(args: argparse.Namespace, request: RankRequest | ConfirmRequest) 
             answer = await cascade.rank(request)
         else:
             answer = await cascade.confirm(request)
-    finally:
-        await cascade.aclose()
-    out: dict[str, Any]
-    if isinstance(answer, Ranking):
-        out = {"ranking": list(answer.order)}
-    else:
-        out = {"confirm": answer.accept}
-    out.update(rationale=answer.rationale, tier=answer.tier, latency_s=round(time.perf_counter() - t0, 4))
-    out["errors"] = [{"tier": e["tier"], **e["error"]} for e in exchanges if "error" in e]
-    return out, 0
+        out: dict[str, Any]
+        if isinstance(answer, Ranking):
+            out = {"ranking": list(answer.order)}
+        else:
+            out = {"confirm": answer.accept}
+        out.update(rationale=answer.rationale, tier=answer.tier, latency_s=round(time.perf_counter() - t0, 4))
+        out["errors"] = [{"tier": e["tier"], **e["error"]} for e in self._exchanges if "error" in e]
+        return out, 0
+
+
+async def _ask(args: argparse.Namespace, request: RankRequest | ConfirmRequest) -> tuple[dict[str, Any], int]:
+    async with Asker(reasoner_config(args.reasoner, args.config), no_fallback=args.no_fallback) as asker:
+        return await asker.ask(request)
 
 
 def rank(args: argparse.Namespace) -> tuple[dict[str, Any], int]:

@@ -433,6 +433,9 @@ class Recovery:
             await self._explore()
             return False
         target = await asyncio.to_thread(self._ipm, choice, frame, camera)
+        if target is None:
+            self._say(4, f"site {choice.index} cannot be placed in the world: next round")
+            return False
         n, e, d = self.tm.state.pos_ned_m
         dist = math.hypot(target[0] - n, target[1] - e)
         bearing = _compass(math.degrees(math.atan2(target[1] - e, target[0] - n)))
@@ -884,8 +887,9 @@ class Recovery:
             radius = max(radius, min(MAX_REJECTED_RADIUS_M, 0.5 * math.sqrt(choice.area_m2)))
         return radius
 
-    def _ipm(self, c: Candidate, frame: Any, camera: PinholeCamera) -> tuple[float, float, float]:
-        """The chosen pixel -> world point through the LiDAR; the flat-ground fallback without it."""
+    def _ipm(self, c: Candidate, frame: Any, camera: PinholeCamera) -> tuple[float, float, float] | None:
+        """The chosen pixel -> world point through the LiDAR; the flat-ground fallback without it;
+        None when neither can place it."""
         self._fault.check("ipm", self.round)
         u, v = c.centre_px
         try:
@@ -896,7 +900,11 @@ class Recovery:
             self.log.warning(
                 "IPM through the LiDAR failed (%s): flat ground at the rangefinder distance", exc
             )
-            p = pixel_to_ned_flat(u, v, camera, frame.pos_ned_m, frame.quat_wxyz, ground_d)
+            try:
+                p = pixel_to_ned_flat(u, v, camera, frame.pos_ned_m, frame.quat_wxyz, ground_d)
+            except IpmError as flat:  # e.g. a rangefinder reading 0: the ray never meets that plane
+                self.log.warning("and flat ground failed too (%s): no world position", flat)
+                return None
         return (float(p[0]), float(p[1]), float(p[2]))
 
 

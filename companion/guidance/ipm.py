@@ -132,7 +132,8 @@ class LidarPixelIndex:
         camera: the pinhole camera of the same capture.
 
     Raises:
-        LidarUnavailable: no cloud, an empty cloud, all rows non-finite, or no return inside the image.
+        LidarUnavailable: no cloud, an empty cloud (shape (0, 3+), or (0,) as ``[]`` gives), all rows
+            non-finite, or no return inside the image.
         GeometryInputError: ``lidar_frd`` is not a 2-D numeric array with at least 3 columns.
 
     Attributes (read-only arrays):
@@ -155,6 +156,8 @@ class LidarPixelIndex:
             raise GeometryInputError(
                 "lidar_frd", "an (N, 3+) numeric array", type(lidar_frd).__name__
             ) from exc
+        if cloud.shape == (0,):  # ``[]``: a sweep with no returns, however it was shaped
+            raise LidarUnavailable("the point cloud is empty")
         if cloud.ndim != 2 or cloud.shape[1] < 3:
             raise GeometryInputError(
                 "lidar_frd", "an (N, 3+) array of body FRD x, y, z (m)", f"shape {cloud.shape}"

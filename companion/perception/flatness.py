@@ -99,7 +99,8 @@ def _metric(
     fit = valid if depth.measured is None else depth.measured & valid
     ned = cell_points(depth, camera, quat_wxyz)
     # Centre the coordinates on the frame's mean point: the moments stay small and exact in float64.
-    mean = ned[fit].mean(axis=0)
+    # A map without a measured cell (a depth image finite only between cell centres) fits nothing.
+    mean = ned[fit].mean(axis=0) if fit.any() else np.zeros(3)
     n, e, d = (np.where(fit, ned[..., i] - mean[i], 0.0) for i in range(3))
     full = _box(valid.astype(np.float64), k) >= k * k - 0.5
     count = _box(fit.astype(np.float64), k)

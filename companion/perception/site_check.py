@@ -86,9 +86,18 @@ def check_site(
     max_roughness_m: float = 0.08,
     min_edge_m: float = 1.5,
 ) -> SiteCheck:
-    """Slope/roughness, obstacles in the rotor disc and distance to an edge around ``site_ne_m``."""
+    """Slope/roughness, obstacles in the rotor disc and distance to an edge around ``site_ne_m``.
+
+    Never raises for a sweep: no sweep, an empty one or one that is not an (N, 3+) array of body FRD
+    metres is a check that measured nothing (``measured`` False), rows with a NaN are dropped.
+    """
     if lidar_frd is None or len(lidar_frd) == 0:
         return SiteCheck(0, math.nan, math.nan, math.nan, math.nan, ("no LiDAR returns",))
+    shape = np.shape(lidar_frd)
+    if len(shape) != 2 or shape[1] < 3:
+        return SiteCheck(
+            0, math.nan, math.nan, math.nan, math.nan, (f"LiDAR sweep of shape {shape}, not (N, 3+)",)
+        )
     world = world_points(lidar_frd, pos_ned_m, quat)
     d = np.hypot(world[:, 0] - site_ne_m[0], world[:, 1] - site_ne_m[1])
     disc = d <= clearance_m
@@ -100,7 +109,10 @@ def check_site(
     core = up[d <= clearance_m * 0.5] if (d <= clearance_m * 0.5).sum() >= 3 else up[disc]
     surface = float(np.median(core))
     obstacle = float(up[disc].max() - surface)
-    rough = float(np.std(up[disc][np.abs(up[disc] - surface) < max_obstacle_m]))
+    on_surface = up[disc][np.abs(up[disc] - surface) < max_obstacle_m]
+    # No return near the median level (the disc holds two levels, a step or a ramp): nothing there
+    # is a surface, so its roughness is the spread of the whole disc, not the std of nothing (NaN).
+    rough = float(np.std(on_surface if len(on_surface) else up[disc]))
     edge = _edge_distance(world, d, up, site_ne_m, surface, clearance_m + 4.0)
     reasons = []
     if obstacle > max_obstacle_m:

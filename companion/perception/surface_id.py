@@ -168,6 +168,17 @@ def _nonempty_box(box: tuple[int, int, int, int], camera: PinholeCamera) -> tupl
     return x0, y0, x1, y1
 
 
+def _edge_distance_cells(mask: np.ndarray) -> np.ndarray:
+    """Per cell of ``mask``, the distance (cells) to the nearest cell outside it. A mask with no cell
+    outside it (one surface filling the whole view) is measured to the view's border instead: the
+    distance transform alone would answer FLT_MAX everywhere."""
+    m = mask.astype(np.uint8)
+    if m.all():
+        padded = cv2.distanceTransform(np.pad(m, 1), cv2.DIST_L2, 5)
+        return np.asarray(padded[1:-1, 1:-1])
+    return np.asarray(cv2.distanceTransform(m, cv2.DIST_L2, 5))
+
+
 def _contained(inner: tuple[int, int, int, int], outer: tuple[int, int, int, int]) -> bool:
     return inner[0] >= outer[0] and inner[1] >= outer[1] and inner[2] <= outer[2] and inner[3] <= outer[3]
 
@@ -203,11 +214,11 @@ def _component(
         # The surface's extent is known (measured, grown back to its edges, plus the image's share):
         # edge distances are measured from that outline itself.
         body = comp | extra
-        dist = cv2.distanceTransform((grown | extra).astype(np.uint8), cv2.DIST_L2, 5)
+        dist = _edge_distance_cells(grown | extra)
         edge_cells = np.where(body, dist - 0.5, 0.0)
     else:
         body = comp
-        dist = cv2.distanceTransform(comp.astype(np.uint8), cv2.DIST_L2, 5)
+        dist = _edge_distance_cells(comp)
         edge_cells = np.where(comp, dist + hw - 0.5, 0.0)
     s = depth.cell_px
     measured_share = 1.0
@@ -257,7 +268,7 @@ def _component(
     centre = (float((c0 + bj + 0.5) * s), float((r0 + bi + 0.5) * s))
     fill = float(land.sum()) / float((lr.max() - lr.min() + 1) * (lc.max() - lc.min() + 1))
     room = min(landable, p.score_area_m2) if depth.metric else landable
-    score = room * fill * min(1.0, best_edge / (2.0 * margin))
+    score = room * fill * (min(1.0, best_edge / (2.0 * margin)) if margin > 0 else 1.0)
     if not depth.metric:
         return Candidate(0, box, centre, score=score), float(np.median(depth.depth[sl][comp]))
     ned = fl.ned_m[sl]
@@ -424,6 +435,12 @@ def surface_id(
         max_relative_gradient=p.max_relative_gradient,
     )
     mask = cv2.morphologyEx(fl.flat.astype(np.uint8), cv2.MORPH_CLOSE, _K3)
+    # The closing fills pinholes; on the grid's rim, where no flatness window fits, it would grow
+    # cells that were never fitted (erosion counts outside the grid as set): only fitted cells there.
+    hw = fl.half_window
+    rim = np.ones(mask.shape, bool)
+    rim[hw : mask.shape[0] - hw, hw : mask.shape[1] - hw] = False
+    mask[rim & ~fl.flat] = 0
     mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, _K3)
     count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=4)
     rows, cols = depth.shape
