@@ -176,6 +176,7 @@ class Recovery:
         self.extra = 0  # rounds flown past the budget (nothing acceptable seen)
         self._onboard = OnboardReasoner()  # judges every measured site for the ledger, whoever decides
         self._fault = FaultHook.from_env()
+        self._roofs_seen = False  # a roof measured during this recovery: a built-up area
 
     @property
     def budget(self) -> int:
@@ -418,6 +419,7 @@ class Recovery:
         self._set(State.SURFACE_ID)
         camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
         candidates = await asyncio.to_thread(self._surface_id, frame, camera)
+        self._roofs_seen = self._roofs_seen or any(c.elevated for c in candidates)
         candidates = [c for c in candidates if not self._near_rejected(c)]
         if frame.image_rgb is not None:  # JPEG encoding off the event loop: the setpoint stream runs there
             await asyncio.to_thread(self.record.save_image, f"round{self.round:02d}-acquire", frame.image_rgb)
@@ -807,6 +809,7 @@ class Recovery:
                     site_ne_m=(target[0], target[1]),
                     site_up_m=choice.height_above_m if math.isfinite(choice.height_above_m) else None,
                     site_strip=choice.strip,
+                    built_up=self._roofs_seen,
                 )
             )
         up_m = choice.height_above_m if math.isfinite(choice.height_above_m) else None

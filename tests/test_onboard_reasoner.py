@@ -536,3 +536,17 @@ def test_onboard_confirm_names_what_vetoed_the_site_by_kind(city: LiveWorld) -> 
     clear = ONBOARD.confirm_sync(ConfirmRequest(site_cut(city, roof, 20.0), roof_check, site_up_m=22.0))
     assert clear.accept
     assert clear.hazards == ()
+
+
+def test_onboard_confirm_street_level_among_buildings_is_a_last_resort_only() -> None:
+    """Clear light paving at street level: in open country (no roof measured) it is accepted; among
+    buildings (``built_up``) it is refused, bindingly, as "street_level": a sidewalk or a plaza, where
+    people walk between one look and the next. A roof is not affected."""
+    image = _painted_line_site(0.0)  # no line at all: even paving
+    country = ONBOARD.confirm_sync(ConfirmRequest(image, None, site_up_m=0.0))
+    assert country.accept, country.rationale
+    town = ONBOARD.confirm_sync(ConfirmRequest(image, None, site_up_m=0.0, built_up=True))
+    assert (town.accept, town.binding, town.hazards) == (False, True, ("street_level",)), town.rationale
+    assert "street level among buildings" in town.rationale
+    roof = ONBOARD.confirm_sync(ConfirmRequest(image, None, site_up_m=20.0, built_up=True))
+    assert roof.accept, roof.rationale

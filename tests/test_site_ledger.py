@@ -28,6 +28,7 @@ def _site(n: float, hazard: Hazard, *, closeup: bool = True, edge: float = math.
         (("vegetation",), False, False, False, Hazard.OBSTRUCTED),  # tree crowns up on a roof
         (("vegetation",), False, True, False, Hazard.OFF_ROOF),  # a lawn
         ((), False, True, False, Hazard.OFF_ROOF),  # a sidewalk, a plaza, a car park
+        (("street_level",), False, True, False, Hazard.OFF_ROOF),  # refused among buildings: last resort
         (("hazard",), False, False, False, Hazard.DOUBTED),  # a roof with soft doubts only
         ((), False, False, False, Hazard.DOUBTED),
     ],

@@ -93,6 +93,7 @@ class ConfirmRequest:
     site_ne_m: tuple[float, float] | None = None  # where the site is, for the lone-"no" rule
     site_up_m: float | None = None  # the site's height above its surroundings (Surface ID), if measured
     site_strip: bool = False  # Surface ID measured the site on an elevated strip (a deck, not a roof)
+    built_up: bool = False  # roofs were measured during the recovery: a town, where streets carry people
     deadline: float | None = None
     transcript: list[dict[str, Any]] | None = field(default=None, compare=False)
 
@@ -131,6 +132,7 @@ HAZARD_KINDS = (
     "vegetation",
     "markings",  # lane markings (a painted line at street level or on a deck)
     "street_asphalt",  # asphalt at street level or on a deck: a road, a car park
+    "street_level",  # street level among buildings: sidewalks, plazas (people), kept as a last resort
     "raised",  # people, vehicles, rooftop objects
     "raised_lines",  # pipes, rails
     "hazard",  # the total hazard score over its limit

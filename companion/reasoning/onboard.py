@@ -27,7 +27,11 @@ count: a dark, even tar roof looks like a road, but no road runs on a roof. An e
 no roof: it is judged as street level is, where a single painted line (``lane_lines >= 1``) vetoes the
 site whatever its texture. A "no" for water or lane markings, or any "no" for a site measured at street
 level or on a strip (streets, plazas, car parks, decks), is *binding*: the cascade lets no remote
-tier's "yes" overrule it. ``Decision.hazards`` names the kinds of what vetoed the site (water,
+tier's "yes" overrule it. Among buildings (``ConfirmRequest.built_up``: the recovery measured a roof)
+a site at street level is refused even when it looks clear: sidewalks and plazas look empty between
+one pedestrian and the next, and the clear roofs are where no one walks. Such a site stays in the
+recovery's ledger as a last resort (docs/recovery.md); in open country (no roof measured) a field is
+judged on what is seen. ``Decision.hazards`` names the kinds of what vetoed the site (water,
 markings, street_asphalt, raised, lidar_obstacle, ...): the recovery's ledger of measured sites ranks
 them by it (docs/recovery.md). ``critical=True``
 relaxes two things a little and never water or lane markings: the total hazard limit rises from
@@ -253,6 +257,16 @@ class OnboardReasoner:
                     "street_asphalt",
                     f"asphalt {where} ({100 * cues.asphalt_share:.0f} %): a road or a car park, "
                     "where traffic comes back",
+                )
+            )
+        if street_level and request.built_up and not vetoes:
+            # Among buildings the clear roofs are where no one walks; sidewalks and plazas look clear
+            # from above between one pedestrian and the next. Open country (no roof measured) keeps
+            # its fields.
+            vetoes.append(
+                (
+                    "street_level",
+                    f"{where} among buildings: people and traffic come back (a last resort only)",
                 )
             )
         if cues.raised_blobs > max_raised:
