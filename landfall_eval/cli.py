@@ -5,8 +5,11 @@
                             [--reasoner NAME] --out DIR
     companion-bench city --seeds N [--start-index K] [--city-seed S] [--weather W] [--context C]
                          [--reasoner NAME] --out DIR
+    companion-bench images DIR [--context crop|full] [--reasoner NAME] --out OUT
 
 Every command writes DIR/results.json (schema: docs/bench.md) and DIR/report.html with its figures.
+``images`` judges a labelled photograph folder instead (landfall_eval/images.py: no simulator, its
+own results schema; exit status 2 for a bad folder, naming the entry).
 Episodes run in parallel (``--workers``, default: the number of cores), each as its own simbridge and
 companion processes; results.json is rewritten after every episode, and a rerun into the same DIR
 skips the episodes already in it (resumption). Exit status: 0 done; 1 some episode could not be run
@@ -39,6 +42,7 @@ SCHEMA = "landfall-bench/1"
 CONTEXTS = ("crop", "pad20", "pad30", "pad40", "pad50", "pad60", "full")
 WEATHERS = ("clear", "fog", "rain")
 RESULTS = "results.json"
+IMAGE_CONTEXTS = ("crop", "full")  # landfall_eval.images.CONTEXTS, without importing it for every command
 
 
 def load_results(out: Path) -> dict[str, Any]:
@@ -136,6 +140,14 @@ def build_parser() -> argparse.ArgumentParser:
         "--city-seed", type=_non_negative_int("--city-seed"), default=0, metavar="S",
         help="seed of the procedural city: every episode flies this city (simbridge --city-seed)",
     )  # fmt: skip
+    g = sub.add_parser(
+        "images", parents=[common], help="the image judgement on a labelled folder of photographs"
+    )
+    g.add_argument("dir", type=Path, metavar="DIR", help="labels.json and its images (../shared/realimages)")
+    g.add_argument(
+        "--context", choices=IMAGE_CONTEXTS, default="crop",
+        help="rank: the two images alone (crop) or also side by side as context (full)",
+    )  # fmt: skip
     return ap
 
 
@@ -214,6 +226,13 @@ def run_episodes(
 def main(argv: Sequence[str] | None = None) -> int:
     ap = build_parser()
     args = ap.parse_args(argv)
+    if args.command == "images":
+        from landfall_eval.images import run_images
+
+        return run_images(
+            args.dir, args.out, reasoner=args.reasoner, config=args.config, context=args.context,
+            quiet=args.quiet,
+        )  # fmt: skip
     out: Path = args.out
     try:
         out.mkdir(parents=True, exist_ok=True)
