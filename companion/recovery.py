@@ -319,7 +319,8 @@ class Recovery:
                 "traceback": "".join(traceback.format_exception(exc)),
             },
         )
-        self._say(SEVERITY_CRITICAL, f"internal error in {where}: {text}"[:120] + ": landing")
+        # a STATUSTEXT holds 50 characters: what happened and what the vehicle does come first
+        self._say(SEVERITY_CRITICAL, f"internal error, landing: {type(exc).__name__} in {where}: {exc}"[:150])
         site = self._fallback_site()
         try:
             try:

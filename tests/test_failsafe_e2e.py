@@ -38,6 +38,7 @@ class GroundPeer:
             f"udpout:127.0.0.1:{port}", source_system=255, source_component=190
         )
         self.texts: list[Any] = []
+        self.heard = False  # the companion's own heartbeat reached us: it counts us as a peer
         self._last_hb = 0.0
 
     def pump(self) -> None:
@@ -47,6 +48,16 @@ class GroundPeer:
         while (m := self.conn.recv_match(blocking=False)) is not None:
             if m.get_type() == "STATUSTEXT":
                 self.texts.append(m)
+            elif m.get_type() == "HEARTBEAT" and m.get_srcComponent() == 191:
+                self.heard = True
+
+    def join(self, timeout_s: float = 20.0) -> None:
+        """Say hello until the companion answers with its heartbeat."""
+        deadline = time.monotonic() + timeout_s
+        while not self.heard:
+            assert time.monotonic() < deadline, "the companion never sent its heartbeat to the ground peer"
+            self.pump()
+            time.sleep(0.05)
 
     def close(self) -> None:
         self.conn.close()
@@ -62,13 +73,14 @@ def _fly_with_fault(
 ) -> tuple[dict[str, Any], Rig, GroundPeer, list[dict[str, Any]]]:
     record = tmp_path / "record"
     rig = start_rig(
-        ["--scenario", "scenario1", "--autopilot", autopilot, "--speed", "4"],
+        ["--scenario", "scenario1", "--autopilot", autopilot, "--speed", "6"],
         ["--record", str(record)],
         env={"LANDFALL_TEST_FAULT": stage},
     )
     gcs = GroundPeer(rig.port)
     try:
         rig.wait_log("sensor stream connected", timeout_s=60)
+        gcs.join()  # a ground station on the link before anything goes wrong
         out = rig.alarm_accepted("--reason", "GPS spoofing detected", "--criticality", "high")
         assert out.returncode == 0, out.stdout + out.stderr
         deadline = time.monotonic() + 240
@@ -100,7 +112,9 @@ def test_a_defect_in_any_stage_still_ends_in_a_graded_touchdown(
     assert f"test fault injected in stage {stage!r}" in log
     assert "recovery ended: landed" in log, log[-3000:]
     # announced as critical, to the ground station
-    critical = [m for m in gcs.texts if m.severity == MAV_SEVERITY_CRITICAL and "internal error" in m.text]
+    critical = [
+        m for m in gcs.texts if m.severity == MAV_SEVERITY_CRITICAL and "internal error, landing" in m.text
+    ]
     assert critical, [(m.severity, m.text) for m in gcs.texts]
     assert "InjectedFault" in critical[0].text
     # recorded with its traceback, naming the stage that raised
