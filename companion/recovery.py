@@ -277,7 +277,13 @@ class Recovery:
         battery = self.tm.state.battery_pct
         charge = f", battery {battery:.0f} %" if math.isfinite(battery) else ""
         count = f"{self.extra}/{self.p.extra_rounds}{charge}"
-        look = site is not None and site.hazard.acceptable and not site.closeup and site.candidate is not None
+        look = (
+            site is not None
+            and site.hazard.acceptable
+            and not site.closeup
+            and not site.looked
+            and site.candidate is not None
+        )
         self.record.record_event(
             "extend",
             {
@@ -290,7 +296,9 @@ class Recovery:
         if look:
             assert site is not None
             self._say(5, f"budget spent: a closer look at {site.label}, seen only from afar ({count})")
-            await self._fly_over(site, site.label)
+            site.looked = True  # once: a site the vehicle cannot reach is not tried again
+            if not await self._fly_over(site, site.label, then="next round"):
+                return False  # not over it: no confirmation, no descent from elsewhere
             return await self._confirm_and_descend(site.ned_m, site.candidate)
         seen = (
             "nothing measured"
@@ -598,9 +606,11 @@ class Recovery:
             return None  # only water or traffic measured, and not here: unknown beats known bad
         return site
 
-    async def _fly_over(self, site: LedgerSite, what: str) -> None:
+    async def _fly_over(self, site: LedgerSite, what: str, then: str = "landing here") -> bool:
+        """Fly over ``site`` at the current altitude; False (said, with what happens ``then``) when it
+        was not reached in time."""
         n, e, _ = site.ned_m
-        _, _, d = self.tm.state.pos_ned_m
+        n0, e0, d = self.tm.state.pos_ned_m
         try:
             await self.ctl.goto(
                 n,
@@ -608,10 +618,12 @@ class Recovery:
                 d,
                 tolerance_m=self.p.arrival_tolerance_m,
                 speed_m_s=self.p.arrival_speed_m_s,
-                timeout_s=self.p.move_timeout_s,
+                timeout_s=self.p.move_timeout_s + math.hypot(n - n0, e - e0) / 2.0,
             )
-        except TargetTimeout:
-            self._say(4, f"{what} not reached: landing here")
+        except TargetTimeout as exc:
+            self._say(4, f"{what} target not reached ({exc.error_m:.1f} m off): {then}")
+            return False
+        return True
 
     async def _measure_here(self) -> None:
         """Judge the spot under the vehicle (one frame, no waiting: a missing frame skips it) into the

@@ -93,6 +93,7 @@ class LedgerSite:
     edge_distance_m: float = math.nan  # Surface ID's distance from the site to its surface's edge
     label: str = ""  # how it is named to people: "site 2", "here"
     candidate: Any = field(default=None, repr=False)  # Surface ID's candidate, to confirm it later
+    looked: bool = False  # a closer look was tried (flown to): not tried again
 
     def to_json(self) -> dict[str, object]:
         return {

@@ -183,9 +183,12 @@ def test_unreachable_target_ends_the_round_and_the_budget_still_lands(start_rig:
     _raise_alarm(rig, "storm", "critical")
     _wait_touchdown(rig, timeout_s=200)
     log = rig.wait_log("recovery ended")
-    assert log.count("target not reached") == 3  # one per round of the critical budget
-    assert "round budget spent" in log
-    assert "recovery ended: landed after 3 rounds (round budget spent)" in log
+    assert log.count("target not reached") >= 3  # one per round of the critical budget at least
+    # nothing acceptable judged close up: the 4 extra rounds (closer looks at the roofs seen from afar,
+    # each not reached either, and steps outward), then the least bad site measured, here
+    assert "budget spent: a closer look at site" in log
+    assert "target not reached" in log.split("a closer look at site")[1]
+    assert "recovery ended: landed after 7 rounds (round budget spent)" in log
 
 
 def test_autopilot_failsafe_text_raises_an_alarm_by_itself(start_rig: Callable[..., Rig]) -> None:
