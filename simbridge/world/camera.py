@@ -140,6 +140,13 @@ for _m, _rgb in {
     Material.PAINT_TEXT: (0.95, 0.85, 0.20),
 }.items():
     _MAT_RGB[int(_m)] = _rgb
+
+
+def default_palette() -> np.ndarray:
+    """A copy of the built-in (32, 3) float32 RGB palette per ``Material`` (``render(..., palette=)``)."""
+    return _MAT_RGB.copy()
+
+
 _ACTOR_RGB = np.array(
     [(0.85, 0.85, 0.87), (0.08, 0.08, 0.09), (0.62, 0.08, 0.07), (0.10, 0.22, 0.55), (0.55, 0.56, 0.58),
      (0.90, 0.75, 0.10), (0.15, 0.40, 0.20), (0.75, 0.40, 0.10)],
