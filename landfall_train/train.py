@@ -28,6 +28,7 @@ import platform
 import subprocess
 import sys
 import time
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -305,13 +306,15 @@ def export(net: Any, out: Path, sidecar: dict[str, Any]) -> None:
     out.parent.mkdir(parents=True, exist_ok=True)
     onnx_path = out.with_suffix(".onnx")
     dummy = torch.zeros(1, 3, INPUT_PX, INPUT_PX)
-    torch.onnx.export(
-        net, (dummy,), str(onnx_path), input_names=["image"], output_names=["cells", "clear"],
-        dynamic_axes={
-            "image": {0: "n", 2: "h", 3: "w"}, "cells": {0: "n", 2: "gh", 3: "gw"}, "clear": {0: "n"}
-        },
-        opset_version=13, dynamo=False, do_constant_folding=True,
-    )  # fmt: skip
+    with warnings.catch_warnings():  # the TorchScript exporter (dynamo=False) is deprecated, and works
+        warnings.simplefilter("ignore", DeprecationWarning)
+        torch.onnx.export(
+            net, (dummy,), str(onnx_path), input_names=["image"], output_names=["cells", "clear"],
+            dynamic_axes={
+                "image": {0: "n", 2: "h", 3: "w"}, "cells": {0: "n", 2: "gh", 3: "gw"}, "clear": {0: "n"}
+            },
+            opset_version=13, dynamo=False, do_constant_folding=True,
+        )  # fmt: skip
     dnn = cv2.dnn.readNetFromONNX(str(onnx_path))
     rng = np.random.default_rng(0)
     worst = 0.0
