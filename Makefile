@@ -4,7 +4,7 @@ PYTHON ?= python3
 STAMP := $(VENV)/.installed
 DEPTH_STAMP := $(VENV)/.installed-depth
 
-.PHONY: demo test lint bench clean mosquitto
+.PHONY: demo test lint bench clean mosquitto model
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -36,6 +36,13 @@ test: $(DEPTH_STAMP) mosquitto
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/mypy
 	$(VENV)/bin/pytest
+
+# The onboard image judgement's weights (companion/reasoning/models/landnet-s.onnx + .json): render patches
+# from procedural cities, train LandNet-S on the CPU (seeded), calibrate on held-out renders, export ONNX.
+# About an hour on 2 cores; patches are cached under runs/train-cache.
+model: $(DEPTH_STAMP)
+	$(VENV)/bin/pip install --quiet -e '.[train]'
+	$(VENV)/bin/python -m landfall_train --seed 0
 
 bench: $(STAMP)
 	$(VENV)/bin/python benchmarks/bench_simbridge_rtf.py

@@ -13,7 +13,11 @@ ratio baseline / ours, with whether the baseline picks the same site and makes t
 
 Goals: rank of 5 crops <= 50 ms, confirm <= 20 ms (medians).
 
-Usage: python benchmarks/bench_onboard.py [--reps 30]
+``--judge landnet`` times the onboard tier reading images with LandNet-S (companion/reasoning/landnet.py)
+instead of the image cues (the rank with geometry keeps the cues either way; the full-resolution baseline
+then changes only that row).
+
+Usage: python benchmarks/bench_onboard.py [--reps 30] [--judge cues|landnet]
 """
 
 from __future__ import annotations
@@ -36,7 +40,7 @@ from companion.perception.site_check import check_site  # noqa: E402
 from companion.perception.surface_id import propose  # noqa: E402
 from companion.reasoning import image_cues  # noqa: E402
 from companion.reasoning.base import ConfirmRequest, RankRequest  # noqa: E402
-from companion.reasoning.onboard import OnboardReasoner  # noqa: E402
+from companion.reasoning.onboard import JUDGES, OnboardReasoner  # noqa: E402
 from landfall_eval.timing import median_ms, pin_one_core  # noqa: E402
 from simbridge.geo import euler_to_quat  # noqa: E402
 from simbridge.scenarios import load_scenario  # noqa: E402
@@ -57,6 +61,7 @@ def _pin() -> None:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     ap.add_argument("--reps", type=int, default=30)
+    ap.add_argument("--judge", choices=JUDGES, default="cues", help="what reads the images (default cues)")
     args = ap.parse_args(argv)
     if args.reps < 1:
         ap.error("--reps must be at least 1")
@@ -79,7 +84,7 @@ def main(argv: list[str] | None = None) -> int:
     close = world.camera_frame(CLOSE_UP, LEVEL, 0.0, "clear", rng)
     check = check_site(world.lidar_sweep(CLOSE_UP, LEVEL, 0.0, rng), CLOSE_UP, LEVEL, CLOSE_UP[:2])
 
-    onboard = OnboardReasoner()
+    onboard = OnboardReasoner(judge=args.judge)
     with_geometry = RankRequest(crops, tuple(cands))
     images_only = RankRequest(crops)
     confirm = ConfirmRequest(close.rgb, check)
@@ -103,7 +108,10 @@ def main(argv: list[str] | None = None) -> int:
         image_cues.WORK_AREA_PX = work_area
 
     sizes = ", ".join(f"{c.shape[1]}x{c.shape[0]}" for c in crops)
-    print(f"Onboard tier, one core, median of {args.reps}; crops {sizes}; close-up 960x540 (site window)")
+    print(
+        f"Onboard tier ({args.judge}), one core, median of {args.reps}; crops {sizes}; "
+        "close-up 960x540 (site window)"
+    )
     print(f"{'stage':<26}{'ours ms':>9}{'full-res ms':>13}{'ratio':>8}{'same answer':>13}")
     rows = [
         ("rank, 5 crops + geometry", "rank", ours["order"][0] == base["order"][0]),

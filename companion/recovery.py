@@ -174,7 +174,10 @@ class Recovery:
         self._descending: tuple[tuple[float, float, float], Candidate] | None = None
         self.ledger = SiteLedger(self.p.rejected_radius_m)
         self.extra = 0  # rounds flown past the budget (nothing acceptable seen)
-        self._onboard = OnboardReasoner()  # judges every measured site for the ledger, whoever decides
+        # judges every measured site for the ledger, whoever decides: the cascade's own onboard tier (its
+        # judge, cues or LandNet-S, as configured) when there is one
+        onboard = getattr(reasoner, "onboard", None)
+        self._onboard = onboard if isinstance(onboard, OnboardReasoner) else OnboardReasoner()
         self._fault = FaultHook.from_env()
         self._roofs_seen = False  # a roof measured during this recovery: a built-up area
 

@@ -260,6 +260,10 @@ def test_env_var_name_upper_cases_section_and_key() -> None:
             "companion.toml: recoverry: unknown section (allowed: mavlink, sensors",
         ),
         ("recovery = [", "companion.toml: invalid TOML"),
+        (
+            "[reasoner]\nonboard_judge = 'net'",
+            "companion.toml: reasoner.onboard_judge: Input should be 'cues' or 'landnet' (got 'net')",
+        ),
     ],
 )
 def test_load_config_file_error_names_option(in_tmp: Path, toml: str, message: str) -> None:
@@ -626,3 +630,11 @@ def test_a_new_profile_needs_base_url_and_model(in_tmp: Path) -> None:
     cfg = load_config(write(Path("companion.toml"), '[reasoner.profiles.edge]\nmodel = "m"'), {}, {})
     with pytest.raises(ConfigError, match=r"reasoner\.profiles\.edge: a new profile needs base_url"):
         resolve_profile("edge", cfg.reasoner.profiles, "reasoner.name")
+
+
+def test_reasoner_onboard_judge_from_file_and_env(in_tmp: Path) -> None:
+    assert CompanionConfig().reasoner.onboard_judge == "cues"
+    path = write(Path("companion.toml"), '[reasoner]\nonboard_judge = "landnet"\n')
+    assert load_config(path, {}, {}).reasoner.onboard_judge == "landnet"
+    env = {"LANDFALL_REASONER_ONBOARD_JUDGE": "cues"}
+    assert load_config(path, env, {}).reasoner.onboard_judge == "cues"

@@ -320,3 +320,74 @@ def test_weather_changes_the_image() -> None:
     assert imgs["rain"].mean() < imgs["clear"].mean()  # wet darkening
     with pytest.raises(ValueError, match="unknown weather"):
         render(g, p, sm, cam, (0.0, 0.0, -110.0), LEVEL, sun, "snow")
+
+
+def _label_scene() -> tuple[WorldGrid, Pyramid, ShadowMap, tuple[float, float, float]]:
+    g = WorldGrid.empty((-60.0, 60.0), (-60.0, 60.0), ground_cls=C.GRASS, ground_mat=M.GRASS)
+    g.fill_rect((0.0, 0.0), 20.0, 20.0, 0.0, height_m=30.0, cls=C.ROOF_FLAT, mat=M.GRAVEL, region=1)
+    g.fill_rect((5.0, 5.0), 2.0, 2.0, 0.0, height_m=31.0, cls=C.ROOF_CLUTTER, mat=M.METAL, region=1)
+    p = Pyramid(g.height)
+    sun = Sun().direction_neu()
+    return g, p, ShadowMap(g, p, sun), sun
+
+
+# sha256 (first 16 hex digits) of rgb + depth + class of the frames below, rendered by the camera as it
+# was before per-pixel labels and palettes existed: the flight path's frames must not change.
+_FRAME_DIGESTS = {"clear": "6992fa820f4b9ae0", "fog": "855b91c7357205d8", "rain": "1566a64c71e52350"}
+
+
+@pytest.mark.parametrize("weather", ["clear", "fog", "rain"])
+def test_render_without_labels_is_byte_identical_to_before(weather: str) -> None:
+    import hashlib
+
+    g, p, sm, sun = _label_scene()
+    pose, q = (3.0, -2.0, -60.0), euler_to_quat(0.05, -0.03, 0.4)
+    cam = CameraModel(96, 64, 90.0)
+    plain = render(g, p, sm, cam, pose, q, sun, weather, np.random.default_rng(5))
+    digest = hashlib.sha256(plain.rgb.tobytes() + plain.depth_m.tobytes() + plain.hit_class.tobytes())
+    assert digest.hexdigest()[:16] == _FRAME_DIGESTS[weather]
+    assert plain.hit_material is None
+    assert plain.hit_kind is None
+    labelled = render(g, p, sm, cam, pose, q, sun, weather, np.random.default_rng(5), labels=True)
+    assert np.array_equal(labelled.rgb, plain.rgb)
+    assert np.array_equal(labelled.hit_class, plain.hit_class)
+
+
+def test_render_labels_name_material_and_kind_per_pixel() -> None:
+    from simbridge.world.camera import LABEL_SKY
+    from simbridge.world.raycast import HIT_TOP
+
+    g, p, sm, sun = _label_scene()
+    cam = CameraModel(160, 160, 90.0)
+    f = render(g, p, sm, cam, (0.0, 0.0, -60.0), LEVEL, sun, labels=True)
+    assert f.hit_material is not None
+    assert f.hit_kind is not None
+    assert f.hit_material.shape == f.hit_kind.shape == (160, 160)
+    assert f.hit_material[80, 80] == M.GRAVEL  # the roof under the camera, seen from the top
+    assert f.hit_kind[80, 80] == HIT_TOP
+    clutter = f.hit_class == C.ROOF_CLUTTER
+    assert set(np.unique(f.hit_material[clutter]).tolist()) == {int(M.METAL)}
+    grass = f.hit_class == C.GRASS
+    assert (f.hit_material[grass] == M.GRASS).all()
+    assert (f.hit_kind != LABEL_SKY).all()
+    beside = render(g, p, sm, cam, (0.0, 25.0, -60.0), LEVEL, sun, labels=True)  # sees the east wall
+    assert beside.hit_kind is not None
+    walls = (beside.hit_kind != HIT_TOP) & (beside.hit_kind != LABEL_SKY)
+    assert walls.sum() > 100
+    # a wall carries its roof's class (hit_class); hit_kind tells it is a wall
+    assert np.isin(beside.hit_class[walls], [C.ROOF_FLAT, C.ROOF_CLUTTER]).all()
+
+
+def test_render_palette_recolours_and_is_checked() -> None:
+    from simbridge.world.camera import _MAT_RGB
+
+    g, p, sm, sun = _label_scene()
+    cam = CameraModel(64, 64, 60.0)
+    palette = _MAT_RGB.copy()
+    palette[int(M.GRAVEL)] = (0.2, 0.3, 0.8)
+    base = render(g, p, sm, cam, (0.0, 0.0, -60.0), LEVEL, sun, rng=np.random.default_rng(1))
+    blue = render(g, p, sm, cam, (0.0, 0.0, -60.0), LEVEL, sun, rng=np.random.default_rng(1), palette=palette)
+    centre = (slice(24, 40), slice(24, 40))
+    assert blue.rgb[centre][..., 2].mean() > base.rgb[centre][..., 2].mean() + 30
+    with pytest.raises(ValueError, match="palette"):
+        render(g, p, sm, cam, (0.0, 0.0, -60.0), LEVEL, sun, palette=np.zeros((3, 3), np.float32))

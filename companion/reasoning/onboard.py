@@ -40,6 +40,12 @@ LiDAR check is clear (nothing taller than 0.3 m inside the rotor disc) one raise
 tolerated (``max_raised_critical``): it stands outside the disc, or is a false sighting. Without a LiDAR
 check nothing about raised objects is relaxed.
 
+**Judges.** ``judge="cues"`` (the default) reads images with the hand-written cues above;
+``judge="landnet"`` reads them with the learned LandNet-S (:mod:`companion.reasoning.net_judge` says
+how its reading replaces the cues in confirm and in images-only rank; geometry, the LiDAR veto and the
+binding rules are the same). Its weights load at construction: a missing or corrupt file is a
+:class:`~companion.reasoning.landnet.LandNetError` naming it.
+
 Rationales name the chosen site and what was seen on it and on the runner-up, e.g. ``site 0: elevated
 flat roof 22 m up, 839 m2 landable, 14.3 m from its edge, no clutter, uniform gravel or tile texture
 (not a hazard); site 1 rejected: HVAC-like blobs with shadows (6)``. The work is CPU-bound and takes a
@@ -58,8 +64,11 @@ from companion.perception.site_check import SiteCheck
 from companion.perception.surface_id import Candidate
 from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequest, Reasoner
 from companion.reasoning.image_cues import ImageCues, analyse
+from companion.reasoning.landnet import LandNet
+from companion.reasoning.net_judge import confirm_reading, rank_readings
 
 __all__ = [
+    "JUDGES",
     "ConfirmParams",
     "Decision",
     "GeometryWeights",
@@ -69,6 +78,9 @@ __all__ = [
     "geometry_score",
     "lidar_kind",
 ]
+
+
+JUDGES = ("cues", "landnet")  # what reads the images (module docstring, "Judges")
 
 
 @dataclass(frozen=True, slots=True)
@@ -166,9 +178,27 @@ class OnboardReasoner:
 
     name: str = "onboard"
 
-    def __init__(self, weights: GeometryWeights | None = None, confirm: ConfirmParams | None = None) -> None:
+    def __init__(
+        self,
+        weights: GeometryWeights | None = None,
+        confirm: ConfirmParams | None = None,
+        *,
+        judge: str = "cues",
+        landnet: LandNet | None = None,
+    ) -> None:
+        """``judge``: ``"cues"`` or ``"landnet"``; with ``"landnet"``, ``landnet`` (default: the packaged
+        model, loaded now).
+
+        Raises:
+            ValueError: an unknown judge.
+            LandNetError: ``"landnet"`` without a loadable model (the message names the file).
+        """
+        if judge not in JUDGES:
+            raise ValueError(f"unknown onboard judge {judge!r}; expected one of {', '.join(JUDGES)}")
         self.weights = weights or GeometryWeights()
         self.confirm_params = confirm or ConfirmParams()
+        self.judge = judge
+        self.landnet = (landnet or LandNet.load()) if judge == "landnet" else None
 
     # the work runs in a worker thread: the daemon's event loop also streams the setpoints, and a
     # 4x-speed simulation leaves it 250 ms of wall time before PX4's offboard-loss failsafe
@@ -186,6 +216,13 @@ class OnboardReasoner:
             ValueError: a crop that is not a non-empty (H, W, 3) uint8 image.
         """
         t0 = time.perf_counter()
+        if self.landnet is not None and request.candidates is None:
+            order, text, body = rank_readings(
+                self.landnet, request, [_core(request, k) for k in range(len(request.crops))], self.weights
+            )
+            if request.transcript is not None:
+                request.transcript.append({"tier": self.name, "judge": self.judge, **body})
+            return Ranking(order, text, self.name, time.perf_counter() - t0)
         all_cues = [analyse(_core(request, k)) for k in range(len(request.crops))]  # validates them first
         largest = max(c.size_px[0] * c.size_px[1] for c in all_cues)
         sites: list[_Site] = []
@@ -221,6 +258,8 @@ class OnboardReasoner:
             ValueError: an image that is not a non-empty (H, W, 3) uint8 image.
         """
         t0 = time.perf_counter()
+        if self.landnet is not None:
+            return self._confirm_net(request, self.landnet, t0)
         p = self.confirm_params
         cues = analyse(request.image, site=True, window=p.site_window)
         check = request.check
@@ -300,6 +339,42 @@ class OnboardReasoner:
                 {
                     "tier": self.name,
                     "cues": cues.to_json(),
+                    "accept": accept,
+                    "binding": binding,
+                    "hazards": kinds,
+                }
+            )
+        return Decision(accept, why, self.name, time.perf_counter() - t0, binding=binding, hazards=kinds)
+
+    def _confirm_net(self, request: ConfirmRequest, net: LandNet, t0: float) -> Decision:
+        """``confirm_sync`` with LandNet-S's reading in place of the image cues (net_judge)."""
+        check = request.check
+        lidar: list[tuple[str, str]] = []
+        if check is not None and not check.clear:
+            lidar.append((lidar_kind(check), "LiDAR: " + "; ".join(check.reasons)))
+        roof = request.site_up_m is not None and request.site_up_m >= self.weights.roof_height_m
+        elevated = roof and not request.site_strip
+        street_level = request.site_up_m is not None and not elevated
+        where = "on an elevated strip (a deck)" if roof and request.site_strip else "at street level"
+        vetoes, categorical, note, reading = confirm_reading(
+            net, request, self.confirm_params, lidar_vetoes=lidar, street_level=street_level, where=where
+        )
+        accept = not vetoes
+        if accept:
+            seen = ", ".join(reading.observations()[:3])
+            why = f"site clear: {_geometry_phrase(check)}; image: {seen}{note}"
+        else:
+            why = "rejected: " + "; ".join(text for _kind, text in vetoes)
+            if check is None:
+                why += " (no LiDAR: judged from the image alone)"
+        binding = not accept and (categorical or street_level)
+        kinds = tuple(dict.fromkeys(kind for kind, _text in vetoes))
+        if request.transcript is not None:
+            request.transcript.append(
+                {
+                    "tier": self.name,
+                    "judge": self.judge,
+                    "reading": reading.to_json(),
                     "accept": accept,
                     "binding": binding,
                     "hazards": kinds,

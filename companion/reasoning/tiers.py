@@ -21,6 +21,7 @@ import httpx
 from companion.config import ConfigError, LvlmProfileConfig, ReasonerConfig
 from companion.reasoning.base import Reasoner
 from companion.reasoning.cascade import Cascade, CascadeParams, Hedged
+from companion.reasoning.landnet import LandNetError
 from companion.reasoning.lvlm import LvlmProfile, LvlmReasoner
 from companion.reasoning.onboard import OnboardReasoner
 
@@ -189,4 +190,8 @@ def build_cascade(
         critical_deadline_factor=cfg.critical_deadline_factor,
         override_after=cfg.override_lone_no_after,
     )
-    return Cascade(stages["rank"], stages["confirm"], OnboardReasoner(), params, record)
+    try:  # loads LandNet-S now: a missing or corrupt file fails start-up, naming it
+        onboard = OnboardReasoner(judge=cfg.onboard_judge)
+    except LandNetError as exc:
+        raise ConfigError(f"reasoner.onboard_judge = {cfg.onboard_judge!r}", str(exc)) from exc
+    return Cascade(stages["rank"], stages["confirm"], onboard, params, record)

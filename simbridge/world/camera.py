@@ -140,6 +140,13 @@ for _m, _rgb in {
     Material.PAINT_TEXT: (0.95, 0.85, 0.20),
 }.items():
     _MAT_RGB[int(_m)] = _rgb
+
+
+def default_palette() -> np.ndarray:
+    """A copy of the built-in (32, 3) float32 RGB palette per ``Material`` (``render(..., palette=)``)."""
+    return _MAT_RGB.copy()
+
+
 _ACTOR_RGB = np.array(
     [(0.85, 0.85, 0.87), (0.08, 0.08, 0.09), (0.62, 0.08, 0.07), (0.10, 0.22, 0.55), (0.55, 0.56, 0.58),
      (0.90, 0.75, 0.10), (0.15, 0.40, 0.20), (0.75, 0.40, 0.10)],
@@ -472,6 +479,12 @@ class Frame:
     rgb: np.ndarray  # (H, W, 3) uint8
     depth_m: np.ndarray  # (H, W) float32 z-depth along the optical axis, NaN for sky
     hit_class: np.ndarray  # (H, W) uint8 SurfaceClass of the surface each pixel sees (255: sky)
+    # Per-pixel labels, only with ``render(..., labels=True)`` (training data; the flight path skips them):
+    hit_material: np.ndarray | None = None  # (H, W) uint8 Material of the cell each pixel sees (0: sky)
+    hit_kind: np.ndarray | None = None  # (H, W) uint8: HIT_TOP, HIT_WALL_N, HIT_WALL_E, or LABEL_SKY
+
+
+LABEL_SKY = 255  # ``Frame.hit_kind`` of a pixel that sees the sky
 
 
 def render(
@@ -484,8 +497,21 @@ def render(
     sun_neu: tuple[float, float, float],
     weather: str = "clear",
     rng: np.random.Generator | None = None,
+    *,
+    labels: bool = False,
+    palette: np.ndarray | None = None,
 ) -> Frame:
-    """Render the camera at a pose (position NED, attitude body->NED)."""
+    """Render the camera at a pose (position NED, attitude body->NED).
+
+    Args:
+        labels: also fill ``Frame.hit_material`` and ``Frame.hit_kind`` (per-pixel training labels).
+        palette: (32, 3) float32 RGB in [0, 1] per ``Material`` in place of the built-in one (domain
+            randomisation for training data); None keeps the built-in palette.
+    """
+    if palette is not None and (palette.shape != _MAT_RGB.shape or palette.dtype != np.float32):
+        raise ValueError(
+            f"palette must be float32 of shape {_MAT_RGB.shape}, got {palette.dtype} {palette.shape}"
+        )
     ray_len = camera.ray_norms()
     dirs = body_to_neu(camera.unit_rays_body(), quat)
     origin = np.array([[pos_ned_m[0], pos_ned_m[1], -pos_ned_m[2]]])
@@ -508,17 +534,40 @@ def render(
     seed = int(rng.integers(1, 2**62)) if clear else 0
     rgb = shade(
         ts, ii, jj, kinds, steps, dirs, origin[0], grid.height, grid.mat, grid.region, shadow.shadow,
-        grid.res, grid.n0, grid.e0, sun, _MAT_RGB, _ACTOR_RGB, _FACADE_RGB, ray_len, grid.cls, depth, cls,
-        out, vignette.reshape(-1), seed, SENSOR_NOISE,
+        grid.res, grid.n0, grid.e0, sun, _MAT_RGB if palette is None else palette, _ACTOR_RGB, _FACADE_RGB,
+        ray_len, grid.cls, depth, cls, out, vignette.reshape(-1), seed, SENSOR_NOISE,
     )  # fmt: skip
     depth_img = depth.reshape(h, w)
+    hit_material, hit_kind = _hit_labels(grid, ii, jj, kinds, dirs, (h, w)) if labels else (None, None)
     if clear:
-        return Frame(rgb=out.reshape(h, w, 3), depth_m=depth_img, hit_class=cls.reshape(h, w))
-    img = apply_weather(rgb.reshape(h, w, 3), depth_img, weather, rng)
-    image = _to_uint8(
-        np.ascontiguousarray(img, np.float32), vignette, int(rng.integers(1, 2**62)), SENSOR_NOISE
-    )
-    return Frame(rgb=image, depth_m=depth_img, hit_class=cls.reshape(h, w))
+        image = out.reshape(h, w, 3)
+    else:
+        img = apply_weather(rgb.reshape(h, w, 3), depth_img, weather, rng)
+        image = _to_uint8(
+            np.ascontiguousarray(img, np.float32), vignette, int(rng.integers(1, 2**62)), SENSOR_NOISE
+        )
+    return Frame(image, depth_img, cls.reshape(h, w), hit_material, hit_kind)
+
+
+def _hit_labels(
+    grid: WorldGrid,
+    ii: np.ndarray,
+    jj: np.ndarray,
+    kinds: np.ndarray,
+    dirs: np.ndarray,
+    shape: tuple[int, int],
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per-pixel material and hit kind (``Frame.hit_material``, ``Frame.hit_kind``) of one render's rays.
+    A ray that leaves the modelled area downward sees open ground (soil, a top), as ``shade`` draws it."""
+    hit = kinds != HIT_MISS
+    material = np.zeros(kinds.shape[0], np.uint8)
+    material[hit] = grid.mat[ii[hit], jj[hit]]
+    kind = np.full(kinds.shape[0], LABEL_SKY, np.uint8)
+    kind[hit] = kinds[hit]
+    ground = ~hit & (dirs[:, 2] < -1e-6)
+    material[ground] = int(Material.SOIL)
+    kind[ground] = HIT_TOP
+    return material.reshape(shape), kind.reshape(shape)
 
 
 _VIGNETTE: dict[tuple[int, int], np.ndarray] = {}

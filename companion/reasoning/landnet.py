@@ -1,0 +1,236 @@
+"""LandNet-S, the onboard tier's learned eyes: what one RGB image shows, and where (issue 18).
+
+A small fully convolutional net (``landfall_train/net.py`` defines and trains it) says, per cell of 8 x 8
+pixels of its input, which classes are present (``roof``, ``object``, ``edge``, ``person``, ``vehicle``,
+``water``, ``low_vegetation``, ``tree``, ``road``, ``marking``, ``ground``), and how likely the whole image
+is a clear landing site (roof surface with nothing on it). It runs through OpenCV's DNN module from an
+ONNX file; no torch. The file's sidecar (``MODEL.json``) names the classes, the input normalisation,
+the thresholds (calibrated on held-out simbridge renders only) and the ONNX file's sha256, which
+:meth:`LandNet.load` checks.
+
+:meth:`LandNet.read` takes an RGB uint8 image of any size (H, W, 3), scales it so the shorter side is
+``short_side_px`` (the longer at most ``max_long_side_px``), both sides multiples of 16, and returns a
+:class:`SceneReading`: the clear-site probability, per class the share of the image's cells where it is
+present and where (a 3 x 3 compass: "upper left" ... "centre" ... "lower right"), and how many separate
+groups of cells hold objects, people or vehicles. One ``cv2.dnn.Net`` is not safe to call from two
+threads at once (the onboard tier runs in worker threads): a lock guards it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+__all__ = ["DEFAULT_MODEL", "LandNet", "LandNetError", "SceneReading"]
+
+DEFAULT_MODEL = Path(__file__).with_name("models") / "landnet-s.onnx"
+HAZARD_SCALE = 3.0  # rank: hazard points of a surely-not-clear site (the image cues' water weight)
+COUNTED = ("object", "person", "vehicle")  # classes counted as separate groups of cells
+_INPUT_KEYS = ("mean", "std", "multiple", "short_side_px", "max_long_side_px")
+_PLACES = (
+    ("upper left", "top", "upper right"),
+    ("left", "centre", "right"),
+    ("lower left", "bottom", "lower right"),
+)
+_WORDS = {
+    "roof": "roof surface",
+    "object": "objects on the surface",
+    "edge": "edges or walls",
+    "person": "people",
+    "vehicle": "vehicles",
+    "water": "water",
+    "low_vegetation": "grass",
+    "tree": "trees",
+    "road": "road surface",
+    "marking": "painted lane markings",
+    "ground": "paving or bare ground",
+}
+
+
+class LandNetError(RuntimeError):
+    """The model cannot be used: a missing, corrupt or mismatched file. ``path`` names it."""
+
+    def __init__(self, message: str, path: Path) -> None:
+        super().__init__(f"{path}: {message}")
+        self.path = path
+
+
+@dataclass(frozen=True, slots=True)
+class SceneReading:
+    """What LandNet-S saw in one image. Shares are fractions (0..1) of the image's cells."""
+
+    model: str
+    size_px: tuple[int, int]  # (height, width) of the image as given
+    grid: tuple[int, int]  # (rows, cols) of cells read
+    clear_p: float  # probability that the whole image is a clear landing site
+    shares: tuple[tuple[str, float], ...]  # per class (sidecar order): share of cells where present
+    places: tuple[tuple[str, tuple[str, ...]], ...]  # per present class: compass places, most cells first
+    counts: tuple[tuple[str, int], ...]  # COUNTED classes: separate groups of cells holding them
+
+    @property
+    def hazard(self) -> float:
+        """Hazard points, on the image cues' scale: ``HAZARD_SCALE`` x (1 - clear_p)."""
+        return HAZARD_SCALE * (1.0 - self.clear_p)
+
+    def share(self, name: str) -> float:
+        return dict(self.shares).get(name, 0.0)
+
+    def where(self, name: str) -> tuple[str, ...]:
+        return dict(self.places).get(name, ())
+
+    def count(self, name: str) -> int:
+        return dict(self.counts).get(name, 0)
+
+    def phrase(self, name: str) -> str:
+        """What was seen of one class, e.g. ``objects on the surface (3: upper left, centre)``."""
+        places = ", ".join(self.where(name)[:3])
+        if name in COUNTED:
+            return f"{_WORDS[name]} ({self.count(name)}: {places})"
+        return f"{_WORDS[name]} ({100 * self.share(name):.0f} %: {places})"
+
+    def observations(self, names: tuple[str, ...] | None = None) -> tuple[str, ...]:
+        """Phrases naming what was seen, hazards first, then the roof surface and the net's confidence."""
+        order = names or ("person", "vehicle", "object", "water", "marking", "tree", "low_vegetation", "road")
+        out = [self.phrase(n) for n in order if self.share(n) > 0.0]
+        out.append(f"roof surface {100 * self.share('roof'):.0f} %")
+        out.append(f"clear-site confidence {self.clear_p:.2f} [{self.model}]")
+        return tuple(out)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "model": self.model,
+            "size_px": list(self.size_px),
+            "grid": list(self.grid),
+            "clear_p": round(self.clear_p, 4),
+            "shares": {k: round(v, 4) for k, v in self.shares},
+            "places": {k: list(v) for k, v in self.places},
+            "counts": dict(self.counts),
+            "hazard": round(self.hazard, 3),
+        }
+
+
+class LandNet:
+    """One loaded model; :meth:`read` is safe to call from several threads."""
+
+    def __init__(self, net: Any, meta: dict[str, Any], name: str) -> None:
+        self._net = net
+        self._lock = threading.Lock()
+        self.name = name
+        self.classes: tuple[str, ...] = tuple(meta["classes"])
+        inp = meta["input"]
+        self.mean = np.array(inp["mean"], np.float32)
+        self.std = np.array(inp["std"], np.float32)
+        self.multiple = int(inp["multiple"])
+        self.short_side_px = int(inp["short_side_px"])
+        self.max_long_side_px = int(inp["max_long_side_px"])
+        thresholds = meta["thresholds"]
+        self.clear_threshold = float(thresholds["clear"])
+        self.cell_thresholds = np.array([float(thresholds["cells"][c]) for c in self.classes], np.float32)
+
+    @classmethod
+    def load(cls, path: Path | str | None = None) -> LandNet:
+        """The model at ``path`` (``X.onnx`` with its sidecar ``X.json``; default: the packaged one).
+
+        Raises:
+            LandNetError: a missing or unreadable file, a sidecar without what inference needs, a sha256
+                that does not match, or an ONNX file OpenCV cannot load.
+        """
+        onnx_path = Path(path) if path is not None else DEFAULT_MODEL
+        meta_path = onnx_path.with_suffix(".json")
+        for p in (onnx_path, meta_path):
+            if not p.is_file():
+                raise LandNetError("model file not found (make model writes it)", p)
+        try:
+            meta = json.loads(meta_path.read_text())
+            classes, inp, thr = meta["classes"], meta["input"], meta["thresholds"]
+            if not isinstance(classes, list) or not classes or set(thr["cells"]) != set(classes):
+                raise ValueError("classes and cell thresholds do not match")
+            missing = [k for k in _INPUT_KEYS if k not in inp]
+            if missing:
+                raise ValueError(f"input lacks {', '.join(missing)}")
+            float(thr["clear"])
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise LandNetError(f"unreadable model sidecar: {exc!r}", meta_path) from exc
+        blob = onnx_path.read_bytes()
+        digest = hashlib.sha256(blob).hexdigest()
+        if meta.get("sha256") != digest:
+            raise LandNetError(
+                f"sha256 {digest[:12]}... does not match the sidecar's ({meta.get('sha256')})", onnx_path
+            )
+        try:
+            net = cv2.dnn.readNetFromONNX(str(onnx_path))
+        except cv2.error as exc:
+            raise LandNetError(f"OpenCV cannot load the ONNX model: {exc}", onnx_path) from exc
+        return cls(net, meta, str(meta.get("name", onnx_path.stem)))
+
+    def input_size(self, h: int, w: int) -> tuple[int, int]:
+        """(height, width) an image of ``h`` x ``w`` pixels is scaled to: sides multiples of 16."""
+        short, long_ = min(h, w), max(h, w)
+        s = min(self.short_side_px / short, self.max_long_side_px / long_)
+        m = self.multiple
+
+        def side(x: int) -> int:
+            return max(2 * m, m * round(x * s / m))
+
+        return side(h), side(w)
+
+    def read(self, rgb: np.ndarray) -> SceneReading:
+        """What the image shows (module docstring).
+
+        Raises:
+            ValueError: not a non-empty (H, W, 3) uint8 numpy array.
+        """
+        img = _check(rgb)
+        h, w = img.shape[:2]
+        ih, iw = self.input_size(h, w)
+        interp = cv2.INTER_AREA if ih * iw < h * w else cv2.INTER_LINEAR
+        x = cv2.resize(img, (iw, ih), interpolation=interp).astype(np.float32) * np.float32(1.0 / 255.0)
+        blob = np.ascontiguousarray(((x - self.mean) / self.std).transpose(2, 0, 1)[None])
+        with self._lock:
+            self._net.setInput(blob)
+            cells, clear = self._net.forward(["cells", "clear"])
+        p = 1.0 / (1.0 + np.exp(-cells[0].astype(np.float64)))
+        clear_p = float(1.0 / (1.0 + math.exp(-float(np.asarray(clear).reshape(-1)[0]))))
+        present = p >= self.cell_thresholds[:, None, None]
+        return self._reading((h, w), present, clear_p)
+
+    def _reading(self, size: tuple[int, int], present: np.ndarray, clear_p: float) -> SceneReading:
+        _k, gh, gw = present.shape
+        shares = tuple((c, float(present[i].mean())) for i, c in enumerate(self.classes))
+        rows = np.minimum(np.arange(gh) * 3 // gh, 2)
+        cols = np.minimum(np.arange(gw) * 3 // gw, 2)
+        places: list[tuple[str, tuple[str, ...]]] = []
+        counts: list[tuple[str, int]] = []
+        for i, c in enumerate(self.classes):
+            if not present[i].any():
+                if c in COUNTED:
+                    counts.append((c, 0))
+                continue
+            ys, xs = np.nonzero(present[i])
+            votes = np.bincount(rows[ys] * 3 + cols[xs], minlength=9)
+            order = sorted((-int(v), int(z)) for z, v in enumerate(votes) if v > 0)
+            places.append((c, tuple(_PLACES[z // 3][z % 3] for _v, z in order)))
+            if c in COUNTED:
+                n, _ = cv2.connectedComponents(present[i].astype(np.uint8), connectivity=8)
+                counts.append((c, int(n) - 1))
+        return SceneReading(self.name, size, (gh, gw), clear_p, shares, tuple(places), tuple(counts))
+
+
+def _check(rgb: object) -> np.ndarray:
+    if not isinstance(rgb, np.ndarray):
+        raise ValueError(f"expected an RGB image as a numpy array, got {type(rgb).__name__}")
+    if rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise ValueError(f"expected an RGB image of shape (height, width, 3), got shape {rgb.shape}")
+    if rgb.dtype != np.uint8:
+        raise ValueError(f"expected an RGB image of dtype uint8, got {rgb.dtype}")
+    if rgb.shape[0] == 0 or rgb.shape[1] == 0:
+        raise ValueError(f"expected a non-empty RGB image, got shape {rgb.shape}")
+    return np.ascontiguousarray(rgb)

@@ -1,0 +1,154 @@
+"""The onboard tier's judgement from LandNet-S's reading (``reasoner.onboard_judge = "landnet"``).
+
+In place of the hand-written image cues (:mod:`companion.reasoning.image_cues`), the confirm stage and
+the images-only rank read the image with :class:`companion.reasoning.landnet.LandNet`. Everything that is
+not the image's business stays as :class:`companion.reasoning.onboard.OnboardReasoner` has it: the LiDAR
+veto, the street-level and built-up rules, binding "no"s, the ranking with Surface ID's geometry (which
+keeps the image cues in this milestone).
+
+**Confirm.** The net reads the site window: the middle ``FRAME_WINDOW`` of each side of a whole camera
+frame (16:9, ``FRAME_ASPECT``), else the middle ``CROP_WINDOW`` of a close-up cut around the site (or
+``ConfirmParams.site_window``). Water over ``max_water`` of the window's cells, or painted markings over
+``MAX_MARKING_SHARE`` (any at street level), veto it bindingly, as the cues' water and lane markings do.
+Otherwise the site is accepted when the net's clear-site probability reaches the sidecar's threshold
+(calibrated on simbridge renders). A rejection names what was seen where (objects, people, vehicles,
+vegetation, road surface, ...). With a critical alarm and a clear LiDAR disc, one group of objects in view
+is tolerated, as the cues' one raised blob is.
+
+**Rank (images only).** Score = crop size term - ``SceneReading.hazard`` (``HAZARD_SCALE`` x (1 -
+clear probability)): continuous, so ties are rare.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Any
+
+from companion.reasoning.base import ConfirmRequest, RankRequest
+from companion.reasoning.landnet import COUNTED, LandNet, SceneReading
+
+if TYPE_CHECKING:
+    from companion.reasoning.onboard import ConfirmParams, GeometryWeights
+
+__all__ = ["confirm_reading", "rank_readings", "site_window"]
+
+FRAME_ASPECT = 16.0 / 9.0  # a whole camera frame (the companion's camera), within ASPECT_TOL
+ASPECT_TOL = 0.05
+FRAME_WINDOW = 0.3  # as image_cues.SITE_WINDOW_FRAME
+CROP_WINDOW = 0.67  # as image_cues.SITE_WINDOW_CROP
+MAX_MARKING_SHARE = 0.02  # of the window's cells: a painted line, not one stray cell
+
+
+def site_window(h: int, w: int, override: float | None) -> float:
+    """Share of each side of an (h, w) close-up the net judges."""
+    if override is not None:
+        return override
+    return FRAME_WINDOW if abs(w / h - FRAME_ASPECT) <= ASPECT_TOL * FRAME_ASPECT else CROP_WINDOW
+
+
+def _centre(rgb: Any, frac: float) -> Any:
+    h, w = rgb.shape[:2]
+    ch, cw = max(1, round(h * frac)), max(1, round(w * frac))
+    y0, x0 = (h - ch) // 2, (w - cw) // 2
+    return rgb[y0 : y0 + ch, x0 : x0 + cw]
+
+
+def confirm_reading(
+    net: LandNet,
+    request: ConfirmRequest,
+    p: ConfirmParams,
+    *,
+    lidar_vetoes: list[tuple[str, str]],
+    street_level: bool,
+    where: str,
+) -> tuple[list[tuple[str, str]], bool, str, SceneReading]:
+    """Vetoes from the reading of the site window (module docstring), after ``lidar_vetoes``.
+
+    Returns (vetoes as (kind, text), categorical, a note for an acceptance, the reading).
+
+    Raises:
+        ValueError: an image that is not a non-empty (H, W, 3) uint8 array.
+    """
+    image = request.image
+    if getattr(image, "ndim", 0) == 3 and image.shape[0] and image.shape[1]:
+        image = _centre(image, site_window(image.shape[0], image.shape[1], p.site_window))
+    r = net.read(image)
+    vetoes = list(lidar_vetoes)
+    categorical = False
+    if r.share("water") > p.max_water:
+        vetoes.append(("water", f"{r.phrase('water')} on the site"))
+        categorical = True
+    marking = r.share("marking")
+    if marking > MAX_MARKING_SHARE or (street_level and marking > 0.0):
+        vetoes.append(("markings", f"{r.phrase('marking')} {where if street_level else ''}".rstrip()
+                       + ": a road stays risky even when empty"))  # fmt: skip
+        categorical = True
+    if street_level and r.share("road") > p.max_street_asphalt:
+        vetoes.append(("street_asphalt", f"{r.phrase('road')} {where}: a road or a car park"))
+    if street_level and request.built_up and not vetoes:
+        vetoes.append(
+            ("street_level", f"{where} among buildings: people and traffic come back (a last resort only)")
+        )
+    note = ""
+    groups = sum(r.count(c) for c in COUNTED)
+    vegetation = r.share("low_vegetation") + r.share("tree")
+    if not vetoes and r.clear_p < net.clear_threshold:
+        lidar_clear = request.check is not None and request.check.clear
+        tolerate = (
+            request.critical
+            and lidar_clear
+            and groups <= p.max_raised_critical
+            and vegetation <= p.max_vegetation
+        )
+        if tolerate and groups:
+            note = " (critical: one object in view tolerated, LiDAR finds the rotor disc clear)"
+        elif not tolerate:
+            vetoes.append(_not_clear(r, net.clear_threshold, groups, vegetation, p.max_vegetation))
+    return vetoes, categorical, note, r
+
+
+def _not_clear(
+    r: SceneReading, threshold: float, groups: int, vegetation: float, max_vegetation: float
+) -> tuple[str, str]:
+    seen = [r.phrase(c) for c in ("person", "vehicle", "object") if r.count(c)]
+    if vegetation > 0.0:
+        seen.append(f"vegetation ({100 * vegetation:.0f} %)")
+    seen.extend(r.phrase(c) for c in ("road", "edge", "ground") if r.share(c) >= 0.1)
+    what = ", ".join(seen[:4]) if seen else "nothing named, but it does not look like a clear roof"
+    text = (
+        f"not a clear roof surface (clear-site confidence {r.clear_p:.2f} under {threshold:.2f}; "
+        f"roof surface {100 * r.share('roof'):.0f} %): {what}"
+    )
+    kind = "raised" if groups else "vegetation" if vegetation > max_vegetation else "hazard"
+    return kind, text
+
+
+def rank_readings(
+    net: LandNet, request: RankRequest, crops: list[Any], w: GeometryWeights
+) -> tuple[tuple[int, ...], str, dict[str, Any]]:
+    """Images-only rank (no candidates): order, rationale and the transcript entry's body.
+
+    Raises:
+        ValueError: a crop that is not a non-empty (H, W, 3) uint8 array.
+    """
+    readings = [net.read(c) for c in crops]
+    largest = max(r.size_px[0] * r.size_px[1] for r in readings)
+    scores = [w.crop_size * math.sqrt(r.size_px[0] * r.size_px[1] / largest) - r.hazard for r in readings]
+    order = tuple(sorted(range(len(readings)), key=lambda k: (-scores[k], k)))
+    best = order[0]
+    text = f"site {best}: {_describe(readings[best], net.clear_threshold, 3)}"
+    if len(order) > 1:
+        nxt = order[1]
+        verdict = "rejected" if readings[nxt].clear_p < net.clear_threshold else "next"
+        text += f"; site {nxt} {verdict}: {_describe(readings[nxt], net.clear_threshold, 2)}"
+    text += " (no geometry: LandNet-S reading only)"
+    body = {
+        "scores": {str(k): round(s, 3) for k, s in enumerate(scores)},
+        "readings": [r.to_json() for r in readings],
+    }
+    return order, text, body
+
+
+def _describe(r: SceneReading, threshold: float, limit: int) -> str:
+    head = "looks like a clear roof" if r.clear_p >= threshold else "not a clear roof"
+    return f"{head}, " + ", ".join(r.observations()[: limit + 2])

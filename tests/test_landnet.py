@@ -1,0 +1,225 @@
+"""LandNet-S (companion/reasoning/landnet.py) and the onboard tier with ``judge="landnet"``: loading and its
+errors, input validation, determinism (threads included), any crop size, the onboard switch and its
+config, close-ups of simbridge scenes, and a training smoke test (landfall_train; needs torch)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from companion.config import ConfigError, ReasonerConfig
+from companion.reasoning.base import ConfirmRequest, RankRequest
+from companion.reasoning.landnet import DEFAULT_MODEL, LandNet, LandNetError, SceneReading
+from companion.reasoning.onboard import OnboardReasoner
+from companion.reasoning.tiers import build_cascade
+from simbridge.world.live import LiveWorld
+from tests.views import close_up, site_cut
+
+
+@pytest.fixture(scope="module")
+def net() -> LandNet:
+    return LandNet.load()
+
+
+@pytest.fixture(scope="module")
+def judge(net: LandNet) -> OnboardReasoner:
+    return OnboardReasoner(judge="landnet", landnet=net)
+
+
+def _image(h: int, w: int, seed: int = 0) -> np.ndarray:
+    return np.random.default_rng(seed).integers(0, 256, (h, w, 3), dtype=np.uint8)
+
+
+# --- loading ------------------------------------------------------------------------------------------
+def test_landnet_load_packaged_model_and_sidecar(net: LandNet) -> None:
+    meta = json.loads(DEFAULT_MODEL.with_suffix(".json").read_text())
+    assert net.classes == tuple(meta["classes"])
+    assert {"roof", "object", "person", "vehicle", "water", "marking"} <= set(net.classes)
+    assert 0.0 < net.clear_threshold < 1.0
+    assert ((net.cell_thresholds > 0.0) & (net.cell_thresholds < 1.0)).all()
+    assert meta["seed"] == 0
+    assert meta["command"].startswith("python -m landfall_train")
+    assert DEFAULT_MODEL.stat().st_size < 4_000_000
+
+
+def test_landnet_load_missing_file_is_an_error_naming_it(tmp_path: Path) -> None:
+    missing = tmp_path / "nothing.onnx"
+    with pytest.raises(LandNetError, match=r"nothing\.onnx: model file not found") as err:
+        LandNet.load(missing)
+    assert err.value.path == missing
+
+
+def _copy_model(tmp_path: Path) -> Path:
+    onnx = tmp_path / "m.onnx"
+    shutil.copy(DEFAULT_MODEL, onnx)
+    shutil.copy(DEFAULT_MODEL.with_suffix(".json"), onnx.with_suffix(".json"))
+    return onnx
+
+
+def test_landnet_load_corrupt_weights_are_an_error_naming_the_file(tmp_path: Path) -> None:
+    onnx = _copy_model(tmp_path)
+    blob = bytearray(onnx.read_bytes())
+    blob[len(blob) // 2] ^= 0xFF
+    onnx.write_bytes(bytes(blob))
+    with pytest.raises(LandNetError, match=r"m\.onnx: sha256 .* does not match"):
+        LandNet.load(onnx)
+    # a sidecar that vouches for garbage: OpenCV's error, still naming the file
+    onnx.write_bytes(b"not an onnx model")
+    meta = json.loads(onnx.with_suffix(".json").read_text())
+    import hashlib
+
+    meta["sha256"] = hashlib.sha256(b"not an onnx model").hexdigest()
+    onnx.with_suffix(".json").write_text(json.dumps(meta))
+    with pytest.raises(LandNetError, match=r"m\.onnx: OpenCV cannot load"):
+        LandNet.load(onnx)
+
+
+def test_landnet_load_bad_sidecar_is_an_error_naming_it(tmp_path: Path) -> None:
+    onnx = _copy_model(tmp_path)
+    meta = json.loads(onnx.with_suffix(".json").read_text())
+    del meta["thresholds"]["cells"]["water"]
+    onnx.with_suffix(".json").write_text(json.dumps(meta))
+    with pytest.raises(LandNetError, match=r"m\.json: unreadable model sidecar"):
+        LandNet.load(onnx)
+
+
+# --- reading --------------------------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    "bad",
+    [
+        [[1, 2, 3]],
+        np.zeros((10, 10), np.uint8),
+        np.zeros((10, 10, 4), np.uint8),
+        np.zeros((10, 10, 3), np.float32),
+        np.zeros((0, 10, 3), np.uint8),
+    ],
+)
+def test_landnet_read_rejects_bad_input(net: LandNet, bad: object) -> None:
+    with pytest.raises(ValueError, match="expected"):
+        net.read(bad)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(("h", "w"), [(1, 1), (5, 3), (37, 101), (128, 128), (540, 960), (1000, 200)])
+def test_landnet_read_any_size(net: LandNet, h: int, w: int) -> None:
+    r = net.read(_image(h, w))
+    ih, iw = net.input_size(h, w)
+    assert ih % 16 == 0
+    assert iw % 16 == 0
+    assert r.grid == (ih // 8, iw // 8)
+    assert r.size_px == (h, w)
+    assert 0.0 <= r.clear_p <= 1.0
+    assert all(0.0 <= s <= 1.0 for _c, s in r.shares)
+    assert 0.0 <= r.hazard <= 3.0
+
+
+def test_landnet_read_is_deterministic_across_threads(net: LandNet) -> None:
+    images = [_image(96 + 16 * k, 160, seed=k) for k in range(6)]
+    first = [net.read(img) for img in images]
+    with ThreadPoolExecutor(max_workers=4) as pool:
+        again = list(pool.map(net.read, images * 3))
+    for k, r in enumerate(again):
+        assert r == first[k % len(images)]
+
+
+def test_scene_reading_phrases_say_what_and_where() -> None:
+    r = SceneReading(
+        "landnet-s", (100, 100), (16, 16), 0.2, (("roof", 0.7), ("object", 0.05), ("water", 0.0)),
+        (("roof", ("centre",)), ("object", ("upper left", "centre"))), (("object", 2),),
+    )  # fmt: skip
+    assert r.phrase("object") == "objects on the surface (2: upper left, centre)"
+    assert r.observations()[0] == "objects on the surface (2: upper left, centre)"
+    assert "roof surface 70 %" in r.observations()
+    assert r.hazard == pytest.approx(2.4)
+
+
+# --- the onboard switch ---------------------------------------------------------------------------------
+def test_onboard_judge_defaults_to_cues_and_rejects_unknown() -> None:
+    assert OnboardReasoner().judge == "cues"
+    assert OnboardReasoner().landnet is None
+    assert ReasonerConfig().onboard_judge == "cues"
+    with pytest.raises(ValueError, match="unknown onboard judge 'net'"):
+        OnboardReasoner(judge="net")
+
+
+def test_onboard_landnet_missing_weights_fail_start_up_naming_the_file(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    monkeypatch.setattr("companion.reasoning.landnet.DEFAULT_MODEL", tmp_path / "gone.onnx")
+    with pytest.raises(
+        ConfigError, match=r"reasoner.onboard_judge = 'landnet': .*gone.onnx: model file not found"
+    ):
+        build_cascade(ReasonerConfig(onboard_judge="landnet"))
+    assert build_cascade(ReasonerConfig()).onboard is not None  # cues need no file
+
+
+def test_onboard_landnet_rank_images_only(judge: OnboardReasoner) -> None:
+    crops = [_image(60, 90, 1), _image(120, 120, 2), _image(30, 30, 3)]
+    transcript: list[dict[str, object]] = []
+    ranking = judge.rank_sync(RankRequest(crops, transcript=transcript))
+    assert sorted(ranking.order) == [0, 1, 2]
+    assert ranking.rationale.startswith(f"site {ranking.order[0]}: ")
+    assert "LandNet-S reading only" in ranking.rationale
+    assert transcript[0]["judge"] == "landnet"
+    again = judge.rank_sync(RankRequest(crops))
+    assert (again.order, again.rationale) == (ranking.order, ranking.rationale)
+    with pytest.raises(ValueError, match="expected"):
+        judge.rank_sync(RankRequest([np.zeros((4, 4), np.uint8)]))
+
+
+# --- close-ups of simbridge's scenario1 (tests/views.py) -----------------------------------------------
+HEIGHT_M = 20.0
+
+
+def _cut_decision(
+    judge: OnboardReasoner, city: LiveWorld, ne: tuple[float, float], up_m: float
+) -> tuple[bool, str]:
+    frame, _check = close_up(city, ne, up_m, HEIGHT_M)
+    d = judge.confirm_sync(ConfirmRequest(site_cut(city, frame, HEIGHT_M)))
+    assert d.tier == "onboard"
+    assert "[landnet-s]" in d.rationale or d.rationale.startswith("rejected: ")
+    return d.accept, d.rationale
+
+
+def test_landnet_confirm_accepts_the_clear_gravel_roof(judge: OnboardReasoner, city: LiveWorld) -> None:
+    accept, why = _cut_decision(judge, city, (0.0, -27.0), 22.0)
+    assert accept, why
+
+
+def test_landnet_confirm_rejects_water(judge: OnboardReasoner, city: LiveWorld) -> None:
+    accept, why = _cut_decision(judge, city, (0.0, 150.0), -0.8)
+    assert not accept, why
+
+
+def test_landnet_confirm_rejects_the_cluttered_roof(judge: OnboardReasoner, city: LiveWorld) -> None:
+    accept, why = _cut_decision(judge, city, (0.0, 29.0), 18.0)
+    assert not accept, why
+
+
+# --- training (landfall_train) --------------------------------------------------------------------------
+@pytest.mark.slow
+def test_landfall_train_smoke_renders_trains_and_exports(tmp_path: Path) -> None:
+    pytest.importorskip("torch", reason="training needs torch: pip install -e '.[train]'")
+    pytest.importorskip("onnx", reason="ONNX export needs onnx: pip install -e '.[train]'")
+    from landfall_train.train import main
+
+    out = tmp_path / "tiny"
+    argv = [
+        "--out", str(out), "--cache", str(tmp_path / "cache"), "--steps", "2", "--batch", "4", "--workers",
+        "1", "--train-cities", "1", "--per-city", "4", "--val-cities", "1", "--val-per-city", "4",
+    ]  # fmt: skip
+    assert main(argv) == 0
+    tiny = LandNet.load(out.with_suffix(".onnx"))
+    meta = json.loads(out.with_suffix(".json").read_text())
+    assert meta["training"]["steps_done"] == 2
+    assert meta["data"]["train_city_seeds"] == [100]
+    assert meta["parity_max_abs_diff"] < 1e-3
+    assert tiny.read(_image(64, 64)).grid == (16, 16)
+    from landfall_train.patches import generate
+
+    with pytest.raises(ValueError, match="reserved for evaluation"):
+        generate(tmp_path / "x", [0], 1, 0)
