@@ -309,7 +309,7 @@ def analyse(rgb: np.ndarray, *, site: bool = False, window: float | None = None)
     Raises:
         ValueError: not a non-empty (H, W, 3) uint8 numpy array, or a window outside (0, 1].
     """
-    rgb = _check(rgb)
+    rgb = check_rgb(rgb)
     if window is not None and not 0.0 < window <= 1.0:
         raise ValueError(f"the site window is a share of each side in (0, 1], got {window}")
     if site:
@@ -410,7 +410,8 @@ def analyse(rgb: np.ndarray, *, site: bool = False, window: float | None = None)
     return ImageCues(**cues, hazard=float(sum(v for _k, v in terms)), terms=terms)
 
 
-def _check(rgb: object) -> np.ndarray:
+def check_rgb(rgb: object) -> np.ndarray:
+    """``rgb`` as a contiguous (H, W, 3) uint8 array; ValueError saying what it is instead."""
     if not isinstance(rgb, np.ndarray):
         raise ValueError(f"expected an RGB image as a numpy array, got {type(rgb).__name__}")
     if rgb.ndim != 3 or rgb.shape[2] != 3:

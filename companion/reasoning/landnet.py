@@ -29,6 +29,8 @@ from typing import Any
 import cv2
 import numpy as np
 
+from companion.reasoning.image_cues import check_rgb
+
 __all__ = ["DEFAULT_MODEL", "LandNet", "LandNetError", "SceneReading"]
 
 DEFAULT_MODEL = Path(__file__).with_name("models") / "landnet-s.onnx"
@@ -188,7 +190,7 @@ class LandNet:
         Raises:
             ValueError: not a non-empty (H, W, 3) uint8 numpy array.
         """
-        img = _check(rgb)
+        img = check_rgb(rgb)
         h, w = img.shape[:2]
         ih, iw = self.input_size(h, w)
         interp = cv2.INTER_AREA if ih * iw < h * w else cv2.INTER_LINEAR
@@ -222,15 +224,3 @@ class LandNet:
                 n, _ = cv2.connectedComponents(present[i].astype(np.uint8), connectivity=8)
                 counts.append((c, int(n) - 1))
         return SceneReading(self.name, size, (gh, gw), clear_p, shares, tuple(places), tuple(counts))
-
-
-def _check(rgb: object) -> np.ndarray:
-    if not isinstance(rgb, np.ndarray):
-        raise ValueError(f"expected an RGB image as a numpy array, got {type(rgb).__name__}")
-    if rgb.ndim != 3 or rgb.shape[2] != 3:
-        raise ValueError(f"expected an RGB image of shape (height, width, 3), got shape {rgb.shape}")
-    if rgb.dtype != np.uint8:
-        raise ValueError(f"expected an RGB image of dtype uint8, got {rgb.dtype}")
-    if rgb.shape[0] == 0 or rgb.shape[1] == 0:
-        raise ValueError(f"expected a non-empty RGB image, got shape {rgb.shape}")
-    return np.ascontiguousarray(rgb)
