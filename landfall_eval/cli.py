@@ -35,6 +35,7 @@ from tqdm import tqdm
 from landfall_eval.episode import EpisodeSpec, EpisodeTimes, describe_last_state, run_episode
 from landfall_eval.grading import summarise
 from landfall_eval.launches import halton_launches
+from simbridge.cli import non_negative_seed
 
 __all__ = ["SCHEMA", "load_results", "main", "save_results"]
 
@@ -76,19 +77,6 @@ def _positive(kind: type, what: str) -> Callable[[str], Any]:
             raise argparse.ArgumentTypeError(f"{what} must be a number, got {text!r}") from None
         if value <= 0:
             raise argparse.ArgumentTypeError(f"{what} must be > 0, got {text}")
-        return value
-
-    return parse
-
-
-def _non_negative_int(what: str) -> Callable[[str], int]:
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{what} must be a whole number, got {text!r}") from None
-        if value < 0:
-            raise argparse.ArgumentTypeError(f"{what} must be >= 0, got {text}")
         return value
 
     return parse
@@ -137,7 +125,7 @@ def build_parser() -> argparse.ArgumentParser:
     y.add_argument("--seeds", type=_positive(int, "--seeds"), default=20, help="number of launch points")
     y.add_argument("--start-index", type=int, default=0, metavar="K", help="first Halton index (default 0)")
     y.add_argument(
-        "--city-seed", type=_non_negative_int("--city-seed"), default=0, metavar="S",
+        "--city-seed", type=non_negative_seed, default=0, metavar="S",
         help="seed of the procedural city: every episode flies this city (simbridge --city-seed)",
     )  # fmt: skip
     g = sub.add_parser(

@@ -38,7 +38,7 @@ from companion.perception.crops import (
     rank_crops,
     site_box,
 )
-from companion.perception.depth import ArrayDepth, DepthError, DepthSource, LidarDepth
+from companion.perception.depth import ArrayDepth, DepthError, DepthMap, DepthSource, LidarDepth
 from companion.perception.site_check import SiteCheck, check_site
 from companion.perception.surface_id import Candidate, SurfaceParams, propose, quadrant_fallback
 from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequest
@@ -230,6 +230,26 @@ def depth_inputs(
     return ArrayDepth(depth_px, kind == "metric", s.cell_px), image, None, depth_px
 
 
+def _propose(
+    source: DepthSource,
+    scene: Scene,
+    image: np.ndarray | None,
+    lidar: np.ndarray | None,
+    params: SurfaceParams,
+) -> tuple[list[Candidate], DepthMap]:
+    """Surface ID on a drawn scene, as the recovery calls it (pose and ground from the scene)."""
+    return propose(
+        source,
+        scene.camera,
+        image=image,
+        lidar_frd=lidar,
+        quat_wxyz=scene.quat,
+        pos_ned_m=scene.pos,
+        ground_up_m=-scene.alt_m,
+        params=params,
+    )
+
+
 # ------------------------------------------------------------------------------------ 1. Surface ID
 @CHAIN
 @given(st.data(), scenes(), surface_params)
@@ -239,16 +259,7 @@ def test_surface_id_boxes_and_centres_lie_inside_the_image(
     source, image, lidar, _ = data.draw(depth_inputs(scene))
     cam = scene.camera
     try:
-        cands, depth = propose(
-            source,
-            cam,
-            image=image,
-            lidar_frd=lidar,
-            quat_wxyz=scene.quat,
-            pos_ned_m=scene.pos,
-            ground_up_m=-scene.alt_m,
-            params=params,
-        )
+        cands, depth = _propose(source, scene, image, lidar, params)
     except DepthError:
         return
     assert cands
@@ -846,16 +857,7 @@ def test_chain_from_a_frame_to_a_confirmed_target_raises_only_typed_errors(
     reasoner = OnboardReasoner()
     # Surface ID (recovery._surface_id): no depth -> the quadrant fallback
     try:
-        cands, _ = propose(
-            LidarDepth(cell_px=scene.cell_px, range_m=range_m),
-            cam,
-            image=image,
-            lidar_frd=lidar,
-            quat_wxyz=scene.quat,
-            pos_ned_m=scene.pos,
-            ground_up_m=-scene.alt_m,
-            params=params,
-        )
+        cands, _ = _propose(LidarDepth(cell_px=scene.cell_px, range_m=range_m), scene, image, lidar, params)
     except DepthError:
         cands = quadrant_fallback(cam)
     # rank, every context variant (recovery._rank / _rank_crops)

@@ -147,7 +147,7 @@ def test_city_campaign_refuses_a_negative_city_seed(
     with pytest.raises(SystemExit) as exc:
         build_parser().parse_args(["city", "--city-seed", "-1", "--out", str(tmp_path)])
     assert exc.value.code == 2
-    assert "--city-seed must be >= 0, got -1" in capsys.readouterr().err
+    assert "argument --city-seed: must be >= 0, got -1" in capsys.readouterr().err
 
 
 # ------------------------------------------------------------------------------------ report

@@ -266,21 +266,14 @@ class OnboardReasoner:
         lidar_clear = check is not None and check.clear
         relax = request.critical
         max_raised = p.max_raised_critical if relax and lidar_clear else p.max_raised
-        vetoes: list[tuple[str, str]] = []  # (kind, what was seen)
+        vetoes = _lidar_vetoes(check)  # (kind, what was seen)
         categorical = False  # water or a road's markings: no other tier's yes overrules them
-        if check is not None and not check.clear:
-            vetoes.append((lidar_kind(check), "LiDAR: " + "; ".join(check.reasons)))
         if cues.water_share > p.max_water:
             vetoes.append(("water", f"water ({100 * cues.water_share:.0f} % of the site)"))
             categorical = True
         if cues.vegetation_share > p.max_vegetation:
             vetoes.append(("vegetation", f"vegetation ({100 * cues.vegetation_share:.0f} %)"))
-        # A roof is a surface measured well above its surroundings that is not a long narrow strip
-        # (a highway deck, a bridge: traffic runs there). Streets and decks are judged alike.
-        roof = request.site_up_m is not None and request.site_up_m >= self.weights.roof_height_m
-        elevated = roof and not request.site_strip
-        street_level = request.site_up_m is not None and not elevated
-        where = "on an elevated strip (a deck)" if roof and request.site_strip else "at street level"
+        elevated, street_level, where = self._level(request)
         if cues.line_length > p.max_markings:
             vetoes.append(
                 ("markings", f"lane markings ({cues.lane_lines}): a road stays risky even when empty")
@@ -321,66 +314,72 @@ class OnboardReasoner:
         if not vetoes and hazard > limit:
             seen = ", ".join(cues.phrase(name) for name, _v in terms[:3])
             vetoes.append(("hazard", f"hazard {hazard:.1f} over {limit:.1f}: {seen}"))
-        accept = not vetoes
-        if accept:
-            why = f"site clear: {_geometry_phrase(check)}; image: {', '.join(cues.observations()[:3])}"
-            if relax and cues.raised_blobs:
-                why += " (critical: one object in view tolerated, LiDAR finds the rotor disc clear)"
-            if elevated and any(name in street for name, _v in cues.terms):
-                why += f" (dark asphalt-like surface {request.site_up_m:.0f} m up: a tar roof, not a road)"
-        else:
-            why = "rejected: " + "; ".join(text for _kind, text in vetoes)
-            if check is None:
-                why += " (no LiDAR: judged from the image alone)"
-        binding = not accept and (categorical or street_level)
-        kinds = tuple(dict.fromkeys(kind for kind, _text in vetoes))
-        if request.transcript is not None:
-            request.transcript.append(
-                {
-                    "tier": self.name,
-                    "cues": cues.to_json(),
-                    "accept": accept,
-                    "binding": binding,
-                    "hazards": kinds,
-                }
-            )
-        return Decision(accept, why, self.name, time.perf_counter() - t0, binding=binding, hazards=kinds)
+        why = f"site clear: {_geometry_phrase(check)}; image: {', '.join(cues.observations()[:3])}"
+        if relax and cues.raised_blobs:
+            why += " (critical: one object in view tolerated, LiDAR finds the rotor disc clear)"
+        if elevated and any(name in street for name, _v in cues.terms):
+            why += f" (dark asphalt-like surface {request.site_up_m:.0f} m up: a tar roof, not a road)"
+        body = {"cues": cues.to_json()}
+        return self._decision(request, t0, vetoes, categorical or street_level, why, body)
 
     def _confirm_net(self, request: ConfirmRequest, net: LandNet, t0: float) -> Decision:
         """``confirm_sync`` with LandNet-S's reading in place of the image cues (net_judge)."""
-        check = request.check
-        lidar: list[tuple[str, str]] = []
-        if check is not None and not check.clear:
-            lidar.append((lidar_kind(check), "LiDAR: " + "; ".join(check.reasons)))
+        _elevated, street_level, where = self._level(request)
+        vetoes, categorical, note, reading = confirm_reading(
+            net,
+            request,
+            self.confirm_params,
+            lidar_vetoes=_lidar_vetoes(request.check),
+            street_level=street_level,
+            where=where,
+        )
+        seen = ", ".join(reading.observations()[:3])
+        why = f"site clear: {_geometry_phrase(request.check)}; image: {seen}{note}"
+        body = {"judge": self.judge, "reading": reading.to_json()}
+        return self._decision(request, t0, vetoes, categorical or street_level, why, body)
+
+    def _level(self, request: ConfirmRequest) -> tuple[bool, bool, str]:
+        """(elevated, street level, where in words) of the site. A roof is a surface measured well
+        above its surroundings that is not a long narrow strip (a highway deck, a bridge: traffic
+        runs there). Streets and decks are judged alike."""
         roof = request.site_up_m is not None and request.site_up_m >= self.weights.roof_height_m
         elevated = roof and not request.site_strip
         street_level = request.site_up_m is not None and not elevated
         where = "on an elevated strip (a deck)" if roof and request.site_strip else "at street level"
-        vetoes, categorical, note, reading = confirm_reading(
-            net, request, self.confirm_params, lidar_vetoes=lidar, street_level=street_level, where=where
-        )
+        return elevated, street_level, where
+
+    def _decision(
+        self,
+        request: ConfirmRequest,
+        t0: float,
+        vetoes: list[tuple[str, str]],
+        binds: bool,
+        clear_why: str,
+        body: dict[str, Any],
+    ) -> Decision:
+        """The confirm stage's Decision from its vetoes (none: accepted, with ``clear_why``); a
+        rejection is binding when ``binds``. Appends the transcript entry (``body`` and the verdict)."""
         accept = not vetoes
         if accept:
-            seen = ", ".join(reading.observations()[:3])
-            why = f"site clear: {_geometry_phrase(check)}; image: {seen}{note}"
+            why = clear_why
         else:
             why = "rejected: " + "; ".join(text for _kind, text in vetoes)
-            if check is None:
+            if request.check is None:
                 why += " (no LiDAR: judged from the image alone)"
-        binding = not accept and (categorical or street_level)
+        binding = not accept and binds
         kinds = tuple(dict.fromkeys(kind for kind, _text in vetoes))
         if request.transcript is not None:
             request.transcript.append(
-                {
-                    "tier": self.name,
-                    "judge": self.judge,
-                    "reading": reading.to_json(),
-                    "accept": accept,
-                    "binding": binding,
-                    "hazards": kinds,
-                }
+                {"tier": self.name, **body, "accept": accept, "binding": binding, "hazards": kinds}
             )
         return Decision(accept, why, self.name, time.perf_counter() - t0, binding=binding, hazards=kinds)
+
+
+def _lidar_vetoes(check: SiteCheck | None) -> list[tuple[str, str]]:
+    """The LiDAR's veto of a site, as the one (kind, text) pair of a list (empty: no check, or clear)."""
+    if check is None or check.clear:
+        return []
+    return [(lidar_kind(check), "LiDAR: " + "; ".join(check.reasons))]
 
 
 def lidar_kind(check: SiteCheck) -> str:
