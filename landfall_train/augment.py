@@ -4,11 +4,14 @@ Rendered patches are too clean and too alike: one texture per material, one sens
 :func:`augment` (numpy + OpenCV, seeded by the caller's generator) cuts a ``size`` square out of a patch
 with a random scale (``SCALE``), rotation and flip, then varies what a real camera and a real roof vary:
 
-- colour: per-channel gain (white balance), gamma, brightness and contrast, saturation; a hue shift on
-  roof, object and ground pixels only (water's blue and vegetation's green carry meaning); sometimes a
-  blue or grey cast over the whole image (flat grey roofs must not read as water);
+- colour: per-channel gain (white balance), gamma, brightness and contrast, saturation; a hue shift
+  (now and then any hue) on roof, object and ground pixels only (water's blue and vegetation's green
+  carry meaning); sometimes a blue or grey cast over the whole image (flat grey roofs must not read as
+  water);
 - overlays that keep the labels: soft shadow polygons, low-frequency stains on roof pixels (moss, rust,
-  dirt);
+  dirt); now and then a foreign texture over the roof or the ground (ridges, rows with joints or
+  blotches at any angle, period and contrast: ``TEXTURE_SWAP_P``), so the net learns that a roof is a
+  roof by its shape and what stands on it, not by the renderer's few textures;
 - degradation: Gaussian or motion blur, a 2x down-and-up (a kite camera's softness), noise, vignetting,
   JPEG compression.
 
@@ -32,6 +35,8 @@ CELL_PX = 8  # LandNet-S predicts presence per cell of this many pixels a side
 CELL_MIN_PX = 2
 CELL_MIN_SHARE = 0.03
 SCALE = (0.7, 1.4)  # output pixels per patch pixel, log-uniform
+TEXTURE_SWAP_P = 0.2  # chance of a foreign texture over one roof or ground region (Tobin et al. 2017)
+_SWAPPABLE = (0, 0, 10)  # roof twice as often as ground
 _HUE_FREE = np.zeros(256, bool)
 _HUE_FREE[[0, 1, 2, 10]] = True  # roof, object, edge, ground: any colour is plausible
 
@@ -93,11 +98,12 @@ def _colour(x: np.ndarray, lab: np.ndarray, rng: np.random.Generator) -> np.ndar
     grey = x.mean(axis=2, keepdims=True)
     x = grey + (x - grey) * np.float32(rng.uniform(0.5, 1.5))  # saturation
     x = np.clip(x, 0.0, 1.0)
-    if rng.random() < 0.5:  # hue, where colour carries no meaning
+    if rng.random() < 0.5:  # hue, where colour carries no meaning: any hue, now and then
         free = _HUE_FREE[lab]
         if free.any():
+            turn = float(rng.uniform(-0.5, 0.5) if rng.random() < 0.3 else rng.uniform(-0.1, 0.1))
             hsv = cv2.cvtColor(x, cv2.COLOR_RGB2HSV)  # float: H in degrees
-            hsv[..., 0][free] = (hsv[..., 0][free] + float(rng.uniform(-0.1, 0.1)) * 360.0) % 360.0
+            hsv[..., 0][free] = (hsv[..., 0][free] + turn * 360.0) % 360.0
             x = cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)
     if rng.random() < 0.2:  # a cast over everything: bluish (shade, overcast) or grey (haze)
         cast = np.array([0.55, 0.62, 0.75] if rng.random() < 0.5 else [0.6, 0.6, 0.6], np.float32)
@@ -120,7 +126,32 @@ def _overlays(x: np.ndarray, lab: np.ndarray, rng: np.random.Generator) -> np.nd
             coarse = rng.uniform(-1.0, 1.0, (cells, cells, 3)).astype(np.float32)
             noise = np.asarray(cv2.resize(coarse, (w, h)), np.float32)
             x = x * (1.0 + np.float32(rng.uniform(0.05, 0.2)) * noise * roof[..., None])
+    if rng.random() < TEXTURE_SWAP_P:  # a foreign texture on the roof or the ground (shape, not texture)
+        k = int(rng.choice(_SWAPPABLE))
+        region = (lab == k).astype(np.float32)
+        if region.any():
+            x = x * (1.0 + _foreign_texture(h, w, rng) * region[..., None])
     return np.asarray(np.clip(x, 0.0, 1.0), np.float32)
+
+
+def _foreign_texture(h: int, w: int, rng: np.random.Generator) -> np.ndarray:
+    """(h, w, 1) float32 relative tone change: ridges or rows at any angle and period (sheets, tiles,
+    seams, furrows), or blotches (stains, patched surfaces), of random contrast."""
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    contrast = np.float32(rng.uniform(0.08, 0.35))
+    if rng.random() < 0.6:
+        angle = float(rng.uniform(0.0, math.pi))
+        period = float(rng.uniform(2.0, 14.0))  # pixels
+        phase = (xx * math.cos(angle) + yy * math.sin(angle)) * np.float32(2.0 * math.pi / period)
+        wave = np.sin(phase)
+        if rng.random() < 0.5:  # rows with dark joints, not a smooth ridge
+            wave = np.where(wave > float(rng.uniform(0.6, 0.9)), -1.0, 0.3).astype(np.float32)
+        tone = wave
+    else:
+        cells = int(rng.integers(4, 24))
+        coarse = rng.uniform(-1.0, 1.0, (cells, cells)).astype(np.float32)
+        tone = np.asarray(cv2.resize(coarse, (w, h), interpolation=cv2.INTER_CUBIC), np.float32)
+    return np.asarray((contrast * tone)[..., None], np.float32)
 
 
 def _degrade(x: np.ndarray, rng: np.random.Generator) -> np.ndarray:

@@ -9,11 +9,20 @@ view randomises the ground resolution (``GSD_M``, log-uniform), the lens (``HFOV
 scaled by up to +-``PALETTE_JITTER`` per channel). A patch is a ``PATCH_PX`` square RGB image and its
 per-pixel class map (:func:`landfall_train.labels.label_map`).
 
+A city at 0.1 m cells is too coarse for a close-up at 2-5 cm per pixel and has few roof kinds, so most
+patches come from **vignettes** (:mod:`simbridge.world.vignettes`): small scenes at 4-8 cm cells
+(houses with gable or hipped roofs of tiles, slate, shingle, corrugated or standing-seam sheet; barns;
+flat roofs; gardens with pools, people and cars; streets and car parks; ponds; yards), each in clear
+and cluttered variants, seen at ``VIGNETTE_GSD_M`` under the renderer's domain randomisation
+(``RenderVariety.sample`` per view: overcast or sunny light, a colour tint per building, texture scale
+and direction, stains, soft shadows). City views keep the flight simulator's own look.
+
 **Excluded worlds.** What the evaluation flies never becomes training data: city seeds below
 ``MIN_CITY_SEED`` (``companion-bench city`` flies city 0), and no scenario file (scenario1, scenario2,
 tests/onboard_scene.toml) is ever loaded here.
 
-Patches go to ``OUT/shard-SEED.npz`` (``rgb`` (N, S, S, 3) uint8, ``labels`` (N, S, S) uint8, ``meta``
+Patches go to ``OUT/shard-SEED.npz`` (vignettes: ``shard-FIRST.npz`` per ``VIGNETTES_PER_SHARD``)
+(``rgb`` (N, S, S, 3) uint8, ``labels`` (N, S, S) uint8, ``meta``
 JSON text), one shard per city; the same seed gives the same bytes.
 """
 
@@ -33,15 +42,26 @@ import numpy as np
 
 from landfall_train.labels import label_map
 from simbridge.geo import euler_to_quat
-from simbridge.world.camera import WEATHERS, CameraModel, default_palette, render
+from simbridge.world.camera import WEATHERS, CameraModel, RenderVariety, default_palette, render
 from simbridge.world.city import generate_city
 from simbridge.world.live import LiveWorld
 from simbridge.world.model import Material as M
 from simbridge.world.model import SurfaceClass as C
+from simbridge.world.model import WorldGrid
+from simbridge.world.vignettes import build_vignette
 from simbridge.world.world import Sun
 
-__all__ = ["MIN_CITY_SEED", "STRATA", "generate", "load_shards", "render_city"]
+__all__ = [
+    "MIN_CITY_SEED",
+    "STRATA",
+    "generate",
+    "generate_vignettes",
+    "load_shards",
+    "render_city",
+    "render_vignettes",
+]
 
+GENERATOR = "2"  # bump when what a seed renders changes: the cache of patches is keyed by it
 MIN_CITY_SEED = 100  # city seeds below this are never training data (companion-bench city flies 0)
 CITY_SIZE_M = 400.0
 CITY_RES_M = 0.1
@@ -52,6 +72,9 @@ MAX_TILT_DEG = 12.0
 SUN_ELEVATION_DEG = (20.0, 75.0)
 WEATHER_P = (0.7, 0.15, 0.15)  # clear, fog, rain
 PALETTE_JITTER = 0.2
+VIGNETTE_GSD_M = (0.015, 0.15)  # metres per pixel over the vignettes (real close-ups: about 1-10 cm)
+VIGNETTE_SALT = 7_000_003  # separates a vignette's view stream from a city's of the same number
+VIGNETTES_PER_SHARD = 20
 VIEWS_PER_TIME = 25  # views rendered at one simulated time (actors stamped once)
 ACTOR_STEP_S = (5.0, 60.0)  # simulated time between two such sets of views (actors only move forward)
 MAX_CELLS = 200_000  # cells kept per stratum to draw view centres from
@@ -60,7 +83,7 @@ INTERIOR_M = 3.0  # roof_interior views: this far from the roof's edge and its c
 
 # (name, share of views, classes under the view's centre; "marking" means the lane-marking material)
 STRATA: tuple[tuple[str, float, tuple[int, ...]], ...] = (
-    ("roof_interior", 0.18, (C.ROOF_FLAT,)),  # at least INTERIOR_M from anything but flat roof
+    ("roof_interior", 0.18, (C.ROOF_FLAT, C.ROOF_PITCHED)),  # at least INTERIOR_M from anything but roof
     ("flat_roof", 0.14, (C.ROOF_FLAT,)),
     ("clutter", 0.15, (C.ROOF_CLUTTER,)),
     ("pitched_roof", 0.08, (C.ROOF_PITCHED,)),
@@ -74,25 +97,39 @@ STRATA: tuple[tuple[str, float, tuple[int, ...]], ...] = (
     ("person", 0.03, (C.PEDESTRIAN,)),
 )
 
+# Vignettes are mostly houses and roofs close up: their views lean to roofs (same strata, other shares).
+VIGNETTE_SHARES = {
+    "roof_interior": 0.14, "flat_roof": 0.10, "clutter": 0.18, "pitched_roof": 0.18, "road": 0.07,
+    "marking": 0.05, "water": 0.05, "grass": 0.05, "tree": 0.04, "ground": 0.07, "vehicle": 0.04,
+    "person": 0.03,
+}  # fmt: skip
 
-def _cells(
-    cls: np.ndarray, mat: np.ndarray, classes: tuple[int, ...], name: str, rng: np.random.Generator
-) -> np.ndarray:
-    mask = np.isin(cls, classes)
+
+def _cells(grid: WorldGrid, classes: tuple[int, ...], name: str, rng: np.random.Generator) -> np.ndarray:
+    """Flat indices of up to ``MAX_CELLS`` cells of a stratum (drawn by ``rng`` when there are more)."""
+    mask = np.isin(grid.cls, classes)
     if name == "marking":
-        mask |= mat == int(M.LANE_MARKING)
+        mask |= grid.mat == int(M.LANE_MARKING)
     if name == "roof_interior":
-        mask &= _interior_m(cls) >= INTERIOR_M
+        mask &= _interior_m(grid) >= INTERIOR_M
     idx = np.flatnonzero(mask)
     if idx.size > MAX_CELLS:
         idx = rng.choice(idx, MAX_CELLS, replace=False)
     return idx
 
 
-def _interior_m(cls: np.ndarray) -> np.ndarray:
-    """Distance (metres) of each cell to the nearest cell that is not flat roof."""
-    flat = (cls == int(C.ROOF_FLAT)).astype(np.uint8)
-    return np.asarray(cv2.distanceTransform(flat, cv2.DIST_L2, 5), np.float32) * np.float32(CITY_RES_M)
+def _interior_m(grid: WorldGrid) -> np.ndarray:
+    """Distance (metres) of each cell to the nearest cell that is not roof surface, flat or pitched
+    (cached per grid: the class raster of a roof does not change)."""
+    key = (id(grid), grid.res, grid.shape)
+    if _INTERIOR.get("key") != key:
+        roof = np.isin(grid.cls, (int(C.ROOF_FLAT), int(C.ROOF_PITCHED))).astype(np.uint8)
+        dist = np.asarray(cv2.distanceTransform(roof, cv2.DIST_L2, 5), np.float32) * np.float32(grid.res)
+        _INTERIOR.update(key=key, dist=dist)
+    return np.asarray(_INTERIOR["dist"])
+
+
+_INTERIOR: dict[str, Any] = {}
 
 
 def _palette(rng: np.random.Generator) -> np.ndarray:
@@ -119,15 +156,9 @@ def render_city(city_seed: int, count: int, seed: int) -> tuple[np.ndarray, np.n
     world = generate_city(city_seed, CITY_SIZE_M, CITY_RES_M)
     world.sun = Sun(float(rng.uniform(0.0, 360.0)), float(rng.uniform(*SUN_ELEVATION_DEG)))
     live = LiveWorld(world, camera=CameraModel(PATCH_PX, PATCH_PX, 50.0), actor_seed=city_seed)
-    grid = live.grid
-    names = [s[0] for s in STRATA]
-    weights = np.array([s[1] for s in STRATA])
-    rgb = np.empty((count, PATCH_PX, PATCH_PX, 3), np.uint8)
-    labels = np.empty((count, PATCH_PX, PATCH_PX), np.uint8)
-    meta: list[dict[str, Any]] = []
-    interior = _interior_m(grid.cls)
+    out = _Patches(count)
     static = {
-        name: _cells(grid.cls, grid.mat, classes, name, rng)
+        name: _cells(live.grid, classes, name, rng)
         for name, _w, classes in STRATA
         if name not in ("vehicle", "person")
     }
@@ -138,57 +169,111 @@ def render_city(city_seed: int, count: int, seed: int) -> tuple[np.ndarray, np.n
             t_s += float(rng.uniform(*ACTOR_STEP_S))
             live.sync(t_s)  # every actor stamped: the strata of vehicles and people come from the grid
             cells = dict(static)
-            cells["vehicle"] = _cells(grid.cls, grid.mat, (C.VEHICLE,), "vehicle", rng)
-            cells["person"] = _cells(grid.cls, grid.mat, (C.PEDESTRIAN,), "person", rng)
-        avail = np.array([cells[n].size > 0 for n in names])
-        p = weights * avail
-        stratum = names[int(rng.choice(len(names), p=p / p.sum()))]
-        i, j = divmod(int(rng.choice(cells[stratum])), grid.shape[1])
-        gsd_max = GSD_M[1]
-        if stratum == "roof_interior":  # the footprint's half side within the clear distance
-            gsd_max = max(GSD_M[0], min(gsd_max, float(interior[i, j]) / (0.5 * PATCH_PX)))
-        gsd = math.exp(rng.uniform(math.log(GSD_M[0]), math.log(gsd_max)))
-        hfov = float(rng.uniform(*HFOV_DEG))
-        camera = CameraModel(PATCH_PX, PATCH_PX, hfov)
-        above = gsd * camera.focal_px  # metres above the surface under the centre, for that resolution
-        shift = 0.25 * gsd * PATCH_PX  # the centre's cell lies within a quarter patch of the middle
-        north = grid.n0 + (i + 0.5) * grid.res + float(rng.uniform(-shift, shift))
-        east = grid.e0 + (j + 0.5) * grid.res + float(rng.uniform(-shift, shift))
-        pos = (north, east, -(float(grid.height[i, j]) + above))
-        tilt = math.radians(float(rng.uniform(0.0, MAX_TILT_DEG)))
-        tilt_dir = float(rng.uniform(0.0, 2 * math.pi))
-        yaw = float(rng.uniform(-math.pi, math.pi))
-        quat = euler_to_quat(tilt * math.cos(tilt_dir), tilt * math.sin(tilt_dir), yaw)
-        weather = WEATHERS[int(rng.choice(3, p=WEATHER_P))]
-        frame = render(
-            grid, live.pyramid, live.shadow, camera, pos, quat, live.sun_neu, weather, rng,
-            labels=True, palette=_palette(rng),
-        )  # fmt: skip
-        if frame.hit_material is None or frame.hit_kind is None:
-            raise RuntimeError("render(labels=True) returned no labels")
-        rgb[k] = frame.rgb
-        labels[k] = label_map(frame.hit_class, frame.hit_material, frame.hit_kind)
-        meta.append(
-            {
-                "stratum": stratum,
-                "gsd_m": round(gsd, 4),
-                "hfov_deg": round(hfov, 2),
-                "tilt_deg": round(math.degrees(tilt), 2),
-                "weather": weather,
-                "t_s": round(t_s, 2),
-                "pos_ned_m": [round(v, 2) for v in pos],
-                "yaw_rad": round(yaw, 4),
-            }
-        )
-    return rgb, labels, meta
+            cells["vehicle"] = _cells(live.grid, (C.VEHICLE,), "vehicle", rng)
+            cells["person"] = _cells(live.grid, (C.PEDESTRIAN,), "person", rng)
+        out.add(k, _view(live, cells, GSD_M, rng, variety=None), t_s)
+    return out.rgb, out.labels, out.meta
 
 
-def _one_shard(args: tuple[Path, int, int, int]) -> str:
-    out, city_seed, count, seed = args
+def render_vignettes(first: int, worlds: int, per_world: int, seed: int) -> tuple[
+    np.ndarray, np.ndarray, list[dict[str, Any]]
+]:  # fmt: skip
+    """``worlds x per_world`` labelled patches of the vignettes ``first .. first + worlds - 1``
+    (:func:`simbridge.world.vignettes.build_vignette`): houses, barns, flat roofs, gardens, streets,
+    car parks, ponds and yards at 4-8 cm cells, seen at ``VIGNETTE_GSD_M`` under the renderer's domain
+    randomisation (a :meth:`simbridge.world.camera.RenderVariety.sample` per view). Returns what
+    :func:`render_city` returns."""
+    out = _Patches(worlds * per_world)
+    k = 0
+    for v in range(first, first + worlds):
+        rng = np.random.default_rng([seed, VIGNETTE_SALT, v])
+        world = build_vignette(v)
+        live = LiveWorld(world, camera=CameraModel(PATCH_PX, PATCH_PX, 50.0), actor_seed=v)
+        cells = {name: _cells(live.grid, classes, name, rng) for name, _w, classes in STRATA}
+        for _ in range(per_world):
+            variety = RenderVariety.sample(rng)
+            view = _view(live, cells, VIGNETTE_GSD_M, rng, variety=variety, shares=VIGNETTE_SHARES)
+            out.add(k, view, 0.0, vignette=v)
+            k += 1
+    return out.rgb, out.labels, out.meta
+
+
+class _Patches:
+    """The arrays and metadata of ``count`` patches being rendered."""
+
+    def __init__(self, count: int) -> None:
+        self.rgb = np.empty((count, PATCH_PX, PATCH_PX, 3), np.uint8)
+        self.labels = np.empty((count, PATCH_PX, PATCH_PX), np.uint8)
+        self.meta: list[dict[str, Any]] = []
+
+    def add(
+        self, k: int, view: tuple[np.ndarray, np.ndarray, dict[str, Any]], t_s: float, **extra: Any
+    ) -> None:
+        self.rgb[k], self.labels[k], meta = view
+        self.meta.append({**meta, "t_s": round(t_s, 2), **extra})
+
+
+def _view(
+    live: LiveWorld,
+    cells: dict[str, np.ndarray],
+    gsd_range: tuple[float, float],
+    rng: np.random.Generator,
+    variety: RenderVariety | None,
+    shares: dict[str, float] | None = None,
+) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+    """One labelled view: a stratum (``STRATA``, among those with cells), a cell of it near the middle,
+    a ground resolution in ``gsd_range`` (log-uniform), a lens, a tilt, a heading, a weather and a
+    palette. ``shares`` replaces the strata's shares. Returns (RGB, class map, metadata)."""
+    grid = live.grid
+    names = [n for n, _w, _c in STRATA]
+    share = shares or {n: w for n, w, _c in STRATA}
+    weights = np.array([share[n] for n in names]) * np.array([cells[n].size > 0 for n in names])
+    stratum = names[int(rng.choice(len(names), p=weights / weights.sum()))]
+    i, j = divmod(int(rng.choice(cells[stratum])), grid.shape[1])
+    gsd_max = gsd_range[1]
+    if stratum == "roof_interior":  # the footprint's half side within the clear distance
+        clear_m = float(_interior_m(grid)[i, j])
+        gsd_max = max(gsd_range[0], min(gsd_max, clear_m / (0.5 * PATCH_PX)))
+    gsd = math.exp(rng.uniform(math.log(gsd_range[0]), math.log(gsd_max)))
+    hfov = float(rng.uniform(*HFOV_DEG))
+    camera = CameraModel(PATCH_PX, PATCH_PX, hfov)
+    above = gsd * camera.focal_px  # metres above the surface under the centre, for that resolution
+    shift = 0.25 * gsd * PATCH_PX  # the centre's cell lies within a quarter patch of the middle
+    north = grid.n0 + (i + 0.5) * grid.res + float(rng.uniform(-shift, shift))
+    east = grid.e0 + (j + 0.5) * grid.res + float(rng.uniform(-shift, shift))
+    pos = (north, east, -(float(grid.height[i, j]) + above))
+    tilt = math.radians(float(rng.uniform(0.0, MAX_TILT_DEG)))
+    tilt_dir = float(rng.uniform(0.0, 2 * math.pi))
+    yaw = float(rng.uniform(-math.pi, math.pi))
+    quat = euler_to_quat(tilt * math.cos(tilt_dir), tilt * math.sin(tilt_dir), yaw)
+    weather = WEATHERS[int(rng.choice(3, p=WEATHER_P))]
+    frame = render(
+        grid, live.pyramid, live.shadow, camera, pos, quat, live.sun_neu, weather, rng,
+        labels=True, palette=_palette(rng), variety=variety,
+    )  # fmt: skip
+    if frame.hit_material is None or frame.hit_kind is None:
+        raise RuntimeError("render(labels=True) returned no labels")
+    meta = {
+        "stratum": stratum,
+        "gsd_m": round(gsd, 4),
+        "hfov_deg": round(hfov, 2),
+        "tilt_deg": round(math.degrees(tilt), 2),
+        "weather": weather,
+        "pos_ned_m": [round(v, 2) for v in pos],
+        "yaw_rad": round(yaw, 4),
+    }
+    return frame.rgb, label_map(frame.hit_class, frame.hit_material, frame.hit_kind), meta
+
+
+def _one_shard(args: tuple[Path, str, int, int, int, int]) -> str:
+    out, kind, key, worlds, count, seed = args
     os.environ.setdefault("NUMBA_NUM_THREADS", "1")
-    path = out / f"shard-{city_seed}.npz"
+    path = out / f"shard-{key}.npz"
     if not path.exists():
-        rgb, labels, meta = render_city(city_seed, count, seed)
+        if kind == "city":
+            rgb, labels, meta = render_city(key, count, seed)
+        else:
+            rgb, labels, meta = render_vignettes(key, worlds, count, seed)
         tmp = path.with_suffix(".tmp.npz")
         np.savez(tmp, rgb=rgb, labels=labels, meta=np.array(json.dumps(meta)))
         tmp.replace(path)
@@ -201,8 +286,23 @@ def generate(out: Path, city_seeds: Sequence[int], per_city: int, seed: int, wor
     bad = [s for s in city_seeds if s < MIN_CITY_SEED]
     if bad:
         raise ValueError(f"city seeds {bad} are reserved for evaluation: training uses >= {MIN_CITY_SEED}")
+    return _run(out, [(out, "city", int(s), 1, per_city, seed) for s in city_seeds], workers)
+
+
+def generate_vignettes(
+    out: Path, first: int, worlds: int, per_world: int, seed: int, workers: int = 1
+) -> list[Path]:
+    """Render ``per_world`` patches of each vignette ``first .. first + worlds - 1`` into ``out``, in
+    shards of ``VIGNETTES_PER_SHARD`` worlds (kept when there already), with ``workers`` processes."""
+    jobs = [
+        (out, "vignettes", v, min(VIGNETTES_PER_SHARD, first + worlds - v), per_world, seed)
+        for v in range(first, first + worlds, VIGNETTES_PER_SHARD)
+    ]
+    return _run(out, jobs, workers)
+
+
+def _run(out: Path, jobs: list[tuple[Path, str, int, int, int, int]], workers: int) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
-    jobs = [(out, int(s), per_city, seed) for s in city_seeds]
     if workers <= 1:
         names = [_one_shard(j) for j in jobs]
     else:

@@ -2,8 +2,10 @@
 
 ``python -m landfall_train [--steps N] [--max-minutes M] ...`` (``make model``):
 
-1. render the patches (:mod:`landfall_train.patches`): training cities ``TRAIN_SEEDS``, validation
-   cities ``VAL_SEEDS`` (other seeds, same generator), cached under ``--cache`` by generator settings;
+1. render the patches (:mod:`landfall_train.patches`): training cities ``TRAIN_SEEDS`` and vignettes
+   ``0 .. --vignettes - 1`` (fine-grained houses, barns, roofs, gardens, streets under the renderer's
+   domain randomisation), validation cities ``VAL_SEEDS`` and vignettes from ``VAL_FIRST_VIGNETTE``
+   (other seeds, same generators), cached under ``--cache`` by generator settings;
 2. train on CPU, seeded: each step's batch and each sample's randomisation (:mod:`landfall_train.augment`)
    come from ``np.random.default_rng([seed, step, slot])``, so the run does not depend on worker timing;
    AdamW with a warm-up and a cosine decay over ``--steps``; ``--max-minutes`` stops it early (the
@@ -45,6 +47,10 @@ TRAIN_SEEDS = tuple(range(100, 148))  # 48 cities
 VAL_SEEDS = (900, 901, 902, 903)
 PER_CITY = 200
 VAL_PER_CITY = 150
+VIGNETTES = 1500  # training vignettes 0 .. VIGNETTES - 1
+PER_VIGNETTE = 20
+VAL_FIRST_VIGNETTE = 1_000_000  # validation vignettes: their own numbers
+VAL_VIGNETTES = 100
 INPUT_PX = 128
 POS_WEIGHT = {"object": 3.0, "person": 4.0, "vehicle": 3.0, "marking": 2.0}
 CLEAR_POS_WEIGHT = 2.0
@@ -56,14 +62,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, default=MODEL, help="model path without suffix (.onnx and .json)")
     p.add_argument("--cache", type=Path, default=Path("runs/train-cache"), help="rendered patches")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--steps", type=int, default=5000)
+    p.add_argument("--steps", type=int, default=5500)
     p.add_argument("--batch", type=int, default=64)
     p.add_argument("--lr", type=float, default=2e-3)
-    p.add_argument("--max-minutes", type=float, default=40.0, help="stop training after this long")
+    p.add_argument("--max-minutes", type=float, default=45.0, help="stop training after this long")
     p.add_argument("--train-cities", type=int, default=len(TRAIN_SEEDS), help="how many of TRAIN_SEEDS")
     p.add_argument("--per-city", type=int, default=PER_CITY)
     p.add_argument("--val-cities", type=int, default=len(VAL_SEEDS))
     p.add_argument("--val-per-city", type=int, default=VAL_PER_CITY)
+    p.add_argument(
+        "--vignettes", type=int, default=VIGNETTES, help="training vignettes (fine-grained scenes)"
+    )
+    p.add_argument("--per-vignette", type=int, default=PER_VIGNETTE)
+    p.add_argument("--val-vignettes", type=int, default=VAL_VIGNETTES)
     p.add_argument("--workers", type=int, default=2, help="processes rendering patches")
     p.add_argument("--threads", type=int, default=1, help="torch threads")
     return p
@@ -74,7 +85,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     command = "python -m landfall_train " + " ".join(sys.argv[1:] if argv is None else argv)
     t0 = time.monotonic()
-    gen = f"{patches.PATCH_PX}-{patches.CITY_SIZE_M}-{patches.CITY_RES_M}-{args.seed}"
+    gen = f"{patches.GENERATOR}-{patches.PATCH_PX}-{patches.CITY_SIZE_M}-{patches.CITY_RES_M}-{args.seed}"
     cache = args.cache / hashlib.sha256(gen.encode()).hexdigest()[:12]
     train_seeds = TRAIN_SEEDS[: args.train_cities]
     val_seeds = VAL_SEEDS[: args.val_cities]
@@ -85,6 +96,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     val_paths = patches.generate(
         cache / f"val-{args.val_per_city}", val_seeds, args.val_per_city, args.seed, args.workers
     )
+    _log.info("rendering %d + %d vignettes", args.vignettes, args.val_vignettes)
+    train_paths += patches.generate_vignettes(
+        cache / f"vignettes-{args.per_vignette}",
+        0,
+        args.vignettes,
+        args.per_vignette,
+        args.seed,
+        args.workers,
+    )
+    val_paths += patches.generate_vignettes(
+        cache / f"val-vignettes-{args.per_vignette}", VAL_FIRST_VIGNETTE, args.val_vignettes,
+        args.per_vignette, args.seed, args.workers,
+    )  # fmt: skip
     x_train, y_train, train_digest = patches.load_shards(train_paths)
     x_val, y_val, val_digest = patches.load_shards(val_paths)
     t_render = time.monotonic() - t0
@@ -106,6 +130,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         "command": command,
         "data": {
             "train_city_seeds": list(train_seeds), "val_city_seeds": list(val_seeds),
+            "train_vignettes": [0, args.vignettes], "per_vignette": args.per_vignette,
+            "val_vignettes": [VAL_FIRST_VIGNETTE, VAL_FIRST_VIGNETTE + args.val_vignettes],
             "train_patches": len(x_train), "val_patches": len(x_val), "patch_px": patches.PATCH_PX,
             "train_digest": train_digest, "val_digest": val_digest,
             "excluded": "city seeds < 100 (companion-bench city flies 0), scenario1, scenario2, "

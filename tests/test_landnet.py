@@ -211,15 +211,35 @@ def test_landfall_train_smoke_renders_trains_and_exports(tmp_path: Path) -> None
     argv = [
         "--out", str(out), "--cache", str(tmp_path / "cache"), "--steps", "2", "--batch", "4", "--workers",
         "1", "--train-cities", "1", "--per-city", "4", "--val-cities", "1", "--val-per-city", "4",
+        "--vignettes", "1", "--per-vignette", "3", "--val-vignettes", "1",
     ]  # fmt: skip
     assert main(argv) == 0
     tiny = LandNet.load(out.with_suffix(".onnx"))
     meta = json.loads(out.with_suffix(".json").read_text())
     assert meta["training"]["steps_done"] == 2
     assert meta["data"]["train_city_seeds"] == [100]
+    assert meta["data"]["train_patches"] == 4 + 3
     assert meta["parity_max_abs_diff"] < 1e-3
     assert tiny.read(_image(64, 64)).grid == (16, 16)
     from landfall_train.patches import generate
 
     with pytest.raises(ValueError, match="reserved for evaluation"):
         generate(tmp_path / "x", [0], 1, 0)
+
+
+def test_vignette_patches_are_labelled_varied_and_the_same_for_the_same_seed() -> None:
+    from landfall_train.labels import CLASSES, IGNORE
+    from landfall_train.patches import PATCH_PX, render_vignettes
+
+    rgb, labels, meta = render_vignettes(3, 2, 4, seed=5)
+    assert rgb.shape == (8, PATCH_PX, PATCH_PX, 3)
+    assert labels.shape == (8, PATCH_PX, PATCH_PX)
+    assert [m["vignette"] for m in meta] == [3] * 4 + [4] * 4
+    assert all(0.015 <= m["gsd_m"] <= 0.15 for m in meta)
+    assert set(np.unique(labels).tolist()) <= set(range(len(CLASSES))) | {IGNORE}
+    assert all(float(img.std()) > 2.0 for img in rgb)  # a scene, not a blank
+    again, labels_again, _ = render_vignettes(3, 2, 4, seed=5)
+    assert np.array_equal(rgb, again)
+    assert np.array_equal(labels, labels_again)
+    other, _, _ = render_vignettes(3, 2, 4, seed=6)
+    assert not np.array_equal(rgb, other)

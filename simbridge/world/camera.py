@@ -14,7 +14,7 @@ Depth maps hold the z-depth along the optical axis in metres (NaN where the ray 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -26,6 +26,7 @@ from simbridge.world.raycast import HIT_MISS, HIT_TOP, HIT_WALL_N, Pyramid, cast
 
 CAMERA_TO_BODY = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
 _RAYS_BODY: dict[tuple[int, int, float], tuple[np.ndarray, np.ndarray]] = {}
+_RAYS_CACHED = 16  # camera models whose rays are kept
 MAX_RANGE_M = 600.0
 SENSOR_NOISE = 0.008  # sigma of the sensor noise, in units of full scale
 IMAGE_TILE = 8  # pixels a side of the tiles whose ray bundles ``cast_rays`` proves at once
@@ -58,19 +59,23 @@ class CameraModel:
 
     def unit_rays_body(self) -> np.ndarray:
         """(H*W, 3) unit pixel rays in body FRD, row-major over pixels (cached per model)."""
+        return self._rays()[0]
+
+    def ray_norms(self) -> np.ndarray:
+        """|(x, y, 1)| per pixel: z-depth = range / norm."""
+        return self._rays()[1]
+
+    def _rays(self) -> tuple[np.ndarray, np.ndarray]:
         key = (self.width_px, self.height_px, self.hfov_deg)
         cached = _RAYS_BODY.get(key)
         if cached is None:
             rays = self.rays_cam()
             norms = np.linalg.norm(rays, axis=1)
             cached = (np.ascontiguousarray((rays / norms[:, None]) @ CAMERA_TO_BODY.T), norms)
+            if len(_RAYS_BODY) >= _RAYS_CACHED:  # bounded: training renders draw a new lens per view
+                _RAYS_BODY.pop(next(iter(_RAYS_BODY)), None)
             _RAYS_BODY[key] = cached
-        return cached[0]
-
-    def ray_norms(self) -> np.ndarray:
-        """|(x, y, 1)| per pixel: z-depth = range / norm."""
-        self.unit_rays_body()
-        return _RAYS_BODY[(self.width_px, self.height_px, self.hfov_deg)][1]
+        return cached
 
     def rays_cam(self) -> np.ndarray:
         """(H*W, 3) unnormalised rays (x, y, 1) in the camera frame, row-major over pixels."""
@@ -138,6 +143,12 @@ for _m, _rgb in {
     Material.CAR_PAINT: (0.6, 0.6, 0.6),
     Material.CLOTH: (0.5, 0.3, 0.3),
     Material.PAINT_TEXT: (0.95, 0.85, 0.20),
+    Material.CORRUGATED: (0.58, 0.60, 0.60),
+    Material.SLATE: (0.30, 0.32, 0.35),
+    Material.SHINGLE: (0.36, 0.33, 0.31),
+    Material.SEAM_METAL: (0.52, 0.56, 0.58),
+    Material.GLASS: (0.22, 0.28, 0.34),
+    Material.POOL: (0.35, 0.70, 0.80),
 }.items():
     _MAT_RGB[int(_m)] = _rgb
 
@@ -258,6 +269,331 @@ def _texture(mat: int, pn: float, pe: float, r: float, g: float, b: float) -> tu
     return (r * k, g * k, b * k)
 
 
+@njit(cache=True, fastmath=True, inline="always")
+def _line(x: float, period: float, width: float, fw: float) -> float:
+    """Coverage in [0, 1] of a thin periodic line (``width`` m every ``period`` m) at ``x``, box-filtered
+    over a pixel footprint of ``fw`` m: a line thinner than the footprint widens and fades instead of
+    aliasing into dots."""
+    eff = max(width, fw)
+    return width / eff if _wrap(x, period) < eff else 0.0
+
+
+@njit(cache=True, fastmath=True)
+def _texture_new(
+    mat: int, u: float, v: float, r: float, g: float, b: float, fw: float, salt: int
+) -> tuple[float, float, float]:
+    """Procedural albedo of the roof materials 22..27 (``Material.CORRUGATED`` .. ``POOL``) at local
+    coordinates (u, v) in metres: u runs across the rows (down the slope), v along them (the eave).
+    ``fw`` is the pixel footprint in metres (fine ridges and lines fade as it grows); ``salt`` varies
+    the per-sheet / per-slate tones."""
+    k = 1.0
+    if mat == 22:  # corrugated sheet: 12 cm ridges down the slope, 1 m x 2.5 m sheets, weathering
+        period = 0.12
+        s = math.sin(6.283185307179586 * v / period)
+        fade = max(0.0, 1.0 - 1.2 * fw / period)  # fades out before it would alias
+        k = 1.0 + fade * (0.2 * s + 0.1 * s * s - 0.05)  # lit flank, dark flank, bright crest
+        k *= 0.94 + 0.12 * _hash2(math.floor(u / 2.5), math.floor(v / 1.0), salt + 40)
+        k *= 1.0 - 0.35 * _line(u, 2.5, 0.05, fw)  # end lap: the upper sheet's edge casts a line
+        k *= 1.0 - 0.15 * _line(v, 1.0, 0.03, fw)  # side lap
+        k *= 0.86 + 0.24 * _value_noise(u * 0.7, v * 0.7, salt + 41)
+        k *= 0.96 + 0.08 * _hash2(math.floor(u * 10.0), math.floor(v * 10.0), salt + 42)
+    elif mat == 23:  # slate: 23 cm rows of 30 cm slates, half-bond, thin dark gaps
+        row = math.floor(u / 0.23)
+        off = 0.15 if row % 2 == 0 else 0.0
+        col = math.floor((v + off) / 0.3)
+        h = _hash2(row, col, salt + 50)
+        k = 0.7 + 0.45 * h
+        k *= 0.9 + 0.12 * (u / 0.23 - row)  # the exposed lower edge is lighter than the lap
+        k *= 1.0 - 0.45 * _line(u, 0.23, 0.02, fw)
+        k *= 1.0 - 0.35 * _line(v + off, 0.3, 0.012, fw)
+        b *= 0.95 + 0.1 * _hash2(col, row, salt + 51)  # blue-grey to purple-grey slates
+    elif mat == 24:  # asphalt shingle: 14 cm rows of 33 cm staggered tabs, granules
+        row = math.floor(u / 0.14)
+        off = 0.165 if row % 2 == 0 else 0.0
+        tab = math.floor((v + off) / 0.33)
+        k = 0.82 + 0.26 * _hash2(row, tab, salt + 60)
+        k *= 0.9 + 0.2 * _hash2(math.floor(u * 40.0), math.floor(v * 40.0), salt + 62)
+        k *= 1.0 - 0.4 * _line(u, 0.14, 0.015, fw)
+        k *= 1.0 - 0.3 * _line(v + off, 0.33, 0.01, fw)
+        k *= 0.92 + 0.16 * _value_noise(u * 0.5, v * 0.5, salt + 63)
+    elif mat == 25:  # standing-seam metal: a bright/dark seam pair every 0.5 m, slightly varied panels
+        k = 0.93 + 0.1 * _hash2(math.floor(v / 0.5), math.floor(u / 6.0), salt + 70)
+        k *= 1.0 + 0.4 * _line(v, 0.5, 0.025, fw)
+        k *= 1.0 - 0.4 * _line(v - 0.025, 0.5, 0.03, fw)
+        k *= 0.95 + 0.1 * _value_noise(u * 0.8, v * 3.0, salt + 71)  # oil canning
+    elif mat == 26:  # glass: dark panes reflecting the sky in a gradient, 1 m panels in a light frame
+        pu = _wrap(u, 1.0)
+        pv = _wrap(v, 1.0)
+        refl = 0.15 + 0.45 * (0.6 * pu + 0.4 * pv) + 0.3 * _value_noise(u * 0.3, v * 0.3, salt + 80)
+        pane = 0.8 + 0.3 * _hash2(math.floor(u), math.floor(v), salt + 81)
+        r = r * pane * (1.0 - 0.5 * refl) + 0.62 * 0.5 * refl
+        g = g * pane * (1.0 - 0.5 * refl) + 0.72 * 0.5 * refl
+        b = b * pane * (1.0 - 0.5 * refl) + 0.85 * 0.5 * refl
+        frame = max(_line(u + 0.03, 1.0, 0.06, fw), _line(v + 0.03, 1.0, 0.06, fw))
+        r += (0.56 - r) * frame
+        g += (0.57 - g) * frame
+        b += (0.59 - b) * frame
+    elif mat == 27:  # pool: caustic ripple network, lighter / cyan variation over the basin
+        n1 = 1.0 - abs(2.0 * _value_noise(u * 1.3, v * 1.3, salt + 90) - 1.0)
+        n2 = 1.0 - abs(2.0 * _value_noise(u * 2.9 + 3.1, v * 2.9, salt + 91) - 1.0)
+        c = (0.6 * n1**4 + 0.4 * n2**4) * max(0.0, 1.0 - fw / 0.8)
+        d = 0.88 + 0.2 * _value_noise(u * 0.12, v * 0.12, salt + 92)
+        return (r * d + 0.22 * c, g * d + 0.28 * c, b * d + 0.24 * c)
+    return (r * k, g * k, b * k)
+
+
+# ------------------------------------------------------------------ domain randomisation (training only)
+# Layout of the float64 parameter vector ``shade`` takes (``RenderVariety._params``). With ``_VP_ON`` 0
+# ``shade`` takes exactly the fixed look's path (byte-identical frames); only ``_VP_PX`` is read then.
+_VP_ON, _VP_AMBIENT, _VP_SUN_GAIN, _VP_TINT, _VP_SCALE_LO, _VP_SCALE_HI = 0, 1, 2, 3, 4, 5
+_VP_ORIENT, _VP_STAIN, _VP_SOFT, _VP_SHADOW_DEPTH, _VP_SALT, _VP_PX = 6, 7, 8, 9, 10, 11
+_VP_SIZE = 12
+_SOFT_SHADOW_M = 0.6  # penumbra half-width at ``soft_shadow`` 1
+
+
+@dataclass(frozen=True, slots=True)
+class RenderVariety:
+    """Opt-in domain randomisation of the camera's look, for training data (``render(..., variety=)``).
+
+    The defaults are the fixed look the flight simulator renders (``render`` then takes exactly the
+    path it takes without a variety, byte for byte). Per-region effects key on ``WorldGrid.region``
+    (> 0: one building or object) hashed with ``salt``; open ground varies smoothly over tens of metres.
+
+    Attributes:
+        ambient: light every surface gets, in [0, 1] (0.38; overcast ~0.6-0.8).
+        sun_gain: direct sunlight on a surface facing the sun, in [0, 2] (0.85; overcast ~0.2-0.4).
+        tint: strength in [0, 1] (useful up to ~0.35) of a per-region colour tint: brightness, a
+            red/blue hue shift, a green shift and desaturation (red, brown, orange or grey tiles).
+        texture_scale: (low, high) range in [0.25, 4] of a per-region, log-uniform scale on texture
+            periods (ridges, rows, slabs, seams).
+        orient: rotate each region's textures: rows run across the slope of a pitched roof (parallel
+            to the eave), at a hashed angle on flat roofs.
+        stain: amount in [0, 1] of value-noise stains at 0.5-5 m: darkening streaks down the slope,
+            moss on tiles / slate / shingle / concrete, rust on metal, dry patches on grass.
+        soft_shadow: penumbra in [0, 1]: the shadow is averaged over up to ``_SOFT_SHADOW_M`` metres
+            around the hit point (cells at a similar height only) instead of read per cell.
+        shadow_depth: fraction in [0, 1] of the direct light a shadow removes (1: all of it).
+        salt: seed in [0, 2**31) of every hash and noise.
+    """
+
+    ambient: float = 0.38
+    sun_gain: float = 0.85
+    tint: float = 0.0
+    texture_scale: tuple[float, float] = (1.0, 1.0)
+    orient: bool = False
+    stain: float = 0.0
+    soft_shadow: float = 0.0
+    shadow_depth: float = 1.0
+    salt: int = 0
+
+    def __post_init__(self) -> None:
+        for name, lo, hi in (
+            ("ambient", 0.0, 1.0), ("sun_gain", 0.0, 2.0), ("tint", 0.0, 1.0), ("stain", 0.0, 1.0),
+            ("soft_shadow", 0.0, 1.0), ("shadow_depth", 0.0, 1.0),
+        ):  # fmt: skip
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and lo <= value <= hi):
+                raise ValueError(f"RenderVariety.{name} must be a number in [{lo}, {hi}], got {value!r}")
+        scale = self.texture_scale
+        if not (
+            len(scale) == 2
+            and all(isinstance(s, int | float) and math.isfinite(s) for s in scale)
+            and 0.25 <= scale[0] <= scale[1] <= 4.0
+        ):
+            raise ValueError(
+                "RenderVariety.texture_scale must be (low, high) with 0.25 <= low <= high <= 4, "
+                f"got {scale!r}"
+            )
+        if not isinstance(self.orient, bool):
+            raise ValueError(f"RenderVariety.orient must be a bool, got {self.orient!r}")
+        if not (isinstance(self.salt, int) and not isinstance(self.salt, bool) and 0 <= self.salt < 2**31):
+            raise ValueError(f"RenderVariety.salt must be an int in [0, 2**31), got {self.salt!r}")
+
+    @property
+    def is_neutral(self) -> bool:
+        """True when this is the fixed look (the defaults; the salt then changes nothing)."""
+        return replace(self, salt=0) == RenderVariety()
+
+    @staticmethod
+    def sample(rng: np.random.Generator) -> RenderVariety:
+        """A random variety for one training frame: hard sun (70%) or overcast light, tints, scales,
+        orientations, stains and penumbras drawn from ranges that cover real aerial photographs."""
+        if rng.random() < 0.3:  # overcast: flat light, faint soft shadows
+            ambient, gain = rng.uniform(0.55, 0.8), rng.uniform(0.1, 0.4)
+            depth, soft = rng.uniform(0.2, 0.6), rng.uniform(0.5, 1.0)
+        else:
+            ambient, gain = rng.uniform(0.28, 0.5), rng.uniform(0.7, 1.05)
+            depth, soft = rng.uniform(0.75, 1.0), rng.uniform(0.0, 0.7)
+        return RenderVariety(
+            ambient=float(ambient), sun_gain=float(gain), tint=float(rng.uniform(0.1, 0.35)),
+            texture_scale=(0.7, 1.5), orient=True, stain=float(rng.uniform(0.0, 0.8)),
+            soft_shadow=float(soft), shadow_depth=float(depth), salt=int(rng.integers(0, 2**31)),
+        )  # fmt: skip
+
+
+def _variety_params(variety: RenderVariety | None, px_angle: float) -> np.ndarray:
+    """``shade``'s parameter vector: off (the fixed look) for None or a neutral variety."""
+    vp = np.zeros(_VP_SIZE, np.float64)
+    vp[_VP_PX] = px_angle
+    if variety is not None and not variety.is_neutral:
+        vp[_VP_ON] = 1.0
+        vp[_VP_AMBIENT] = variety.ambient
+        vp[_VP_SUN_GAIN] = variety.sun_gain
+        vp[_VP_TINT] = variety.tint
+        vp[_VP_SCALE_LO], vp[_VP_SCALE_HI] = variety.texture_scale
+        vp[_VP_ORIENT] = 1.0 if variety.orient else 0.0
+        vp[_VP_STAIN] = variety.stain
+        vp[_VP_SOFT] = variety.soft_shadow
+        vp[_VP_SHADOW_DEPTH] = variety.shadow_depth
+        vp[_VP_SALT] = float(variety.salt)
+    return vp
+
+
+@njit(cache=True, fastmath=True)
+def _vary_tint(
+    r: float, g: float, b: float, reg: int, pn: float, pe: float, vp: np.ndarray
+) -> tuple[float, float, float]:
+    """Per-region colour tint (``RenderVariety.tint``): hashed per building, smooth noise on open ground."""
+    tint = vp[_VP_TINT]
+    if tint <= 0.0:
+        return (r, g, b)
+    salt = int(vp[_VP_SALT])
+    if reg > 0:
+        h1 = _hash2(reg, 21, salt)
+        h2 = _hash2(reg, 22, salt)
+        h3 = _hash2(reg, 23, salt)
+        desat = min(0.8, 2.0 * tint * _hash2(reg, 24, salt))
+    else:
+        h1 = _value_noise(pn / 30.0, pe / 30.0, salt + 5)
+        h2 = _value_noise(pn / 45.0 + 7.0, pe / 45.0, salt + 6)
+        h3 = 0.5
+        desat = 0.0
+        tint *= 0.6
+    bright = 1.0 + tint * (2.0 * h1 - 1.0)
+    hue = tint * (2.0 * h2 - 1.0)
+    r *= bright * (1.0 + hue)
+    g *= bright * (1.0 + 0.5 * tint * (2.0 * h3 - 1.0))
+    b *= bright * (1.0 - 0.8 * hue)
+    lum = 0.3 * r + 0.59 * g + 0.11 * b
+    return (r + (lum - r) * desat, g + (lum - g) * desat, b + (lum - b) * desat)
+
+
+@njit(cache=True, fastmath=True)
+def _vary_albedo(
+    m: int, pn: float, pe: float, reg: int, fw: float, gn: float, ge: float, vp: np.ndarray,
+    r: float, g: float, b: float,
+) -> tuple[float, float, float]:  # fmt: skip
+    """Albedo under a ``RenderVariety``: the material's texture in per-region rotated, scaled and
+    shifted coordinates, then the region's tint and stains. ``(gn, ge)``: the surface's height gradient
+    (0 where level), ``fw``: the pixel footprint in metres."""
+    salt = int(vp[_VP_SALT])
+    lo = vp[_VP_SCALE_LO]
+    key = reg if reg > 0 else 0
+    scale = lo * (vp[_VP_SCALE_HI] / lo) ** _hash2(key, 12, salt)
+    ang = 0.0
+    ou = 0.0
+    ov = 0.0
+    if reg > 0:
+        if vp[_VP_ORIENT] > 0.5:
+            ang = math.atan2(ge, gn) if (gn != 0.0 or ge != 0.0) else math.pi * _hash2(reg, 13, salt)
+        ou = 37.0 * _hash2(reg, 14, salt)
+        ov = 37.0 * _hash2(reg, 15, salt)
+    c = math.cos(ang)
+    s = math.sin(ang)
+    u = (pn * c + pe * s) / scale + ou
+    v = (pe * c - pn * s) / scale + ov
+    if m >= 22:
+        r, g, b = _texture_new(m, u, v, r, g, b, fw / scale, (key * 7919 + salt) & 0x3FFFFFFF)
+    else:
+        r, g, b = _texture(m, u, v, r, g, b)
+    r, g, b = _vary_tint(r, g, b, reg, pn, pe, vp)
+    stain = vp[_VP_STAIN]
+    if stain > 0.0 and m != 11 and m != 12 and m != 27:
+        x = (
+            0.5 * _value_noise(pn * 0.22, pe * 0.22, salt + 31)
+            + 0.25 * _value_noise(pn * 0.9, pe * 0.9, salt + 32)
+            + 0.25 * _value_noise(u * 0.25, v * 2.0, salt + 33)  # streaks down the slope
+        )
+        a = min(max((x - 0.72 + 0.3 * stain) / 0.2, 0.0), 1.0) * min(1.0, 1.5 * stain)
+        kind = _hash2(key, 25, salt) if reg > 0 else 1.0
+        if m == 14 or m == 22 or m == 25:  # metal: rust or grime
+            if kind < 0.6:
+                w = 0.75 * a
+                r += (0.42 - r) * w
+                g += (0.22 - g) * w
+                b += (0.10 - b) * w
+            else:
+                r *= 1.0 - 0.45 * a
+                g *= 1.0 - 0.45 * a
+                b *= 1.0 - 0.45 * a
+        elif m == 10:  # grass: dry patches
+            w = 0.5 * a
+            r += (0.55 - r) * w
+            g += (0.50 - g) * w
+            b += (0.30 - b) * w
+        elif kind < 0.4 and (m == 1 or m == 2 or m == 3 or m == 4 or m == 5 or m == 23 or m == 24):
+            w = 0.6 * a  # moss / lichen
+            r += (0.22 - r) * w
+            g += (0.30 - g) * w
+            b += (0.12 - b) * w
+        else:  # darkening streaks, dirt
+            r *= 1.0 - 0.45 * a
+            g *= 1.0 - 0.42 * a
+            b *= 1.0 - 0.38 * a
+    return (r, g, b)
+
+
+@njit(cache=True, fastmath=True)
+def _soft_shadow(
+    shadow: np.ndarray, height: np.ndarray, pn: float, pe: float, n0: float, e0: float, res: float,
+    i: int, j: int, radius_m: float,
+) -> float:  # fmt: skip
+    """Fraction in [0, 1] of the square of half-width ``radius_m`` around (pn, pe) in shadow: bilinear
+    samples at most a cell apart, counting only cells within 1 m of the hit cell's height (no bleed
+    across walls). Where the square's corners and centre agree (most pixels) that value is returned."""
+    rows, cols = shadow.shape
+    rad = radius_m / res
+    r_i = math.ceil(rad)
+    s0 = shadow[i, j]
+    if (
+        shadow[max(i - r_i, 0), max(j - r_i, 0)] == s0
+        and shadow[max(i - r_i, 0), min(j + r_i, cols - 1)] == s0
+        and shadow[min(i + r_i, rows - 1), max(j - r_i, 0)] == s0
+        and shadow[min(i + r_i, rows - 1), min(j + r_i, cols - 1)] == s0
+        and shadow[max(i - r_i, 0), j] == s0
+        and shadow[min(i + r_i, rows - 1), j] == s0
+        and shadow[i, max(j - r_i, 0)] == s0
+        and shadow[i, min(j + r_i, cols - 1)] == s0
+    ):
+        return 1.0 if s0 else 0.0
+    h0 = height[i, j]
+    x0 = (pn - n0) / res - 0.5
+    y0 = (pe - e0) / res - 0.5
+    n = min(max(math.ceil(2.0 * rad) + 1, 3), 9)
+    step = 2.0 * rad / (n - 1)
+    acc = 0.0
+    wsum = 0.0
+    for sx in range(n):
+        x = x0 - rad + sx * step
+        ia = math.floor(x)
+        tx = x - ia
+        for sy in range(n):
+            y = y0 - rad + sy * step
+            ja = math.floor(y)
+            ty = y - ja
+            for di in range(2):
+                a = min(max(ia + di, 0), rows - 1)
+                wx = tx if di == 1 else 1.0 - tx
+                for dj in range(2):
+                    bb = min(max(ja + dj, 0), cols - 1)
+                    if abs(height[a, bb] - h0) < 1.0:
+                        w = wx * (ty if dj == 1 else 1.0 - ty)
+                        if shadow[a, bb]:
+                            acc += w
+                        wsum += w
+    return acc / wsum if wsum > 0.0 else (1.0 if s0 else 0.0)
+
+
 @njit(cache=True, inline="always")
 def _lcg_noise(state: np.uint64) -> tuple[np.uint64, float]:
     """Next state of the sensor-noise LCG and a triangular value in about [0, 2) (mean 1)."""
@@ -281,14 +617,17 @@ def shade(
     origin: np.ndarray, height: np.ndarray, mat: np.ndarray, region: np.ndarray, shadow: np.ndarray,
     res: float, n0: float, e0: float, sun: np.ndarray, mat_rgb: np.ndarray, actor_rgb: np.ndarray,
     facade_rgb: np.ndarray, ray_len: np.ndarray, cls_grid: np.ndarray, depth: np.ndarray, cls: np.ndarray,
-    out_u8: np.ndarray, vignette: np.ndarray, seed: int, sigma: float,
+    out_u8: np.ndarray, vignette: np.ndarray, seed: int, sigma: float, vp: np.ndarray,
 ) -> np.ndarray:  # fmt: skip
     """Colour every ray's hit: albedo x (ambient + sun x lit), RGB float32 in [0, 1+]; and per pixel
     the z-depth along the optical axis (``ray_len``: |(x, y, 1)|) and the class seen (255: sky).
 
     With an ``out_u8`` of one row per ray (clear weather: nothing comes between shading and the
     sensor), the same pass also applies the vignette and the seeded sensor noise and quantises into
-    it (what ``_to_uint8`` does, in the same order); the float image is then not kept (empty)."""
+    it (what ``_to_uint8`` does, in the same order); the float image is then not kept (empty).
+
+    ``vp``: the ``RenderVariety`` parameter vector (``_VP_*``); with ``vp[_VP_ON]`` 0 the fixed look,
+    byte for byte as before varieties existed."""
     n = ts.shape[0]
     rows, cols = height.shape
     direct = out_u8.shape[0] == n
@@ -296,6 +635,12 @@ def shade(
     state = np.uint64(seed) * np.uint64(6364136223846793005) + np.uint64(1442695040888963407)
     ambient = 0.38
     cam_up = origin[2]
+    vary = vp[_VP_ON] > 0.5
+    amb_v = vp[_VP_AMBIENT]
+    gain_v = vp[_VP_SUN_GAIN]
+    px = vp[_VP_PX]
+    soft_m = vp[_VP_SOFT] * _SOFT_SHADOW_M
+    shadow_depth = vp[_VP_SHADOW_DEPTH]
     for k in range(n):
         dn, de, du = dirs[k, 0], dirs[k, 1], dirs[k, 2]
         t = ts[k]
@@ -305,8 +650,14 @@ def shade(
                 t = origin[2] / -du
                 pn = origin[0] + t * dn
                 pe = origin[1] + t * de
-                r, g, b = _texture(18, pn, pe, mat_rgb[18, 0], mat_rgb[18, 1], mat_rgb[18, 2])
-                light = ambient + 0.8 * max(sun[2], 0.0)
+                if vary:
+                    r, g, b = _vary_albedo(
+                        18, pn, pe, 0, t * px, 0.0, 0.0, vp, mat_rgb[18, 0], mat_rgb[18, 1], mat_rgb[18, 2]
+                    )
+                    light = amb_v + gain_v * (0.8 / 0.85) * max(sun[2], 0.0)
+                else:
+                    r, g, b = _texture(18, pn, pe, mat_rgb[18, 0], mat_rgb[18, 1], mat_rgb[18, 2])
+                    light = ambient + 0.8 * max(sun[2], 0.0)
                 depth[k] = (cam_up / -du) / ray_len[k]
                 cls[k] = 1
             else:  # sky
@@ -323,13 +674,17 @@ def shade(
             pu = origin[2] + t * du
             reg = region[i, j]
             m = mat[i, j]
-            if kind == HIT_TOP:
-                if reg < 0 and (m == 19 or m == 20):  # actor: its own paint
-                    a = (-reg - 1) % actor_rgb.shape[0]
-                    r, g, b = actor_rgb[a, 0], actor_rgb[a, 1], actor_rgb[a, 2]
+            top = kind == HIT_TOP
+            if vary and not top and m != 19 and m != 20:  # a low riser of a sloped top: shade it as the top
+                if kind == HIT_WALL_N:
+                    low = min(height[max(i - 1, 0), j], height[min(i + 1, rows - 1), j])
                 else:
-                    r, g, b = _texture(m, pn, pe, mat_rgb[m, 0], mat_rgb[m, 1], mat_rgb[m, 2])
+                    low = min(height[i, max(j - 1, 0)], height[i, min(j + 1, cols - 1)])
+                top = height[i, j] - low < 0.6
+            if top:
                 # normal from the height gradient (domes, trees, pitched roofs)
+                gn = 0.0
+                ge = 0.0
                 i0 = max(i - 1, 0)
                 i1 = min(i + 1, rows - 1)
                 j0 = max(j - 1, 0)
@@ -347,7 +702,25 @@ def shade(
                     nn, ne_, nu = -gn, -ge, 1.0
                     norm = math.sqrt(nn * nn + ne_ * ne_ + nu * nu)
                     cos_sun = (nn * sun[0] + ne_ * sun[1] + nu * sun[2]) / norm
-                lit = 0.0 if shadow[i, j] else max(cos_sun, 0.0)
+                if reg < 0 and (m == 19 or m == 20):  # actor: its own paint
+                    a = (-reg - 1) % actor_rgb.shape[0]
+                    r, g, b = actor_rgb[a, 0], actor_rgb[a, 1], actor_rgb[a, 2]
+                elif vary:
+                    r, g, b = _vary_albedo(
+                        m, pn, pe, reg, t * px, gn, ge, vp, mat_rgb[m, 0], mat_rgb[m, 1], mat_rgb[m, 2]
+                    )
+                elif m >= 22:  # the roof materials without a fixed look to keep: axis-aligned
+                    r, g, b = _texture_new(m, pn, pe, mat_rgb[m, 0], mat_rgb[m, 1], mat_rgb[m, 2], t * px, 0)
+                else:
+                    r, g, b = _texture(m, pn, pe, mat_rgb[m, 0], mat_rgb[m, 1], mat_rgb[m, 2])
+                if vary:
+                    if soft_m > 0.0:
+                        sf = _soft_shadow(shadow, height, pn, pe, n0, e0, res, i, j, soft_m)
+                    else:
+                        sf = 1.0 if shadow[i, j] else 0.0
+                    lit = max(cos_sun, 0.0) * (1.0 - shadow_depth * sf)
+                else:
+                    lit = 0.0 if shadow[i, j] else max(cos_sun, 0.0)
             else:
                 # facade: a tint per building, floors every 3 m, windows every 1.6 m
                 fc = (reg if reg > 0 else i // 7 + j // 11) % facade_rgb.shape[0]
@@ -355,13 +728,15 @@ def shade(
                 along = pe if kind == HIT_WALL_N else pn
                 if reg > 0 and 1.0 < _wrap(pu, 3.0) < 2.4 and _wrap(along, 1.6) > 0.4:
                     r, g, b = 0.16, 0.2, 0.26  # glass
+                elif vary:
+                    r, g, b = _vary_tint(r, g, b, reg, pn, pe, vp)
                 st = steps[k]
                 if kind == HIT_WALL_N:
                     cos_sun = -st * sun[0]
                 else:
                     cos_sun = -st * sun[1]
                 lit = max(cos_sun, 0.0)
-            light = ambient + 0.85 * lit
+            light = amb_v + gain_v * lit if vary else ambient + 0.85 * lit
         c0 = np.float32(r * light)
         c1 = np.float32(g * light)
         c2 = np.float32(b * light)
@@ -500,6 +875,7 @@ def render(
     *,
     labels: bool = False,
     palette: np.ndarray | None = None,
+    variety: RenderVariety | None = None,
 ) -> Frame:
     """Render the camera at a pose (position NED, attitude body->NED).
 
@@ -507,7 +883,11 @@ def render(
         labels: also fill ``Frame.hit_material`` and ``Frame.hit_kind`` (per-pixel training labels).
         palette: (32, 3) float32 RGB in [0, 1] per ``Material`` in place of the built-in one (domain
             randomisation for training data); None keeps the built-in palette.
+        variety: lighting, tint, texture, stain and shadow randomisation for training data
+            (``RenderVariety``); None (or a neutral variety) renders the fixed look, byte for byte.
     """
+    if variety is not None and not isinstance(variety, RenderVariety):
+        raise ValueError(f"variety must be a RenderVariety or None, got {type(variety).__name__}")
     if palette is not None and (palette.shape != _MAT_RGB.shape or palette.dtype != np.float32):
         raise ValueError(
             f"palette must be float32 of shape {_MAT_RGB.shape}, got {palette.dtype} {palette.shape}"
@@ -536,6 +916,7 @@ def render(
         ts, ii, jj, kinds, steps, dirs, origin[0], grid.height, grid.mat, grid.region, shadow.shadow,
         grid.res, grid.n0, grid.e0, sun, _MAT_RGB if palette is None else palette, _ACTOR_RGB, _FACADE_RGB,
         ray_len, grid.cls, depth, cls, out, vignette.reshape(-1), seed, SENSOR_NOISE,
+        _variety_params(variety, 1.0 / camera.focal_px),
     )  # fmt: skip
     depth_img = depth.reshape(h, w)
     hit_material, hit_kind = _hit_labels(grid, ii, jj, kinds, dirs, (h, w)) if labels else (None, None)

@@ -69,6 +69,12 @@ class Material(enum.IntEnum):
     CAR_PAINT = 19
     CLOTH = 20
     PAINT_TEXT = 21  # painted letters on a roof ("LAND HERE")
+    CORRUGATED = 22  # corrugated sheet (metal or fibre cement): ridges 7-18 cm apart, sheet joints
+    SLATE = 23  # slate or flat concrete tiles: small dark overlapping rows
+    SHINGLE = 24  # asphalt shingles: staggered tabs
+    SEAM_METAL = 25  # standing-seam metal: raised seams 0.4-0.6 m apart
+    GLASS = 26  # skylights, roof windows, greenhouse panes
+    POOL = 27  # swimming-pool water (light cyan over tiles)
 
 
 ROOF_MATERIALS = (Material.GRAVEL, Material.CONCRETE, Material.TAR, Material.MEMBRANE, Material.TILES)
