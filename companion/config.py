@@ -295,7 +295,7 @@ class ReasonerConfig(_Section):
     hedge: str = ""
     hedge_after_s: float = Field(default=4.0, gt=0)
     override_lone_no_after: int = Field(default=2, ge=1)
-    onboard_judge: Literal["cues", "landnet"] = "cues"
+    onboard_judge: Literal["cues", "landnet"] = "landnet"
     profiles: dict[str, LvlmProfileConfig] = Field(default_factory=dict, strict=False)
 
 

@@ -633,8 +633,8 @@ def test_a_new_profile_needs_base_url_and_model(in_tmp: Path) -> None:
 
 
 def test_reasoner_onboard_judge_from_file_and_env(in_tmp: Path) -> None:
-    assert CompanionConfig().reasoner.onboard_judge == "cues"
-    path = write(Path("companion.toml"), '[reasoner]\nonboard_judge = "landnet"\n')
-    assert load_config(path, {}, {}).reasoner.onboard_judge == "landnet"
-    env = {"LANDFALL_REASONER_ONBOARD_JUDGE": "cues"}
-    assert load_config(path, env, {}).reasoner.onboard_judge == "cues"
+    assert CompanionConfig().reasoner.onboard_judge == "landnet"
+    path = write(Path("companion.toml"), '[reasoner]\nonboard_judge = "cues"\n')
+    assert load_config(path, {}, {}).reasoner.onboard_judge == "cues"
+    env = {"LANDFALL_REASONER_ONBOARD_JUDGE": "landnet"}
+    assert load_config(path, env, {}).reasoner.onboard_judge == "landnet"

@@ -138,10 +138,13 @@ def test_scene_reading_phrases_say_what_and_where() -> None:
 
 
 # --- the onboard switch ---------------------------------------------------------------------------------
-def test_onboard_judge_defaults_to_cues_and_rejects_unknown() -> None:
+def test_companion_defaults_to_landnet_the_class_to_cues_and_unknown_is_refused() -> None:
+    # The companion's configuration picks the learned judge; a bare OnboardReasoner (library use,
+    # the cue tests) keeps the hand-written cues.
+    assert ReasonerConfig().onboard_judge == "landnet"
+    assert build_cascade(ReasonerConfig()).onboard.judge == "landnet"
     assert OnboardReasoner().judge == "cues"
     assert OnboardReasoner().landnet is None
-    assert ReasonerConfig().onboard_judge == "cues"
     with pytest.raises(ValueError, match="unknown onboard judge 'net'"):
         OnboardReasoner(judge="net")
 
@@ -154,7 +157,7 @@ def test_onboard_landnet_missing_weights_fail_start_up_naming_the_file(
         ConfigError, match=r"reasoner.onboard_judge = 'landnet': .*gone.onnx: model file not found"
     ):
         build_cascade(ReasonerConfig(onboard_judge="landnet"))
-    assert build_cascade(ReasonerConfig()).onboard is not None  # cues need no file
+    assert build_cascade(ReasonerConfig(onboard_judge="cues")).onboard is not None  # cues need no file
 
 
 def test_onboard_landnet_rank_images_only(judge: OnboardReasoner) -> None:

@@ -4,7 +4,7 @@ In place of the hand-written image cues (:mod:`companion.reasoning.image_cues`),
 the images-only rank read the image with :class:`companion.reasoning.landnet.LandNet`. Everything that is
 not the image's business stays as :class:`companion.reasoning.onboard.OnboardReasoner` has it: the LiDAR
 veto, the street-level and built-up rules, binding "no"s, the ranking with Surface ID's geometry (which
-keeps the image cues in this milestone).
+keeps the image cues' hazard terms).
 
 **Confirm.** The net reads the site window: the middle ``FRAME_WINDOW`` of each side of a whole camera
 frame (16:9, ``FRAME_ASPECT``), else the middle ``CROP_WINDOW`` of a close-up cut around the site (or

@@ -40,8 +40,9 @@ LiDAR check is clear (nothing taller than 0.3 m inside the rotor disc) one raise
 tolerated (``max_raised_critical``): it stands outside the disc, or is a false sighting. Without a LiDAR
 check nothing about raised objects is relaxed.
 
-**Judges.** ``judge="cues"`` (the default) reads images with the hand-written cues above;
-``judge="landnet"`` reads them with the learned LandNet-S (:mod:`companion.reasoning.net_judge` says
+**Judges.** ``judge="cues"`` (this class's default) reads images with the hand-written cues above;
+``judge="landnet"`` (the companion's default, ``reasoner.onboard_judge``: far better on real aerial
+photographs) reads them with the learned LandNet-S (:mod:`companion.reasoning.net_judge` says
 how its reading replaces the cues in confirm and in images-only rank; geometry, the LiDAR veto and the
 binding rules are the same). Its weights load at construction: a missing or corrupt file is a
 :class:`~companion.reasoning.landnet.LandNetError` naming it.

@@ -58,7 +58,7 @@ built at once and shadows tile by tile on demand. Build plus LiveWorld: 10-50 ms
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TypeVar
 
@@ -1368,24 +1368,18 @@ class _Builder:
 
     def build(self) -> World:
         k = self.kind
-        if k == "house":
-            self.house("gable")
-        elif k == "hip_house":
-            self.house("hip")
-        elif k == "barn":
-            self.barn_kind()
-        elif k == "flat_roof":
-            self.flat_roof()
-        elif k == "garden":
-            self.garden()
-        elif k == "street":
-            self.street()
-        elif k == "car_park":
-            self.car_park()
-        elif k == "pond":
-            self.pond()
-        else:
-            self.yard()
+        scenes: dict[str, Callable[[], None]] = {
+            "house": lambda: self.house("gable"),
+            "hip_house": lambda: self.house("hip"),
+            "barn": self.barn_kind,
+            "flat_roof": self.flat_roof,
+            "garden": self.garden,
+            "street": self.street,
+            "car_park": self.car_park,
+            "pond": self.pond,
+            "yard": self.yard,
+        }
+        scenes[k]()
         self.ensure_clutter()
         sun = Sun(self.u(0.0, 360.0), self.u(*SUN_ELEVATION_DEG))
         levels = ", ".join(f"{r.style}:{r.clutter}" for r in self.roofs) or "no roofs"
