@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml
 # build); the demo does not need it.
 $(DEPTH_STAMP): $(STAMP)
 	$(VENV)/bin/pip install --quiet 'torch==2.13.0'
-	$(VENV)/bin/pip install --quiet -e '.[dev,depth,bench]'
+	$(VENV)/bin/pip install --quiet -e '.[dev,depth,bench,train]'
 	touch $(DEPTH_STAMP)
 
 demo: $(STAMP)

@@ -246,3 +246,37 @@ def test_vignette_patches_are_labelled_varied_and_the_same_for_the_same_seed() -
     assert np.array_equal(labels, labels_again)
     other, _, _ = render_vignettes(3, 2, 4, seed=6)
     assert not np.array_equal(rgb, other)
+
+
+OPEN_FIELD = """
+name = "open_field"
+description = "a bare flat field and nothing else"
+extent = { north = [-60.0, 60.0], east = [-60.0, 60.0] }
+resolution_m = 0.5
+ground = "soil"
+launch = { north = 0.0, east = 0.0, height_m = 60.0, yaw_deg = 0.0 }
+"""
+
+
+def test_landnet_confirm_open_country_field_passes_but_not_among_buildings(
+    judge: OnboardReasoner, tmp_path: Path
+) -> None:
+    # The net's clear-site probability means a clear roof; a bare field measured at street level with
+    # no roof measured in the recovery (open country) passes when nothing stands on it. Among
+    # buildings the same field is a last resort (street level), as with the cues.
+    from simbridge.world.scenario_file import load_scenario_file
+
+    path = tmp_path / "open_field.toml"
+    path.write_text(OPEN_FIELD)
+    field = LiveWorld(load_scenario_file(path))
+    frame, check = close_up(field, (0.0, 0.0), 0.0, HEIGHT_M)
+    image = site_cut(field, frame, HEIGHT_M)
+    d = judge.confirm_sync(ConfirmRequest(image, check=check, site_up_m=0.0, built_up=False))
+    assert d.accept, d.rationale
+    assert "open country" in d.rationale
+    d = judge.confirm_sync(ConfirmRequest(image, check=check, site_up_m=0.0, built_up=True))
+    assert not d.accept
+    assert d.binding
+    assert "street_level" in d.hazards
+    d = judge.confirm_sync(ConfirmRequest(image))  # no geometry: the image alone, a clear roof or nothing
+    assert not d.accept, d.rationale

@@ -11,9 +11,12 @@ frame (16:9, ``FRAME_ASPECT``), else the middle ``CROP_WINDOW`` of a close-up cu
 ``ConfirmParams.site_window``). Water over ``max_water`` of the window's cells, or painted markings over
 ``MAX_MARKING_SHARE`` (any at street level), veto it bindingly, as the cues' water and lane markings do.
 Otherwise the site is accepted when the net's clear-site probability reaches the sidecar's threshold
-(calibrated on simbridge renders). A rejection names what was seen where (objects, people, vehicles,
-vegetation, road surface, ...). With a critical alarm and a clear LiDAR disc, one group of objects in view
-is tolerated, as the cues' one raised blob is.
+(calibrated on simbridge renders). That probability means a clear *roof*; in open country (a site
+Surface ID measured at street level, no roof measured during the recovery: ``built_up`` false) level
+ground with nothing on it passes too: no object, person, vehicle, water or marking in the window, road
+and trees within their limits (a bare field, a yard, a lawn), as with the cues. A rejection names what
+was seen where (objects, people, vehicles, vegetation, road surface, ...). With a critical alarm and a
+clear LiDAR disc, one group of objects in view is tolerated, as the cues' one raised blob is.
 
 **Rank (images only).** Score = crop size term - ``SceneReading.hazard`` (``HAZARD_SCALE`` x (1 -
 clear probability)): continuous, so ties are rare.
@@ -92,7 +95,10 @@ def confirm_reading(
     note = ""
     groups = sum(r.count(c) for c in COUNTED)
     vegetation = r.share("low_vegetation") + r.share("tree")
-    if not vetoes and r.clear_p < net.clear_threshold:
+    open_country = street_level and not request.built_up
+    if not vetoes and r.clear_p < net.clear_threshold and open_country and _open_ground(r, p, groups):
+        note = " (open country: level ground with nothing on it; the net's clear site means a clear roof)"
+    elif not vetoes and r.clear_p < net.clear_threshold:
         lidar_clear = request.check is not None and request.check.clear
         tolerate = (
             request.critical
@@ -105,6 +111,18 @@ def confirm_reading(
         elif not tolerate:
             vetoes.append(_not_clear(r, net.clear_threshold, groups, vegetation, p.max_vegetation))
     return vetoes, categorical, note, r
+
+
+def _open_ground(r: SceneReading, p: ConfirmParams, groups: int) -> bool:
+    """A field, a yard or a lawn with nothing on it: no object, person, vehicle, water or marking seen,
+    road at most ``max_street_asphalt`` and trees at most ``max_vegetation`` of the window."""
+    hazards = r.share("water") + r.share("marking")
+    return (
+        groups == 0
+        and hazards == 0.0
+        and r.share("road") <= p.max_street_asphalt
+        and r.share("tree") <= p.max_vegetation
+    )
 
 
 def _not_clear(
