@@ -105,13 +105,15 @@ VIGNETTE_SHARES = {
 }  # fmt: skip
 
 
-def _cells(grid: WorldGrid, classes: tuple[int, ...], name: str, rng: np.random.Generator) -> np.ndarray:
+def _cells(
+    grid: WorldGrid, classes: tuple[int, ...], name: str, rng: np.random.Generator, interior: np.ndarray
+) -> np.ndarray:
     """Flat indices of up to ``MAX_CELLS`` cells of a stratum (drawn by ``rng`` when there are more)."""
     mask = np.isin(grid.cls, classes)
     if name == "marking":
         mask |= grid.mat == int(M.LANE_MARKING)
     if name == "roof_interior":
-        mask &= _interior_m(grid) >= INTERIOR_M
+        mask &= interior >= INTERIOR_M
     idx = np.flatnonzero(mask)
     if idx.size > MAX_CELLS:
         idx = rng.choice(idx, MAX_CELLS, replace=False)
@@ -119,17 +121,9 @@ def _cells(grid: WorldGrid, classes: tuple[int, ...], name: str, rng: np.random.
 
 
 def _interior_m(grid: WorldGrid) -> np.ndarray:
-    """Distance (metres) of each cell to the nearest cell that is not roof surface, flat or pitched
-    (cached per grid: the class raster of a roof does not change)."""
-    key = (id(grid), grid.res, grid.shape)
-    if _INTERIOR.get("key") != key:
-        roof = np.isin(grid.cls, (int(C.ROOF_FLAT), int(C.ROOF_PITCHED))).astype(np.uint8)
-        dist = np.asarray(cv2.distanceTransform(roof, cv2.DIST_L2, 5), np.float32) * np.float32(grid.res)
-        _INTERIOR.update(key=key, dist=dist)
-    return np.asarray(_INTERIOR["dist"])
-
-
-_INTERIOR: dict[str, Any] = {}
+    """Distance (metres) of each cell to the nearest cell that is not roof surface, flat or pitched."""
+    roof = np.isin(grid.cls, (int(C.ROOF_FLAT), int(C.ROOF_PITCHED))).astype(np.uint8)
+    return np.asarray(cv2.distanceTransform(roof, cv2.DIST_L2, 5), np.float32) * np.float32(grid.res)
 
 
 def _palette(rng: np.random.Generator) -> np.ndarray:
@@ -157,8 +151,9 @@ def render_city(city_seed: int, count: int, seed: int) -> tuple[np.ndarray, np.n
     world.sun = Sun(float(rng.uniform(0.0, 360.0)), float(rng.uniform(*SUN_ELEVATION_DEG)))
     live = LiveWorld(world, camera=CameraModel(PATCH_PX, PATCH_PX, 50.0), actor_seed=city_seed)
     out = _Patches(count)
+    interior = _interior_m(live.grid)
     static = {
-        name: _cells(live.grid, classes, name, rng)
+        name: _cells(live.grid, classes, name, rng, interior)
         for name, _w, classes in STRATA
         if name not in ("vehicle", "person")
     }
@@ -169,9 +164,9 @@ def render_city(city_seed: int, count: int, seed: int) -> tuple[np.ndarray, np.n
             t_s += float(rng.uniform(*ACTOR_STEP_S))
             live.sync(t_s)  # every actor stamped: the strata of vehicles and people come from the grid
             cells = dict(static)
-            cells["vehicle"] = _cells(live.grid, (C.VEHICLE,), "vehicle", rng)
-            cells["person"] = _cells(live.grid, (C.PEDESTRIAN,), "person", rng)
-        out.add(k, _view(live, cells, GSD_M, rng, variety=None), t_s)
+            cells["vehicle"] = _cells(live.grid, (C.VEHICLE,), "vehicle", rng, interior)
+            cells["person"] = _cells(live.grid, (C.PEDESTRIAN,), "person", rng, interior)
+        out.add(k, _view(live, cells, interior, GSD_M, rng, variety=None), t_s)
     return out.rgb, out.labels, out.meta
 
 
@@ -189,10 +184,11 @@ def render_vignettes(first: int, worlds: int, per_world: int, seed: int) -> tupl
         rng = np.random.default_rng([seed, VIGNETTE_SALT, v])
         world = build_vignette(v)
         live = LiveWorld(world, camera=CameraModel(PATCH_PX, PATCH_PX, 50.0), actor_seed=v)
-        cells = {name: _cells(live.grid, classes, name, rng) for name, _w, classes in STRATA}
+        interior = _interior_m(live.grid)
+        cells = {name: _cells(live.grid, classes, name, rng, interior) for name, _w, classes in STRATA}
         for _ in range(per_world):
             variety = RenderVariety.sample(rng)
-            view = _view(live, cells, VIGNETTE_GSD_M, rng, variety=variety, shares=VIGNETTE_SHARES)
+            view = _view(live, cells, interior, VIGNETTE_GSD_M, rng, variety=variety, shares=VIGNETTE_SHARES)
             out.add(k, view, 0.0, vignette=v)
             k += 1
     return out.rgb, out.labels, out.meta
@@ -216,6 +212,7 @@ class _Patches:
 def _view(
     live: LiveWorld,
     cells: dict[str, np.ndarray],
+    interior: np.ndarray,
     gsd_range: tuple[float, float],
     rng: np.random.Generator,
     variety: RenderVariety | None,
@@ -223,7 +220,8 @@ def _view(
 ) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
     """One labelled view: a stratum (``STRATA``, among those with cells), a cell of it near the middle,
     a ground resolution in ``gsd_range`` (log-uniform), a lens, a tilt, a heading, a weather and a
-    palette. ``shares`` replaces the strata's shares. Returns (RGB, class map, metadata)."""
+    palette. ``interior``: :func:`_interior_m` of the world; ``shares`` replaces the strata's shares.
+    Returns (RGB, class map, metadata)."""
     grid = live.grid
     names = [n for n, _w, _c in STRATA]
     share = shares or {n: w for n, w, _c in STRATA}
@@ -232,7 +230,7 @@ def _view(
     i, j = divmod(int(rng.choice(cells[stratum])), grid.shape[1])
     gsd_max = gsd_range[1]
     if stratum == "roof_interior":  # the footprint's half side within the clear distance
-        clear_m = float(_interior_m(grid)[i, j])
+        clear_m = float(interior[i, j])
         gsd_max = max(gsd_range[0], min(gsd_max, clear_m / (0.5 * PATCH_PX)))
     gsd = math.exp(rng.uniform(math.log(gsd_range[0]), math.log(gsd_max)))
     hfov = float(rng.uniform(*HFOV_DEG))
