@@ -568,13 +568,15 @@ def test_a_five_second_link_loss_during_descent_resumes_on_the_same_site(
         time.sleep(5.0)  # the link is down for 5 s of wall time
         relays[0].restore()
         td = _wait_touchdown(rig, timeout_s=200)
+        # the relay carries the autopilot's landed state to the companion after the touchdown: close it
+        # only once the companion has seen it (closing at the touchdown raced the companion under load)
+        log = rig.wait_log("recovery ended: landed", timeout_s=60)
     finally:
         for r in relays:
             r.close()
     assert td["surface"] == "rooftop_clear", (td, rig.log_text()[-3000:])
     assert td["safe"] is True
     assert relays[0].counts["blacked_out"] > 0
-    log = rig.wait_log("recovery ended: landed", timeout_s=60)
     assert "link to the autopilot lost (no LOCAL_POSITION_NED for 3 s)" in log
     back = float(re.search(r"link back after ([0-9.]+) s", log).group(1))  # type: ignore[union-attr]
     assert 4.5 < back < 10.0
