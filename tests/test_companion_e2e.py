@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import Rig
+from tests.views import open_field_toml
 
 pytestmark = pytest.mark.slow
 
@@ -252,16 +253,6 @@ def test_nothing_flat_explores_then_lands_when_the_budget_runs_out(
     assert td["safe"] is False  # and the ground truth agrees that a gable roof was no place to land
 
 
-OPEN_FIELD = """
-name = "open_field"
-description = "a bare flat field and nothing else"
-extent = { north = [-250.0, 250.0], east = [-250.0, 250.0] }
-resolution_m = 0.5
-ground = "soil"
-launch = { north = 0.0, east = 0.0, height_m = 125.0, yaw_deg = 0.0 }
-"""
-
-
 def test_out_of_lidar_range_descends_into_it_instead_of_climbing(
     start_rig: Callable[..., Rig], tmp_path: Path
 ) -> None:
@@ -269,7 +260,7 @@ def test_out_of_lidar_range_descends_into_it_instead_of_climbing(
     ground. Climbing or moving would keep it blind: the companion descends to 70 m, then finds the
     field flat and lands on it."""
     scenario = tmp_path / "open_field.toml"
-    scenario.write_text(OPEN_FIELD)
+    scenario.write_text(open_field_toml(250.0, 125.0))
     rig = start_rig(["--scenario", str(scenario), "--autopilot", "px4", "--speed", "8"])
     _raise_alarm(rig, "GPS spoofing", "high")
     td = _wait_touchdown(rig, timeout_s=200)

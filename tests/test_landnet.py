@@ -18,7 +18,7 @@ from companion.reasoning.landnet import DEFAULT_MODEL, LandNet, LandNetError, Sc
 from companion.reasoning.onboard import OnboardReasoner
 from companion.reasoning.tiers import build_cascade
 from simbridge.world.live import LiveWorld
-from tests.views import close_up, site_cut
+from tests.views import close_up, open_field_toml, site_cut
 
 
 @pytest.fixture(scope="module")
@@ -248,16 +248,6 @@ def test_vignette_patches_are_labelled_varied_and_the_same_for_the_same_seed() -
     assert not np.array_equal(rgb, other)
 
 
-OPEN_FIELD = """
-name = "open_field"
-description = "a bare flat field and nothing else"
-extent = { north = [-60.0, 60.0], east = [-60.0, 60.0] }
-resolution_m = 0.5
-ground = "soil"
-launch = { north = 0.0, east = 0.0, height_m = 60.0, yaw_deg = 0.0 }
-"""
-
-
 def test_landnet_confirm_open_country_field_passes_but_not_among_buildings(
     judge: OnboardReasoner, tmp_path: Path
 ) -> None:
@@ -267,7 +257,7 @@ def test_landnet_confirm_open_country_field_passes_but_not_among_buildings(
     from simbridge.world.scenario_file import load_scenario_file
 
     path = tmp_path / "open_field.toml"
-    path.write_text(OPEN_FIELD)
+    path.write_text(open_field_toml(60.0, 60.0))
     field = LiveWorld(load_scenario_file(path))
     frame, check = close_up(field, (0.0, 0.0), 0.0, HEIGHT_M)
     image = site_cut(field, frame, HEIGHT_M)

@@ -100,3 +100,16 @@ def site_cut(w: LiveWorld, frame: Frame, height_m: float, half_m: float = 6.0) -
     h, wd = frame.rgb.shape[:2]
     half = int(w.camera.focal_px * half_m / height_m)
     return crop(frame, site_box(*w.camera.principal_px, half, wd, h))
+
+
+def open_field_toml(half_m: float, launch_height_m: float) -> str:
+    """A scenario file of a bare flat soil field ``2 * half_m`` across and nothing else, launch above its
+    middle."""
+    return f"""
+name = "open_field"
+description = "a bare flat field and nothing else"
+extent = {{ north = [{-half_m}, {half_m}], east = [{-half_m}, {half_m}] }}
+resolution_m = 0.5
+ground = "soil"
+launch = {{ north = 0.0, east = 0.0, height_m = {launch_height_m}, yaw_deg = 0.0 }}
+"""
