@@ -316,7 +316,7 @@ def analyse(rgb: np.ndarray, *, site: bool = False, window: float | None = None)
         if window is None:
             wide = rgb.shape[1] >= SQUARE_ASPECT * rgb.shape[0]
             window = SITE_WINDOW_FRAME if wide else SITE_WINDOW_CROP
-        small = _working(_centre(rgb, window))
+        small = _working(centre(rgb, window))
     else:
         small = _working(rgb)
     h, w = small.shape[:2]
@@ -423,7 +423,8 @@ def check_rgb(rgb: object) -> np.ndarray:
     return np.ascontiguousarray(rgb)
 
 
-def _centre(rgb: np.ndarray, frac: float) -> np.ndarray:
+def centre(rgb: np.ndarray, frac: float) -> np.ndarray:
+    """The middle ``frac`` of each side of an image (at least one pixel), contiguous."""
     h, w = rgb.shape[:2]
     ch, cw = max(1, round(h * frac)), max(1, round(w * frac))
     y0, x0 = (h - ch) // 2, (w - cw) // 2

@@ -28,6 +28,7 @@ import math
 from typing import TYPE_CHECKING, Any
 
 from companion.reasoning.base import ConfirmRequest, RankRequest
+from companion.reasoning.image_cues import SITE_WINDOW_CROP, SITE_WINDOW_FRAME, centre, check_rgb
 from companion.reasoning.landnet import COUNTED, LandNet, SceneReading
 
 if TYPE_CHECKING:
@@ -37,8 +38,8 @@ __all__ = ["confirm_reading", "rank_readings", "site_window"]
 
 FRAME_ASPECT = 16.0 / 9.0  # a whole camera frame (the companion's camera), within ASPECT_TOL
 ASPECT_TOL = 0.05
-FRAME_WINDOW = 0.3  # as image_cues.SITE_WINDOW_FRAME
-CROP_WINDOW = 0.67  # as image_cues.SITE_WINDOW_CROP
+FRAME_WINDOW = SITE_WINDOW_FRAME
+CROP_WINDOW = SITE_WINDOW_CROP
 MAX_MARKING_SHARE = 0.02  # of the window's cells: a painted line, not one stray cell
 
 
@@ -47,13 +48,6 @@ def site_window(h: int, w: int, override: float | None) -> float:
     if override is not None:
         return override
     return FRAME_WINDOW if abs(w / h - FRAME_ASPECT) <= ASPECT_TOL * FRAME_ASPECT else CROP_WINDOW
-
-
-def _centre(rgb: Any, frac: float) -> Any:
-    h, w = rgb.shape[:2]
-    ch, cw = max(1, round(h * frac)), max(1, round(w * frac))
-    y0, x0 = (h - ch) // 2, (w - cw) // 2
-    return rgb[y0 : y0 + ch, x0 : x0 + cw]
 
 
 def confirm_reading(
@@ -72,10 +66,8 @@ def confirm_reading(
     Raises:
         ValueError: an image that is not a non-empty (H, W, 3) uint8 array.
     """
-    image = request.image
-    if getattr(image, "ndim", 0) == 3 and image.shape[0] and image.shape[1]:
-        image = _centre(image, site_window(image.shape[0], image.shape[1], p.site_window))
-    r = net.read(image)
+    image = check_rgb(request.image)
+    r = net.read(centre(image, site_window(image.shape[0], image.shape[1], p.site_window)))
     vetoes = list(lidar_vetoes)
     categorical = False
     if r.share("water") > p.max_water:
