@@ -55,6 +55,14 @@ INPUT_PX = 128
 POS_WEIGHT = {"object": 3.0, "person": 4.0, "vehicle": 3.0, "marking": 2.0}
 CLEAR_POS_WEIGHT = 2.0
 MODEL = Path("companion/reasoning/models/landnet-s")
+WIDTHS = (16, 32, 64, 96)
+
+
+def _widths(text: str) -> tuple[int, int, int, int]:
+    parts = tuple(int(v) for v in text.split(","))
+    if len(parts) != 4 or min(parts) < 1:
+        raise argparse.ArgumentTypeError(f"four positive channel counts expected, got {text!r}")
+    return parts
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -77,6 +85,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--val-vignettes", type=int, default=VAL_VIGNETTES)
     p.add_argument("--workers", type=int, default=2, help="processes rendering patches")
     p.add_argument("--threads", type=int, default=1, help="torch threads")
+    p.add_argument(
+        "--widths", type=_widths, default=WIDTHS, help="channels of the net's four stages, e.g. 16,32,64,96"
+    )
     return p
 
 
@@ -138,7 +149,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                         "tests/onboard_scene.toml: never rendered for training",
         },
         "training": {
-            "steps_planned": args.steps, "steps_done": steps_done, "batch": args.batch, "lr": args.lr,
+            "widths": list(args.widths), "steps_planned": args.steps, "steps_done": steps_done,
+            "batch": args.batch, "lr": args.lr,
             "render_s": round(t_render, 1), "train_s": round(t_train, 1), "threads": args.threads,
             "torch": _torch_version(), "python": platform.python_version(), "commit": _commit(),
         },
@@ -157,7 +169,7 @@ def fit(x: np.ndarray, y: np.ndarray, args: argparse.Namespace) -> tuple[Any, in
     torch.manual_seed(args.seed)
     torch.set_num_threads(args.threads)
     torch.use_deterministic_algorithms(True)
-    net = LandNetS(len(CLASSES))
+    net = LandNetS(len(CLASSES), args.widths)
     opt = torch.optim.AdamW(net.parameters(), lr=args.lr, weight_decay=1e-4)
     warm: int = max(1, min(200, int(args.steps) // 20))
 

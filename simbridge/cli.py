@@ -13,7 +13,8 @@ from pathlib import Path
 from simbridge.geo import GeoOrigin
 from simbridge.link import LinkUrl, LinkUrlError, parse_signing_key
 from simbridge.scenarios import scenario_names
-from simbridge.sim import SimBridge, SimConfig
+from simbridge.sim import AUTOPILOTS, SimConfig, make_bridge
+from simbridge.sitl import ENV_BINARY, SitlError
 from simbridge.wind import WindConfig
 
 
@@ -65,7 +66,19 @@ def build_parser() -> argparse.ArgumentParser:
         default="udpout:127.0.0.1:14550",
         help="MAVLink endpoint: udpout:HOST:PORT (send to), udpin:HOST:PORT or udp:PORT (listen)",
     )
-    p.add_argument("--autopilot", choices=("px4", "ardupilot"), default="px4")
+    p.add_argument(
+        "--autopilot",
+        choices=AUTOPILOTS,
+        default="px4",
+        help="px4 or ardupilot: the emulation; ardupilot-sitl: real ArduCopter firmware (SITL) as a child "
+        "process, with simbridge as its physics",
+    )
+    p.add_argument(
+        "--sitl",
+        metavar="PATH",
+        help=f"ArduCopter SITL binary for --autopilot ardupilot-sitl (default: ${ENV_BINARY}, else "
+        "../shared/sitl/ardupilot/arducopter beside the repository)",
+    )
     p.add_argument(
         "--scenario",
         default="flat",
@@ -141,6 +154,8 @@ def config_from_args(args: argparse.Namespace) -> SimConfig:
             key = parse_signing_key(args.signing_key)
         except ValueError as exc:
             raise ValueError(f"--signing-key: {exc}") from None
+    if args.sitl and args.autopilot != "ardupilot-sitl":
+        raise ValueError("--sitl: only with --autopilot ardupilot-sitl")
     known = scenario_names()
     if args.scenario not in known and not args.scenario.endswith(".toml"):
         names = ", ".join(known)
@@ -173,6 +188,7 @@ def config_from_args(args: argparse.Namespace) -> SimConfig:
         weather=args.weather,
         sensors=sensors,
         launch=args.launch,
+        sitl=args.sitl,
     )
 
 
@@ -189,9 +205,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         config = config_from_args(args)
     except ValueError as exc:
         parser.error(str(exc))
-    bridge = SimBridge(config)
-    with contextlib.suppress(KeyboardInterrupt):
-        asyncio.run(bridge.run())
+    try:
+        bridge = make_bridge(config)
+        with contextlib.suppress(KeyboardInterrupt):
+            asyncio.run(bridge.run())
+    except SitlError as exc:
+        print(f"simbridge: {exc}", file=sys.stderr)
+        return 2
     return 0
 
 

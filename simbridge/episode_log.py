@@ -2,7 +2,9 @@
 
 Every line has ``t_s`` (simulated seconds). State lines have ``"event": "state"``; event lines
 name the event: ``armed``, ``disarmed``, ``mode`` (``mode``: the new mode's name), ``failsafe``,
-``touchdown`` (``pos_ned_m``, ``surface``, ``safe``, ``reasons``), ``start`` and ``stop``.
+``touchdown`` (``pos_ned_m``, ``surface``, ``safe``, ``reasons``), ``ready`` (``pos_ned_m``,
+``autopilot``, ``start``: the vehicle holds at its launch pose, or on the ground can arm; harnesses raise
+their alarm after it: real firmware takes tens of simulated seconds to get there), ``start`` and ``stop``.
 
 The first line, ``start``, says what was flown: ``scenario``, ``autopilot``, ``seed`` (the episode's),
 ``city_seed`` (the procedural city's; null for other scenarios), ``world_digest`` (16 hex digits
@@ -13,6 +15,7 @@ fingerprinting the static world, :meth:`simbridge.world.model.WorldGrid.digest`;
 from __future__ import annotations
 
 import json
+import threading
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -30,18 +33,22 @@ class EpisodeLog:
             path.parent.mkdir(parents=True, exist_ok=True)
             self._fh = path.open("w", encoding="utf-8")
         self._next_state_s = 0.0
+        self._lock = threading.Lock()  # real firmware: state from the lock-step thread, events from both
 
     def event(self, t_s: float, name: str, fields: dict[str, Any]) -> None:
         if self._fh is None:
             return
-        self._fh.write(json.dumps({"t_s": round(t_s, 4), "event": name, **fields}) + "\n")
-        self._fh.flush()
+        line = json.dumps({"t_s": round(t_s, 4), "event": name, **fields}) + "\n"
+        with self._lock:
+            if self._fh is not None:
+                self._fh.write(line)
+                self._fh.flush()
 
     def state(self, s: VehicleState, mode: str, armed: bool, landed_state: int, battery_pct: float) -> None:
         if self._fh is None or s.t_s + 1e-9 < self._next_state_s:
             return
         self._next_state_s = s.t_s + self.STATE_INTERVAL_S
-        self._fh.write(
+        line = (
             json.dumps(
                 {
                     "t_s": round(s.t_s, 4),
@@ -58,8 +65,12 @@ class EpisodeLog:
             )
             + "\n"
         )
+        with self._lock:
+            if self._fh is not None:
+                self._fh.write(line)
 
     def close(self) -> None:
-        if self._fh is not None:
-            self._fh.close()
-            self._fh = None
+        with self._lock:
+            if self._fh is not None:
+                self._fh.close()
+                self._fh = None

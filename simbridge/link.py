@@ -52,7 +52,7 @@ class LinkUrl:
             port = int(port_text)
         except ValueError:
             raise LinkUrlError(f"MAVLink URL {url!r}: port {port_text!r} is not a number") from None
-        if not 0 < port < 65536:
+        if not 0 < port < 65536 and not (port == 0 and scheme == "udpin"):  # udpin port 0: any free port
             raise LinkUrlError(f"MAVLink URL {url!r}: port {port} is out of range")
         return LinkUrl(scheme, host, port)
 
@@ -93,9 +93,10 @@ class MavlinkUdpLink(asyncio.DatagramProtocol):
         *,
         signing_key: bytes | None = None,
         logger: logging.Logger | None = None,
+        dialect: Any = mavlink2,
     ) -> None:
         self.url = LinkUrl.parse(url)
-        self.mav = mavlink2.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
+        self.mav = dialect.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
         self.mav.robust_parsing = True
         self.stats = LinkStats()
         self._handler = handler

@@ -21,6 +21,7 @@ from simbridge.wind import WindModel
 
 FT_M = 0.3048
 LBF_N = 4.4482216152605
+_SLUG_KG = 14.593902937
 GEAR_HEIGHT_M = 0.1524  # CG height above the ground when resting on the gear (F450 Gear.xml)
 MOTOR_COUNT = 4
 _ESC_PROPS = ("fcs/cmdFR_ext_nd", "fcs/cmdAL_ext_nd", "fcs/cmdFL_ext_nd", "fcs/cmdAR_ext_nd")
@@ -74,6 +75,7 @@ class F450Physics:
     DT_S = 1.0 / 120.0
 
     def __init__(self, origin: GeoOrigin, terrain: Terrain, wind: WindModel | None = None) -> None:
+        self.dt_s = self.DT_S
         self.origin = origin
         self.terrain = terrain
         self.wind = wind
@@ -104,6 +106,8 @@ class F450Physics:
         self._terrain_ft = node("position/terrain-elevation-asl-ft")
         self._wind = [node(f"atmosphere/wind-{a}-fps") for a in ("north", "east", "down")]
         self._sim_time = node("simulation/sim-time-sec")
+        self._force = [node(f"forces/fb{a}-total-lbs") for a in ("x", "y", "z")]  # all but gravity
+        self._mass_slugs = node("inertia/mass-slugs")
         self._ground_height_m = 0.0
         self._t0_s = 0.0
         self._last_pos: Vec3 = (0.0, 0.0, 0.0)
@@ -138,12 +142,26 @@ class F450Physics:
         self._t0_s = self._sim_time.get_double_value()
         self._last_pos = (n, e, d)
 
+    def set_dt(self, dt_s: float) -> None:
+        """Step length from now on (``DT_S`` unless an external autopilot sets its own rate)."""
+        if not 0.0 < dt_s <= 0.05:
+            raise ValueError(f"physics step must be in (0, 0.05] s, got {dt_s}")
+        self.dt_s = dt_s
+        self._fdm.set_dt(dt_s)
+
+    def specific_force_frd(self) -> Vec3:
+        """What an accelerometer at the CG reads, body FRD, m/s^2: every force but gravity over the
+        mass (at rest on the gear, (0, 0, -g))."""
+        mass_kg = self._mass_slugs.get_double_value() * _SLUG_KG
+        fx, fy, fz = (n.get_double_value() * LBF_N / mass_kg for n in self._force)
+        return (fx, fy, fz)
+
     def step(self, throttles: tuple[float, float, float, float]) -> None:
-        """Advance one JSBSim step (``DT_S``) with ESC commands in [0, 1], JSBSim motor order."""
+        """Advance one JSBSim step (``dt_s``) with ESC commands in [0, 1], JSBSim motor order."""
         for esc, th in zip(self._esc, throttles, strict=True):
             esc.set_double_value(min(1.0, max(0.0, th)))
         if self.wind is not None:
-            w = self.wind.step(self.DT_S)
+            w = self.wind.step(self.dt_s)
             for node, v in zip(self._wind, w, strict=True):
                 node.set_double_value(v / FT_M)
         pos = self._last_pos  # the ground under the vehicle at the start of the step

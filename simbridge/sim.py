@@ -27,6 +27,8 @@ from simbridge.vehicle import Vehicle
 from simbridge.wind import WindConfig, WindModel
 
 _MAX_BATCH_STEPS = 6  # physics steps between two looks at the socket (50 ms simulated)
+SITL_AUTOPILOT = "ardupilot-sitl"  # real ArduCopter firmware (simbridge.sitl_bridge)
+AUTOPILOTS = ("px4", "ardupilot", SITL_AUTOPILOT)
 
 
 @dataclass(frozen=True, slots=True)
@@ -47,8 +49,22 @@ class SimConfig:
     weather: str = "clear"
     sensors: tuple[str, int] | None = None  # serve sensor frames on this TCP endpoint
     launch: tuple[float, ...] | None = None  # (north, east[, height above ground]) override
+    sitl: str | None = None  # ArduCopter SITL binary (autopilot "ardupilot-sitl"; default: find_arducopter)
 
     def __post_init__(self) -> None:
+        if self.autopilot not in AUTOPILOTS:
+            raise ValueError(f"--autopilot must be one of {', '.join(AUTOPILOTS)}, got {self.autopilot!r}")
+        if self.autopilot == SITL_AUTOPILOT:
+            if self.signing_key is not None:
+                raise ValueError(
+                    "--signing-key: not with ardupilot-sitl (real firmware takes its key over MAVLink, "
+                    "SETUP_SIGNING; simbridge does not set it up yet)"
+                )
+            if not self.mavlink.startswith("udpout:"):
+                raise ValueError(
+                    f"--mavlink {self.mavlink}: ardupilot-sitl sends to a companion (udpout:HOST:PORT, "
+                    "SITL's udpclient serial port); it cannot listen"
+                )
         if not self.speed > 0:
             raise ValueError(f"--speed must be > 0, got {self.speed}")
         if self.start not in ("air", "ground"):
@@ -59,6 +75,15 @@ class SimConfig:
             raise ValueError(f"system id must be 1..255, got {self.system_id}")
         if self.weather not in ("clear", "fog", "rain"):
             raise ValueError(f"--weather must be clear, fog or rain, got {self.weather!r}")
+
+
+def make_bridge(config: SimConfig, logger: logging.Logger | None = None) -> SimBridge:
+    """The bridge for ``config.autopilot``: the emulation, or real ArduCopter SITL."""
+    if config.autopilot == SITL_AUTOPILOT:
+        from simbridge.sitl_bridge import SitlBridge
+
+        return SitlBridge(config, logger)
+    return SimBridge(config, logger)
 
 
 class SimBridge:
@@ -82,21 +107,6 @@ class SimBridge:
         else:
             self.vehicle.reset((n, e, -(ground + GEAR_HEIGHT_M)), sc.launch_yaw_rad)
         self.episode = EpisodeLog(config.episode_log)
-        self.autopilot = Autopilot(
-            flavour_named(config.autopilot), self.vehicle, self.home_ned_m, self._on_event, self._on_text
-        )
-        self.telemetry = Telemetry(self.autopilot, config.origin)
-        self.link = MavlinkUdpLink(
-            config.mavlink,
-            config.system_id,
-            1,
-            self._on_message,
-            signing_key=config.signing_key,
-            logger=self.log,
-        )
-        self.server = AutopilotServer(
-            self.autopilot, self.telemetry, self.link.send, config.system_id, 1, self.log
-        )
         self._stop = asyncio.Event()
         self._sensor_rng = np.random.default_rng(config.seed + 1)
         self.wall_elapsed_s = 0.0
@@ -113,8 +123,38 @@ class SimBridge:
                 "home_ned_m": list(self.home_ned_m),
             },
         )
+        self._init_autopilot()
+
+    def _init_autopilot(self) -> None:
+        """The emulated autopilot, its telemetry, link and server; ready at once."""
+        config = self.config
+        self.autopilot = Autopilot(
+            flavour_named(config.autopilot), self.vehicle, self.home_ned_m, self._on_event, self._on_text
+        )
+        self.telemetry = Telemetry(self.autopilot, config.origin)
+        self.link = MavlinkUdpLink(
+            config.mavlink,
+            config.system_id,
+            1,
+            self._on_message,
+            signing_key=config.signing_key,
+            logger=self.log,
+        )
+        self.server = AutopilotServer(
+            self.autopilot, self.telemetry, self.link.send, config.system_id, 1, self.log
+        )
         if config.start == "air":
             self.autopilot.spawn_in_air(self.vehicle.state)
+        self.episode.event(0.0, "ready", self.ready_fields())
+
+    def ready_fields(self) -> dict[str, Any]:
+        """The ``ready`` event's fields: the vehicle holds at its launch pose (air) or can arm (ground)."""
+        s = self.vehicle.state
+        return {
+            "pos_ned_m": [round(v, 3) for v in s.pos_ned_m],
+            "autopilot": self.config.autopilot,
+            "start": self.config.start,
+        }
 
     # ------------------------------------------------------------------ callbacks
     def _on_message(self, msg: Any, addr: tuple[str, int]) -> None:
@@ -202,6 +242,10 @@ class SimBridge:
         }  # fmt: skip
         return SensorStreamServer(host, port, self._capture, info)
 
+    def time_boot_ms(self, t_s: float) -> int:
+        """The autopilot's boot clock at simulated time ``t_s`` (the emulation's starts with the world's)."""
+        return int(t_s * 1000)
+
     async def _capture(self, want: set[str]) -> Any:
         """Render what ``want`` asks for at the vehicle's pose now (in a worker thread)."""
         from simbridge.sensorstream import SensorFrame
@@ -223,7 +267,7 @@ class SimBridge:
             cam = world.camera
             cx, cy = cam.principal_px
             return SensorFrame(
-                t_s=s.t_s, time_boot_ms=int(s.t_s * 1000), pos_ned_m=s.pos_ned_m, quat_wxyz=s.quat,
+                t_s=s.t_s, time_boot_ms=self.time_boot_ms(s.t_s), pos_ned_m=s.pos_ned_m, quat_wxyz=s.quat,
                 rangefinder_m=world.rangefinder_m(s.pos_ned_m, s.quat),
                 image_rgb=frame.rgb if frame is not None and "image" in want else None,
                 depth_m=frame.depth_m if frame is not None and "depth" in want else None,

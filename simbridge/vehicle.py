@@ -56,5 +56,14 @@ class Vehicle:
         self.battery.step(self.state.thrust_n / MOTOR_COUNT, MOTOR_COUNT, self.DT_S)
         return self.state
 
+    def step_esc(self, throttles: tuple[float, float, float, float]) -> VehicleState:
+        """One physics step with ESC commands from an outside autopilot (JSBSim motor order), the
+        controller bypassed; the battery drains as with ``step``."""
+        self.motors_on = any(th > 0.0 for th in throttles)
+        self.physics.step(throttles)
+        self.state = self.physics.state()
+        self.battery.step(self.state.thrust_n / MOTOR_COUNT, MOTOR_COUNT, self.physics.dt_s)
+        return self.state
+
     def set_limits(self, limits: ControlLimits) -> None:
         self.controller.limits = limits

@@ -24,6 +24,19 @@ from tests.mavclient import MavClient
 from tests.views import LAUNCH, SCENE, WEATHERS, render, world
 
 
+@pytest.fixture
+def arducopter() -> Path:
+    """ArduPilot's SITL build, or a skip saying how to get it (a failure where CI requires it)."""
+    from simbridge.sitl import SitlNotFound, find_arducopter
+
+    try:
+        return find_arducopter()
+    except SitlNotFound as exc:
+        if os.environ.get("LANDFALL_REQUIRE_SITL") == "1":
+            pytest.fail(f"LANDFALL_REQUIRE_SITL=1 but {exc}")
+        pytest.skip(f"real ArduCopter SITL not available: {exc}")
+
+
 def free_udp_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))

@@ -1,0 +1,236 @@
+"""``simbridge --autopilot ardupilot-sitl``: the same world, sensors, episode log and grading, flown by
+real ArduCopter firmware (SITL) instead of the emulation (issue 19).
+
+The vehicle starts on the ground at the launch point, where SITL's home is (its reply positions are
+relative to the resting vehicle there, so the firmware's home and EKF origin are the launch point: a
+companion gets its local frame from the autopilot, as on a real vehicle). SITL's SERIAL0 goes to the
+``--mavlink udpout:`` endpoint (the companion), SERIAL1 to simbridge's own link
+(:mod:`simbridge.sitl_pilot`), which watches modes and arming for the episode log and, with
+``--start air``, flies the firmware to the launch pose before the episode's ``ready`` event. SITL paces
+itself to ``--speed`` (its ``--speedup``); simbridge's lock step answers every frame in its own thread.
+Touchdowns are detected on the world's truth, as the emulation's land detector does, and graded the same.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import math
+import signal
+import time
+from typing import Any
+
+from simbridge.link import LinkUrl
+from simbridge.physics import GEAR_HEIGHT_M, VehicleState
+from simbridge.sim import SimBridge, SimConfig
+from simbridge.sitl import LockStep, SitlError, SitlProcess, claim_instance, find_arducopter, heading_deg
+from simbridge.sitl_pilot import READY_POS_M, READY_SPEED_M_S, SitlNotReady, SitlPilot
+
+_CONTACT_MARGIN_M = 0.15  # as the emulation's land detector
+_LANDED_CONFIRM_S = 0.3
+_AIRBORNE_M = 0.25
+_EKF_GOOD = 0x33F  # attitude, velocities, positions (rel/abs, vertical), predicted positions
+_EKF_CONST_POS = 0x80
+
+
+class TouchdownWatch:
+    """A touchdown on the world's truth: near the ground (gear contact, or the CG within a margin of
+    its resting height), sinking slower than 0.5 m/s for 0.3 s, after having flown."""
+
+    def __init__(self) -> None:
+        self.armed_watch = False
+        self.flown = False
+        self.landed = False
+        self._since: float | None = None
+
+    def update(self, s: VehicleState) -> bool:
+        """True once, at the touchdown."""
+        if not self.armed_watch:
+            return False
+        agl = s.height_agl_m
+        near = s.on_ground or agl < GEAR_HEIGHT_M + _CONTACT_MARGIN_M
+        if agl > GEAR_HEIGHT_M + _AIRBORNE_M:
+            self.flown = True
+            self.landed = False
+        if self.landed or not self.flown:
+            return False
+        if near and abs(s.vel_ned_m_s[2]) < 0.5:
+            if self._since is None:
+                self._since = s.t_s
+            elif s.t_s - self._since >= _LANDED_CONFIRM_S:
+                self.landed = True
+                self._since = None
+                return True
+        else:
+            self._since = None
+        return False
+
+
+class SitlBridge(SimBridge):
+    """:class:`SimBridge` with real ArduCopter SITL in place of the emulation (module docstring)."""
+
+    def __init__(self, config: SimConfig, logger: logging.Logger | None = None) -> None:
+        super().__init__(config, logger)
+
+    def _init_autopilot(self) -> None:
+        cfg = self.config
+        self.binary = find_arducopter(cfg.sitl)
+        self.target = LinkUrl.parse(cfg.mavlink)
+        sc = self.scenario
+        n, e, d = self.home_ned_m
+        self.rest_ned_m = (n, e, d - GEAR_HEIGHT_M)
+        self.vehicle.reset(self.rest_ned_m, sc.launch_yaw_rad)  # real firmware starts on the ground
+        self.launch_ned_m = (n, e, d - sc.launch_height_m)
+        self.touchdown = TouchdownWatch()
+        self.touchdown.armed_watch = cfg.start == "ground"
+        self.boot_offset_ms: float | None = None
+        self.pilot: SitlPilot | None = None
+        self.lockstep: LockStep | None = None
+        self.ready = asyncio.Event()
+        self.failure: SitlError | None = None
+
+    # ------------------------------------------------------------------ clocks
+    def sim_time_s(self) -> float:
+        return self.lockstep.sim_time_s() if self.lockstep is not None else 0.0
+
+    def time_boot_ms(self, t_s: float) -> int:
+        """SITL's boot clock: the lock step's timestamps plus the offset seen in its SYSTEM_TIME."""
+        offset = self.boot_offset_ms if self.boot_offset_ms is not None else 0.0
+        return round((t_s - self.vehicle_t0_s) * 1000 + offset)
+
+    # ------------------------------------------------------------------ lock-step hook (its thread)
+    def _on_state(self, s: VehicleState) -> None:
+        pilot = self.pilot
+        if pilot is not None:
+            v = pilot.view
+            self.episode.state(
+                s, v.mode, v.armed, v.landed_state, 100 * self.vehicle.battery.remaining_fraction
+            )
+        if self.touchdown.update(s):
+            self._call(self._on_event, "touchdown", {"pos_ned_m": [round(c, 3) for c in s.pos_ned_m]})
+        if self.config.duration_s is not None and s.t_s >= self.config.duration_s:
+            self._call(self._stop.set)
+
+    def _call(self, fn: Any, *args: Any) -> None:
+        with contextlib.suppress(RuntimeError):  # the loop is closing
+            self._loop_ref.call_soon_threadsafe(fn, *args)
+
+    def _on_pilot_event(self, name: str, fields: dict[str, Any]) -> None:
+        self._on_event(name, fields)
+
+    def _at_launch(self) -> bool:
+        s = self.vehicle.state
+        ln, le, ld = self.launch_ned_m
+        n, e, d = s.pos_ned_m
+        near = math.dist((n, e, d), (ln, le, ld)) < READY_POS_M
+        return near and math.sqrt(sum(c * c for c in s.vel_ned_m_s)) < READY_SPEED_M_S
+
+    # ------------------------------------------------------------------ running
+    async def run(self) -> None:
+        loop = asyncio.get_running_loop()
+        self._loop_ref = loop
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            with contextlib.suppress(NotImplementedError, RuntimeError):
+                loop.add_signal_handler(sig, self._stop.set)
+        cfg = self.config
+        if cfg.sensors is not None:
+            self._warm_up_sensors()
+        self.vehicle_t0_s = self.vehicle.state.t_s
+        instance, sock = claim_instance()
+        wall0 = time.monotonic()
+        lat, lon, alt = self.config.origin.to_geodetic(*self.rest_ned_m)
+        home = (lat, lon, alt, heading_deg(self.scenario.launch_yaw_rad))
+        try:
+            async with contextlib.AsyncExitStack() as stack:
+                pilot = SitlPilot(cfg.system_id, self._on_pilot_event, self.sim_time_s, logger=self.log)
+                await stack.enter_async_context(pilot)
+                self.pilot = pilot
+                pilot.on_boot_time = self._on_boot_time
+                proc = SitlProcess(
+                    self.binary, instance, home, speedup=cfg.speed,
+                    serial0=(self.target.host, self.target.port), serial1=("127.0.0.1", pilot.port),
+                    sysid=cfg.system_id, logger=self.log,
+                )  # fmt: skip
+                self.process = proc
+                lock = LockStep(sock, self.vehicle, self.rest_ned_m, proc, on_state=self._on_state)
+                self.lockstep = lock
+                proc.start()
+                stack.callback(proc.close)
+                lock.start()
+                stack.callback(lock.stop)
+                if cfg.sensors is not None:
+                    await stack.enter_async_context(self._sensor_server(*cfg.sensors))
+                self.log.info(
+                    "simbridge ardupilot-sitl (instance %d, pid %s) to %s: scenario %s, seed %d, "
+                    "speed %.1fx, start %s", instance, proc.pid, cfg.mavlink, cfg.scenario, cfg.seed,
+                    cfg.speed, cfg.start,
+                )  # fmt: skip
+                await self._supervise(pilot, lock)
+        finally:
+            sock.close()
+            self.wall_elapsed_s = time.monotonic() - wall0
+            self._write_stop()
+
+    async def _supervise(self, pilot: SitlPilot, lock: LockStep) -> None:
+        """Bring the firmware to ``ready``, then run until stopped, the duration, or a SITL failure."""
+        start = asyncio.ensure_future(self._get_ready(pilot))
+        stop = asyncio.ensure_future(self._stop.wait())
+        try:
+            while not self._stop.is_set():
+                if lock.done.is_set():
+                    raise lock.error or SitlError("lock step ended")
+                if start.done() and start.exception() is not None:
+                    raise start.exception()  # type: ignore[misc]
+                await asyncio.wait([stop], timeout=0.2)
+        finally:
+            for task in (start, stop):
+                task.cancel()
+                with contextlib.suppress(asyncio.CancelledError, SitlError):
+                    await task
+
+    async def _get_ready(self, pilot: SitlPilot) -> None:
+        if self.config.start == "air":
+            await pilot.fly_to_launch(self.scenario.launch_height_m, self._at_launch)
+            self.touchdown.armed_watch = True
+        else:
+            await pilot.wait_estimator(lambda: _ekf_ready(pilot.view.ekf_flags, pilot.view.gps_fix))
+        fields = self.ready_fields()
+        fields["sim_s_to_ready"] = round(self.sim_time_s(), 2)
+        self._on_event("ready", fields)
+        self.ready.set()
+
+    def _on_boot_time(self, time_boot_ms: int) -> None:
+        """SITL's clock is the reply timestamps plus a constant: a message stamped ``time_boot_ms`` was
+        sent at or before the lock step's present, so the largest difference seen is the offset."""
+        sample = time_boot_ms - 1000.0 * self.sim_time_s()
+        if self.boot_offset_ms is None or sample > self.boot_offset_ms:
+            self.boot_offset_ms = sample
+
+    def _write_stop(self) -> None:
+        s = self.vehicle.state
+        lock = self.lockstep
+        st = self.pilot.link.stats if self.pilot is not None else None
+        self.episode.event(
+            s.t_s,
+            "stop",
+            {
+                "wall_s": round(self.wall_elapsed_s, 3),
+                "frames": lock.frames if lock else 0,
+                "resent": lock.resent if lock else 0,
+                "skipped": lock.skipped if lock else 0,
+                "pilot_received": st.received if st else 0,
+                "error": str(lock.error).splitlines()[0] if lock and lock.error else None,
+            },
+        )
+        self.episode.close()
+        rtf = s.t_s / max(self.wall_elapsed_s, 1e-9)
+        self.log.info("simbridge (ardupilot-sitl) stopped at t=%.1f s after %.1f s wall (%.1fx)", s.t_s,
+                      self.wall_elapsed_s, rtf)  # fmt: skip
+
+
+def _ekf_ready(flags: int, gps_fix: int) -> bool:
+    return gps_fix >= 3 and flags & _EKF_GOOD == _EKF_GOOD and not flags & _EKF_CONST_POS
+
+
+__all__ = ["SitlBridge", "SitlNotReady", "TouchdownWatch"]
