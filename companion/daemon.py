@@ -26,6 +26,21 @@ MAV_AUTOPILOT_INVALID = 8
 MAV_STATE_STANDBY, MAV_STATE_ACTIVE = 3, 4
 RESULT_ACCEPTED, RESULT_TEMP_REJECTED, RESULT_DENIED, RESULT_UNSUPPORTED, RESULT_IN_PROGRESS = 0, 1, 2, 3, 5
 RESUME_WAIT_S = 60.0  # after a restart mid-recovery: how long to wait for telemetry and sensors
+POSE_WAIT_UPDATES = 3  # position updates a frame newer than the telemetry waits for
+# What the companion needs from the autopilot, Hz: real ArduPilot sends none of it unasked (PX4 and the
+# emulation stream it anyway; asking is harmless there). Asked on the first heartbeat and again while
+# any of it stays missing.
+STREAMS_HZ: dict[int, float] = {
+    31: 20.0,  # ATTITUDE_QUATERNION
+    32: 20.0,  # LOCAL_POSITION_NED
+    245: 5.0,  # EXTENDED_SYS_STATE
+    132: 10.0,  # DISTANCE_SENSOR
+    1: 2.0,  # SYS_STATUS
+    24: 5.0,  # GPS_RAW_INT
+}
+STREAM_PARTS = ("attitude", "position", "landed", "battery", "gps")  # TelemetryCache parts they feed
+STREAM_CHECK_S = 2.0
+MAV_CMD_SET_MESSAGE_INTERVAL = 511
 
 
 class Companion:
@@ -237,7 +252,29 @@ class Companion:
             raise FrameUnavailable(
                 f"frame captured {age_s:.1f} s ago (sensors.max_frame_age_s {self._max_frame_age_s:g})"
             )
-        return frame
+        return await self._posed(frame)
+
+    async def _posed(self, frame: Any) -> Any:
+        """The frame placed with the autopilot's estimate at its capture time (module telemetry):
+        whatever pose the sensor side sent is replaced here, before anything reads it. A frame newer
+        than the telemetry waits for up to ``POSE_WAIT_UPDATES`` position updates."""
+        t = frame.time_boot_ms / 1000.0
+        pose = self.tm.poses.at(t)
+        for _ in range(POSE_WAIT_UPDATES):
+            span = self.tm.poses.span()
+            if pose is not None or span is None or t <= span[1]:
+                break
+            with contextlib.suppress(TimeoutError):
+                await self.tm.wait_update(0.5)
+            pose = self.tm.poses.at(t)
+        if pose is None:
+            span = self.tm.poses.span()
+            covers = f"{span[0]:.2f}..{span[1]:.2f} s" if span else "nothing yet"
+            raise FrameUnavailable(
+                f"no autopilot pose at the frame's capture time ({t:.2f} s of its boot clock; "
+                f"the pose history covers {covers})"
+            )
+        return dataclasses.replace(frame, pos_ned_m=pose.pos_ned_m, quat_wxyz=pose.quat_wxyz)
 
     # ------------------------------------------------------------------ MAVLink out
     def announce(self, severity: int, text: str) -> None:
@@ -254,6 +291,27 @@ class Companion:
                 )
             )
             await asyncio.sleep(self._heartbeat_period)
+
+    async def _streams(self) -> None:
+        """SET_MESSAGE_INTERVAL for ``STREAMS_HZ`` whenever the autopilot is heard but a part it feeds
+        is older than ``STREAM_CHECK_S`` (the first heartbeat, an autopilot that rebooted)."""
+        asked = False
+        while True:
+            heard = self.tm.age_s("heartbeat") < 3.0
+            if heard and any(self.tm.age_s(p) > STREAM_CHECK_S for p in STREAM_PARTS):
+                sysid = self.tm.state.system_id
+                for msg_id, hz in STREAMS_HZ.items():
+                    cmd = self.link.mav.command_long_encode(
+                        sysid, 1, MAV_CMD_SET_MESSAGE_INTERVAL, 0, msg_id, 1e6 / hz, 0, 0, 0, 0, 0
+                    )
+                    self.link.send_to(cmd, sysid, 1)
+                missing = [p for p in STREAM_PARTS if self.tm.age_s(p) > STREAM_CHECK_S]
+                level = logging.INFO if not asked else logging.DEBUG
+                self.log.log(
+                    level, "asked the autopilot for its telemetry streams (missing: %s)", ", ".join(missing)
+                )
+                asked = True
+            await asyncio.sleep(STREAM_CHECK_S)
 
     async def _watchers(self) -> None:
         """Raise alarms from autopilot signals: battery critical, failsafe text, GPS fix lost."""
@@ -318,6 +376,7 @@ class Companion:
             await stack.enter_async_context(self.link)
             tasks = [
                 asyncio.create_task(self._heartbeats(), name="heartbeat"),
+                asyncio.create_task(self._streams(), name="streams"),
                 asyncio.create_task(self._watchers(), name="watchers"),
             ]
             if self._sensors is not None:

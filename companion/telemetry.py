@@ -2,11 +2,19 @@
 
 Updated by :meth:`TelemetryCache.on_message` for every message from the vehicle's autopilot;
 ``await wait_update()`` wakes on each new position so control waits on telemetry, not on sleeps.
+
+The autopilot's estimate of where the vehicle was is kept for ``PoseHistory.HISTORY_S`` seconds of its
+boot clock (LOCAL_POSITION_NED and ATTITUDE_QUATERNION, both stamped ``time_boot_ms``), so a sensor
+frame is placed in the world with the pose the autopilot estimated at the frame's capture time
+(:meth:`PoseHistory.at`), never with a pose the sensor side claims: on a vehicle, the autopilot's EKF is
+all the companion has, in the autopilot's local frame (relative to its EKF origin).
 """
 
 from __future__ import annotations
 
 import asyncio
+import bisect
+import collections
 import math
 import time
 from dataclasses import dataclass, field
@@ -44,11 +52,114 @@ class VehicleState:
         return not self.armed or self.landed_state == LANDED_ON_GROUND
 
 
+@dataclass(frozen=True, slots=True)
+class Pose:
+    """The autopilot's estimate at one instant of its boot clock."""
+
+    t_boot_s: float
+    pos_ned_m: tuple[float, float, float]
+    quat_wxyz: tuple[float, float, float, float]
+
+
+class PoseHistory:
+    """Position and attitude samples of the last ``HISTORY_S`` seconds, by ``time_boot_ms``."""
+
+    HISTORY_S = 10.0
+    EXTRAPOLATE_S = 0.15  # past the newest sample: dead reckoning on its velocity (attitude held)
+    MAX_GAP_S = 1.0  # two samples further apart than this are not interpolated between
+
+    def __init__(self) -> None:
+        self._pt: collections.deque[float] = collections.deque()
+        self._pos: collections.deque[tuple[tuple[float, float, float], tuple[float, float, float]]] = (
+            collections.deque()
+        )
+        self._qt: collections.deque[float] = collections.deque()
+        self._q: collections.deque[tuple[float, float, float, float]] = collections.deque()
+
+    def add_position(
+        self, t_s: float, pos: tuple[float, float, float], vel: tuple[float, float, float]
+    ) -> None:
+        if self._pt and t_s <= self._pt[-1]:
+            if t_s < self._pt[-1] - self.HISTORY_S:  # the autopilot rebooted: its clock started again
+                self._pt.clear()
+                self._pos.clear()
+            else:
+                return  # a duplicate or a late packet
+        self._pt.append(t_s)
+        self._pos.append((pos, vel))
+        while self._pt and self._pt[0] < t_s - self.HISTORY_S:
+            self._pt.popleft()
+            self._pos.popleft()
+
+    def add_attitude(self, t_s: float, quat: tuple[float, float, float, float]) -> None:
+        if self._qt and t_s <= self._qt[-1]:
+            if t_s < self._qt[-1] - self.HISTORY_S:
+                self._qt.clear()
+                self._q.clear()
+            else:
+                return
+        self._qt.append(t_s)
+        self._q.append(quat)
+        while self._qt and self._qt[0] < t_s - self.HISTORY_S:
+            self._qt.popleft()
+            self._q.popleft()
+
+    def span(self) -> tuple[float, float] | None:
+        """(oldest, newest) boot-clock seconds with a position, or None."""
+        return (self._pt[0], self._pt[-1]) if self._pt else None
+
+    def at(self, t_s: float) -> Pose | None:
+        """The estimate at ``t_s``: positions interpolated linearly, attitudes normalised-linearly;
+        up to ``EXTRAPOLATE_S`` past the newest sample by its velocity; None before the oldest sample,
+        further past the newest, across a gap, or with no attitude at all."""
+        pos = self._position_at(t_s)
+        quat = self._attitude_at(t_s)
+        if pos is None or quat is None:
+            return None
+        return Pose(t_s, pos, quat)
+
+    def _position_at(self, t: float) -> tuple[float, float, float] | None:
+        ts = self._pt
+        if not ts or t < ts[0]:
+            return None
+        k = bisect.bisect_right(ts, t)
+        if k == len(ts):
+            dt = t - ts[-1]
+            if dt > self.EXTRAPOLATE_S:
+                return None
+            (n, e, d), (vn, ve, vd) = self._pos[-1]
+            return (n + vn * dt, e + ve * dt, d + vd * dt)
+        t0, t1 = ts[k - 1], ts[k]
+        if t1 - t0 > self.MAX_GAP_S:
+            return None
+        w = (t - t0) / (t1 - t0)
+        p0, p1 = self._pos[k - 1][0], self._pos[k][0]
+        return (p0[0] + w * (p1[0] - p0[0]), p0[1] + w * (p1[1] - p0[1]), p0[2] + w * (p1[2] - p0[2]))
+
+    def _attitude_at(self, t: float) -> tuple[float, float, float, float] | None:
+        ts = self._qt
+        if not ts or t < ts[0]:
+            return None
+        k = bisect.bisect_right(ts, t)
+        if k == len(ts):
+            return self._q[-1] if t - ts[-1] <= self.EXTRAPOLATE_S else None
+        t0, t1 = ts[k - 1], ts[k]
+        if t1 - t0 > self.MAX_GAP_S:
+            return None
+        w = (t - t0) / (t1 - t0)
+        q0, q1 = self._q[k - 1], self._q[k]
+        sign = 1.0 if sum(a * b for a, b in zip(q0, q1, strict=True)) >= 0.0 else -1.0  # the shorter way
+        q = [a + w * (sign * b - a) for a, b in zip(q0, q1, strict=True)]
+        norm = math.sqrt(sum(c * c for c in q)) or 1.0
+        return (q[0] / norm, q[1] / norm, q[2] / norm, q[3] / norm)
+
+
 class TelemetryCache:
     """Latest vehicle state; parts older than their use allows are reported by :meth:`age_s`."""
 
     def __init__(self, vehicle_system_id: int = 0) -> None:
         self.state = VehicleState(system_id=vehicle_system_id)
+        self.poses = PoseHistory()
         self._update = asyncio.Event()
         self.texts: list[tuple[float, int, str]] = []  # (monotonic, severity, text): the last 50
         self.texts_received = 0  # every STATUSTEXT from the autopilot so far (``texts`` keeps the last 50)
@@ -92,11 +203,13 @@ class TelemetryCache:
             s.pos_ned_m = (float(msg.x), float(msg.y), float(msg.z))
             s.vel_ned_m_s = (float(msg.vx), float(msg.vy), float(msg.vz))
             s.t_boot_s = msg.time_boot_ms / 1000.0
+            self.poses.add_position(s.t_boot_s, s.pos_ned_m, s.vel_ned_m_s)
             self._stamp("position")
             self._update.set()
             self._update = asyncio.Event()
         elif kind == "ATTITUDE_QUATERNION":
             s.quat_wxyz = (float(msg.q1), float(msg.q2), float(msg.q3), float(msg.q4))
+            self.poses.add_attitude(msg.time_boot_ms / 1000.0, s.quat_wxyz)
             self._stamp("attitude")
         elif kind == "DISTANCE_SENSOR" and msg.orientation == 25:
             s.rangefinder_m = msg.current_distance / 100.0

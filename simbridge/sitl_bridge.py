@@ -197,6 +197,7 @@ class SitlBridge(SimBridge):
             await pilot.wait_estimator(lambda: _ekf_ready(pilot.view.ekf_flags, pilot.view.gps_fix))
         fields = self.ready_fields()
         fields["sim_s_to_ready"] = round(self.sim_time_s(), 2)
+        self.log.info("SITL boot clock = lock-step clock + %.1f ms", self.boot_offset_ms or 0.0)
         self._on_event("ready", fields)
         self.ready.set()
 

@@ -38,7 +38,7 @@ from simbridge.sitl import (
 )
 from simbridge.terrain import FlatTerrain
 from simbridge.vehicle import Vehicle
-from tests.conftest import SimProcess
+from tests.conftest import Rig, SimProcess
 from tests.mavclient import MavClient
 
 _SERVO = "<HHI16H"
@@ -308,3 +308,29 @@ def test_real_arducopter_takes_off_holds_and_lands_on_the_world(
     while any(os.path.exists(f"/proc/{c}") for c in children) and time.monotonic() < deadline:
         time.sleep(0.2)
     assert not [c for c in children if os.path.exists(f"/proc/{c}")], "SITL outlived simbridge"
+
+
+@pytest.mark.slow
+@pytest.mark.sitl
+def test_the_companion_lands_real_arducopter_on_the_clear_roof(
+    arducopter: Path, start_rig: Callable[..., Rig]
+) -> None:
+    """The product unchanged on real firmware: the companion asks ArduCopter for its telemetry, places
+    every frame with the autopilot's estimate in the autopilot's own frame (EKF origin at the launch
+    point, not the scenario's origin), flies GUIDED targets, descends, LANDs; the world grades it."""
+    rig = start_rig(["--autopilot", "ardupilot-sitl", "--sitl", str(arducopter), "--scenario", "scenario2",
+                     "--launch", "12,8", "--speed", "4"])  # fmt: skip
+    ready = _wait_event(rig.sim, "ready", 240)
+    start = rig.sim.events("start")[0]
+    home = start["home_ned_m"]
+    assert isinstance(home, list)
+    assert math.hypot(home[0], home[1]) > 5
+    assert ready["autopilot"] == "ardupilot-sitl"
+    rig.wait_log("sensor stream connected", timeout_s=60)
+    out = rig.alarm_accepted("--reason", "GPS spoofing detected", "--criticality", "high")
+    assert out.returncode == 0, out.stdout + out.stderr
+    td = _wait_event(rig.sim, "touchdown", 400)
+    assert td["surface"] == "rooftop_clear", (td, rig.log_text()[-3000:])
+    assert td["safe"] is True
+    rig.wait_log("recovery ended: landed", timeout_s=120)
+    _wait_event(rig.sim, "disarmed", 60)
