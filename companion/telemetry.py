@@ -67,6 +67,7 @@ class PoseHistory:
     HISTORY_S = 10.0
     EXTRAPOLATE_S = 0.15  # past the newest sample: dead reckoning on its velocity (attitude held)
     MAX_GAP_S = 1.0  # two samples further apart than this are not interpolated between
+    REBOOT_BACK_S = 2.0  # a sample this much older than the newest: the autopilot's clock restarted
 
     def __init__(self) -> None:
         self._pt: collections.deque[float] = collections.deque()
@@ -80,7 +81,7 @@ class PoseHistory:
         self, t_s: float, pos: tuple[float, float, float], vel: tuple[float, float, float]
     ) -> None:
         if self._pt and t_s <= self._pt[-1]:
-            if t_s < self._pt[-1] - self.HISTORY_S:  # the autopilot rebooted: its clock started again
+            if t_s < self._pt[-1] - self.REBOOT_BACK_S:  # the autopilot rebooted: its clock started again
                 self._pt.clear()
                 self._pos.clear()
             else:
@@ -93,7 +94,7 @@ class PoseHistory:
 
     def add_attitude(self, t_s: float, quat: tuple[float, float, float, float]) -> None:
         if self._qt and t_s <= self._qt[-1]:
-            if t_s < self._qt[-1] - self.HISTORY_S:
+            if t_s < self._qt[-1] - self.REBOOT_BACK_S:
                 self._qt.clear()
                 self._q.clear()
             else:
