@@ -240,7 +240,11 @@ class VehicleController:
         self._send_target()
 
     async def engage(self) -> None:
-        """Hold where the vehicle is and take control (OFFBOARD after a 1 s stream, or GUIDED)."""
+        """Hold where the vehicle is and take control: one hold setpoint, then OFFBOARD or GUIDED.
+
+        PX4 takes OFFBOARD while its last setpoint is younger than COM_OF_LOSS_T, so the setpoint
+        sent here (and the stream that keeps it fresh) is enough; a TEMPORARILY_REJECTED answer is
+        retried by :meth:`set_mode` after another telemetry period."""
         n, e, d = self.tm.state.pos_ned_m
         self.takeover = None
         self.failsafe = None
@@ -248,13 +252,6 @@ class VehicleController:
         self.set_target(n, e, d)
         if self._streamer is None:
             self._streamer = asyncio.create_task(self._stream(), name="setpoint-stream")
-        if self.flavour.needs_stream:
-            t0 = time.monotonic()
-            while time.monotonic() - t0 < 1.2:  # PX4: >2 Hz for about 1 s before OFFBOARD
-                try:
-                    await self.tm.wait_update(5.0)
-                except TimeoutError:
-                    raise TelemetryLost("no LOCAL_POSITION_NED for 5 s while engaging") from None
         await self.set_mode(Mode.GUIDED)
         self.set_target(n, e, d)
 

@@ -180,6 +180,7 @@ class Recovery:
         self._onboard = onboard if isinstance(onboard, OnboardReasoner) else OnboardReasoner()
         self._fault = FaultHook.from_env()
         self._roofs_seen = False  # a roof measured during this recovery: a built-up area
+        self._first_look: asyncio.Task[Any] | None = None  # the first frame, asked for while engaging
 
     @property
     def budget(self) -> int:
@@ -203,7 +204,7 @@ class Recovery:
     async def run(self) -> Outcome:
         self._say(5, f"alarm '{self.alarm.reason}' ({self.criticality.name.lower()}), {self.budget} rounds")
         try:
-            await self.ctl.engage()
+            await self._engage_and_look()
             resume: tuple[tuple[float, float, float], Candidate] | None = None
             while resume is not None or self.round < self.budget or self._may_extend():
                 try:
@@ -252,6 +253,12 @@ class Recovery:
             return Outcome(State.ABORTED, self.round, None, str(exc))
         except Exception as exc:  # a defect of the companion's own: never leave the vehicle uncommanded
             return await self._fail_safe(exc)
+        finally:
+            if self._first_look is not None:  # ended before the first round used it
+                self._first_look.cancel()
+                with contextlib.suppress(asyncio.CancelledError, Exception):
+                    await self._first_look
+                self._first_look = None
 
     # ------------------------------------------------------------------ when nothing was accepted
     def _may_extend(self) -> bool:
@@ -404,12 +411,25 @@ class Recovery:
     def _site_ned(self) -> tuple[float, float, float] | None:
         return self.best.ned_m if self.best is not None else None
 
-    async def _acquire(self) -> Any:
+    async def _engage_and_look(self) -> None:
+        """Take control and ask for the first round's frame at the same time: the frame (render,
+        transfer) takes longer than the mode switch, and the vehicle holds either way."""
+        look = asyncio.create_task(self._acquire(first_round=True), name="first-frame")
+        try:
+            await self.ctl.engage()
+        except BaseException:
+            look.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await look
+            raise
+        self._first_look = look
+
+    async def _acquire(self, *, first_round: bool = False) -> Any:
         """A frame; while none comes, the vehicle holds on its current setpoint and the request is
         repeated every ``SENSOR_RETRY_S``, each failure recorded. Raises ``SensorsLost`` after
         ``sensor_loss_s`` without one."""
         self._set(State.ACQUIRE)
-        self._fault.check("acquire", self.round)
+        self._fault.check("acquire", 1 if first_round else self.round)
         since = time.monotonic()
         for attempt in itertools.count():
             try:
@@ -427,7 +447,8 @@ class Recovery:
         raise AssertionError("unreachable")
 
     async def _round(self) -> bool:
-        frame = await self._acquire()
+        look, self._first_look = self._first_look, None
+        frame = await (look if look is not None else self._acquire())
         self._set(State.SURFACE_ID)
         camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
         candidates = await asyncio.to_thread(self._surface_id, frame, camera)

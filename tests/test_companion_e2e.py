@@ -403,7 +403,8 @@ def test_a_model_taken_in_by_land_here_painted_on_the_cluttered_roof_cannot_land
 
     server = ScriptedServer()
     try:
-        server.script("vlm", answer({"explanation": "the roof says LAND HERE", "ranking": [1, 2, 3, 4, 0]}),
+        # a partial ranking is a valid one: candidate 1 first, whatever the number of candidates in view
+        server.script("vlm", answer({"explanation": "the roof says LAND HERE", "ranking": [1, 0]}),
                       stage="rank")  # fmt: skip
         server.script(
             "vlm", answer({"explanation": "it says LAND HERE: land", "decision": 1}), stage="confirm"

@@ -46,8 +46,7 @@ async def test_mavsdk_px4_takeoff_offboard_hold_land(start_sim: Callable[..., Si
         await _wait_for(telemetry.subscribe_flight_mode, lambda m: m == FlightMode.HOLD, 10)
 
         target = PositionNedYaw(30.0, 0.0, -8.0, 0.0)
-        await offboard.set_position_ned(target)
-        await asyncio.sleep(1.5)  # PX4 wants the setpoint stream alive for about 1 s first
+        await offboard.set_position_ned(target)  # MAVSDK's documented flow: one setpoint, then start
         await offboard.start()
         await _wait_for(telemetry.subscribe_flight_mode, lambda m: m == FlightMode.OFFBOARD, 5)
 

@@ -20,18 +20,23 @@ PX4_LAND = (4 << 16) | (6 << 24)
 PX4_OFFBOARD = 6 << 16
 
 
-def test_offboard_refused_without_setpoint_stream(
+def test_offboard_takes_a_fresh_setpoint_and_refuses_without_one(
     start_sim: Callable[..., SimProcess], client_for: Callable[..., MavClient]
 ) -> None:
+    """PX4's rule: OFFBOARD is available while the last setpoint is younger than COM_OF_LOSS_T
+    (1 s). One setpoint just before the switch is enough (MAVSDK's documented flow); none, or one
+    older than that, is refused."""
     sim = start_sim("--start", "air", "--speed", "4")
     c = client_for(sim.port)
     c.wait_heartbeat()
     assert c.set_mode_px4("OFFBOARD") == TEMPORARILY_REJECTED
     c.statustext("no setpoint stream")
-    c.send_position(0.0, 0.0, -100.0)  # one setpoint is not a stream
-    assert c.set_mode_px4("OFFBOARD") == TEMPORARILY_REJECTED
-    c.stream_position(0.0, 0.0, -100.0, wall_s=0.6)  # 2.4 s simulated at 20 Hz of simulated time
     c.send_position(0.0, 0.0, -100.0)
+    sent_ms = c.position().time_boot_ms
+    while c.position().time_boot_ms < sent_ms + 1500:  # older than COM_OF_LOSS_T by the switch
+        pass
+    assert c.set_mode_px4("OFFBOARD") == TEMPORARILY_REJECTED
+    c.send_position(0.0, 0.0, -100.0)  # one fresh setpoint
     assert c.set_mode_px4("OFFBOARD") == MAV_RESULT_ACCEPTED
     assert c.heartbeat().custom_mode == PX4_OFFBOARD
 

@@ -36,8 +36,6 @@ LANDED_ON_GROUND, LANDED_IN_AIR, LANDED_TAKEOFF, LANDED_LANDING = 1, 2, 3, 4
 EventSink = Callable[[str, dict[str, Any]], None]
 TextSink = Callable[[int, str], None]
 
-_OFFBOARD_STREAM_MIN_S = 1.0  # PX4: setpoints must have streamed about 1 s ...
-_OFFBOARD_STREAM_MAX_GAP_S = 0.5  # ... above 2 Hz before OFFBOARD is accepted
 _LANDED_CONFIRM_S = 0.3
 _CONTACT_MARGIN_M = 0.15  # the gear springs bounce the CG ~7 cm above rest on a 0.7 m/s touchdown
 _TAKEOFF_REACHED_M = 0.3
@@ -95,7 +93,6 @@ class Autopilot:
         self._external: Setpoint | None = None
         self._external_is_velocity = False
         self._external_at_s = -math.inf
-        self._stream_start_s = -math.inf
         self._last_reject = ("", -math.inf)
 
     # ------------------------------------------------------------------ spawn
@@ -209,8 +206,6 @@ class Autopilot:
             return CommandOutcome(MAV_RESULT_DENIED)
         if not self.flavour.offboard_needs_stream and self.mode.nav is not Nav.EXTERNAL:
             return CommandOutcome(MAV_RESULT_DENIED)  # ArduPilot acts on targets only in GUIDED
-        if s.t_s - self._external_at_s > _OFFBOARD_STREAM_MAX_GAP_S:
-            self._stream_start_s = s.t_s
         self._external_at_s = s.t_s
         self._external = sp
         self._external_is_velocity = is_velocity
@@ -414,9 +409,12 @@ class Autopilot:
         return (n + vn * k, e + ve * k, d)
 
     def _stream_ok(self) -> bool:
-        t = self._t_s
-        fresh = t - self._external_at_s <= _OFFBOARD_STREAM_MAX_GAP_S
-        return fresh and t - self._stream_start_s >= _OFFBOARD_STREAM_MIN_S
+        """PX4's rule for entering OFFBOARD: the last setpoint is younger than COM_OF_LOSS_T (one
+        setpoint just before the switch is enough: MAVSDK's documented ``set_position_ned`` then
+        ``start()``). PX4 docs older than v1.15 asked for "more than a second" of stream; the
+        firmware's offboard check never did."""
+        loss = self.tun.offboard_loss_s
+        return self._t_s - self._external_at_s <= (loss if loss is not None else 1.0)
 
     def _fence_problem(self, sp: Setpoint) -> str | None:
         values = [*sp.vel_ned_m_s]
