@@ -118,6 +118,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     m.add_argument("--iterations", type=_positive(int, "--iterations"), default=20)
     m.add_argument("--scenario", action="append", choices=("scenario1", "scenario2"), help="default: both")
+    m.add_argument(
+        "--ekf-error", choices=("off", "nominal"), default="off",
+        help="landing flights on the autopilot's estimate with an EKF's errors (simbridge --ekf-error)",
+    )  # fmt: skip
     c = sub.add_parser("curated", parents=[common, flying], help="full pipeline in a curated scenario")
     c.add_argument("--scenario", required=True, choices=("scenario1", "scenario2"))
     c.add_argument("--runs", type=_positive(int, "--runs"), default=10)
@@ -264,8 +268,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             bar.update(1)
 
         results["modules"] = run_modules(
-            args.reasoner, args.iterations, scenarios=scenarios, progress=progress, config_path=args.config
-        )
+            args.reasoner, args.iterations, scenarios=scenarios, progress=progress, config_path=args.config,
+            ekf_error=args.ekf_error,
+        )  # fmt: skip
         bar.close()
         save_results(out, results)
     else:

@@ -65,6 +65,7 @@ from landfall_eval.surfaces import (
 from simbridge.autopilot.core import Autopilot
 from simbridge.autopilot.flavours import MAV_RESULT_ACCEPTED, flavour_named
 from simbridge.control import Setpoint
+from simbridge.estimate import EstimateError, EstimateErrorConfig, estimate_preset
 from simbridge.geo import GeoOrigin
 from simbridge.scenarios import Scenario, load_scenario
 from simbridge.terrain import Terrain
@@ -87,7 +88,7 @@ __all__ = [
 CONTEXTS = ("crop", "pad20", "pad30", "pad40", "full")
 CLOSEUP_HEIGHT_M = 30.0  # the confirm close-ups are taken this far above the roof
 STREAM_EVERY_STEPS = 6  # the companion streams setpoints at 20 Hz; physics runs at 120 Hz
-ENGAGE_STREAM_S = 1.2  # PX4 accepts OFFBOARD after about 1 s of setpoints (companion.control.engage)
+ENGAGE_STREAM_S = 0.05  # PX4 takes OFFBOARD once a setpoint is fresh (companion.control.engage)
 
 Progress = Callable[[str], None]
 Vec3 = tuple[float, float, float]
@@ -161,6 +162,7 @@ def fly_and_land(
     home_ned_m: Vec3,
     target_ne_m: tuple[float, float],
     params: RecoveryParams | None = None,
+    estimate: EstimateError | None = None,
 ) -> tuple[Vec3, float]:
     """Fly simbridge's F450 from a hover at ``start_ned_m`` to ``target_ne_m`` at the start altitude,
     descend over it as the recovery loop does and land in the autopilot's land mode.
@@ -168,7 +170,9 @@ def fly_and_land(
     The vehicle and the PX4-flavoured autopilot are the ones the ``simbridge`` process steps, driven
     in-process as fast as they run: setpoints go in as decoded MAVLink position targets (20 Hz), the
     companion's engage, goto and land (arrival within ``arrival_tolerance_m`` and slower than
-    ``arrival_speed_m_s``) are followed in simulated time. No wind.
+    ``arrival_speed_m_s``) are followed in simulated time. No wind. With ``estimate`` the autopilot flies
+    on its estimator's errors (its targets are in its estimated frame) and the companion's arrival and
+    descent checks read the estimate, as over MAVLink.
 
     Returns:
         The touchdown position (NED metres, where the autopilot's land detector fired) and the
@@ -186,7 +190,9 @@ def fly_and_land(
         if name == "touchdown":
             touchdown.append(vehicle.state.pos_ned_m)
 
-    ap = Autopilot(flavour_named("px4"), vehicle, home_ned_m, on_event, lambda _sev, _text: None)
+    ap = Autopilot(
+        flavour_named("px4"), vehicle, home_ned_m, on_event, lambda _sev, _text: None, estimate=estimate
+    )
     ap.spawn_in_air(vehicle.state)
     steps = 0
     target: Setpoint | None = None
@@ -206,7 +212,7 @@ def fly_and_land(
         t_end = vehicle.state.t_s + limit_s
         while True:
             step()
-            s = vehicle.state
+            s = ap.estimated_state  # what the companion hears
             if math.dist(s.pos_ned_m, (n, e, d)) < p.arrival_tolerance_m and (
                 math.hypot(*s.vel_ned_m_s) < p.arrival_speed_m_s
             ):
@@ -215,22 +221,24 @@ def fly_and_land(
                 off = math.dist(s.pos_ned_m, (n, e, d))
                 raise FlightError(f"target not reached in {limit_s:.0f} s ({off:.1f} m off)")
 
-    # engage: stream a hold where the vehicle is, then OFFBOARD
-    target = Setpoint.hold(vehicle.state.pos_ned_m, start_yaw_rad)
+    # engage: one hold setpoint where the autopilot says the vehicle is, then OFFBOARD
+    step()  # the autopilot's first estimate
+    target = Setpoint.hold(ap.estimated_state.pos_ned_m, start_yaw_rad)
     while vehicle.state.t_s < ENGAGE_STREAM_S:
         step()
     mode = ap.set_mode(ap.flavour.mode("OFFBOARD"))
     if mode.result != MAV_RESULT_ACCEPTED:
         raise FlightError(f"OFFBOARD refused: {mode.text}")
-    n0, e0, d0 = vehicle.state.pos_ned_m
+    n0, e0, d0 = ap.estimated_state.pos_ned_m
     tn, te = target_ne_m
     goto(tn, te, d0, p.move_timeout_s + math.hypot(tn - n0, te - e0) / 2.0)
     while True:
         s = vehicle.state
-        rng_m = world.rangefinder_m(s.pos_ned_m, s.quat)
+        rng_m = world.rangefinder_m(s.pos_ned_m, s.quat)  # a sensor: the truth measured
         if rng_m <= p.final_land_m:
             break
-        goto(tn, te, s.pos_ned_m[2] + p.descent_fraction * rng_m, p.move_timeout_s + rng_m)
+        d_now = ap.estimated_state.pos_ned_m[2]
+        goto(tn, te, d_now + p.descent_fraction * rng_m, p.move_timeout_s + rng_m)
     target = None
     land = ap.land()
     if land.result != MAV_RESULT_ACCEPTED:
@@ -353,9 +361,16 @@ async def _confirm_trial(
 
 
 def _landing(
-    lf: LaunchFrame, cands: Sequence[Candidate], order: Sequence[int], sc: Scenario, world: LiveWorld
+    lf: LaunchFrame,
+    cands: Sequence[Candidate],
+    order: Sequence[int],
+    sc: Scenario,
+    world: LiveWorld,
+    ekf: EstimateErrorConfig | None = None,
 ) -> Landing:
-    """Fly to the IPM point of the chosen candidate and land; the distance to what its pixel shows."""
+    """Fly to the IPM point of the chosen candidate and land; the distance to what its pixel shows.
+    With ``ekf``, the frame is placed with the autopilot's estimate (bias, noise and attitude error at
+    capture) and the flight follows targets in the estimated frame while its bias drifts."""
     choice = _chosen(order, cands)
     if choice is None:
         return Landing(None, None, f"seed {lf.seed}: no measured candidate to fly to")
@@ -363,8 +378,12 @@ def _landing(
     truth = truth_point(lf, u, v)
     if truth is None:
         return Landing(None, None, f"seed {lf.seed}: site {choice.index} shows no surface")
+    estimate = EstimateError(ekf, np.random.default_rng([lf.seed, 7])) if ekf is not None else None
+    pos, quat = lf.pos_ned_m, lf.quat_wxyz
+    if estimate is not None:
+        pos, quat = estimate.perturb(lf.pos_ned_m, lf.quat_wxyz)
     try:
-        ipm = pixel_to_ned(u, v, LidarPixelIndex(lf.lidar_frd, lf.camera), lf.pos_ned_m, lf.quat_wxyz)
+        ipm = pixel_to_ned(u, v, LidarPixelIndex(lf.lidar_frd, lf.camera), pos, quat)
     except IpmError as exc:
         return Landing(None, None, f"seed {lf.seed}: IPM failed ({exc})")
     n, e = sc.launch_ne_m
@@ -372,7 +391,9 @@ def _landing(
     w, x, y, z = lf.quat_wxyz
     yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
     try:
-        touchdown, _t = fly_and_land(world, lf.pos_ned_m, yaw, home, (float(ipm[0]), float(ipm[1])))
+        touchdown, _t = fly_and_land(
+            world, lf.pos_ned_m, yaw, home, (float(ipm[0]), float(ipm[1])), estimate=estimate
+        )
     except FlightError as exc:
         return Landing(None, None, f"seed {lf.seed}: {exc}")
     ipm_error = math.hypot(ipm[0] - truth[0], ipm[1] - truth[1])
@@ -381,7 +402,13 @@ def _landing(
 
 
 async def _iteration(
-    scenario: str, seed: int, roofs: Roofs, contexts: Sequence[str], cascade: Cascade, weather: str
+    scenario: str,
+    seed: int,
+    roofs: Roofs,
+    contexts: Sequence[str],
+    cascade: Cascade,
+    weather: str,
+    ekf: EstimateErrorConfig | None = None,
 ) -> Iteration:
     lf = launch_frame(scenario, seed, weather, hover=True)
     sc = load_scenario(scenario, seed)  # the same seeded world, for the close-ups and the flight
@@ -398,7 +425,7 @@ async def _iteration(
         if context in contexts:
             ranks[context] = _rank_trial(lf, world.world.safe_zones, cands, ranking)
     confirm = await _confirm_trial(cascade, sc, world, roofs, seed, weather)
-    return Iteration(seed, jaccard, ranks, confirm, _landing(lf, cands, crop_order, sc, world))
+    return Iteration(seed, jaccard, ranks, confirm, _landing(lf, cands, crop_order, sc, world, ekf))
 
 
 # --------------------------------------------------------------------------------------- the run
@@ -460,6 +487,7 @@ async def _run(
     progress: Progress | None,
     config_path: Path | None,
     weather: str,
+    ekf: EstimateErrorConfig | None = None,
 ) -> dict[str, Any]:
     cfg = load_config(config_path, os.environ, {"reasoner.name": reasoner}).reasoner
     out: dict[str, Any] = {"surface_id": {}, "landing_distance_m": {}, "landing_distance": {}, "reasoner": {}}
@@ -469,7 +497,7 @@ async def _run(
         for seed in range(iterations):
             cascade = build_cascade(cfg)  # fresh per iteration: no lone-"no" counts carried over
             try:
-                it = await _iteration(scenario, seed, roofs, contexts, cascade, weather)
+                it = await _iteration(scenario, seed, roofs, contexts, cascade, weather, ekf)
             finally:
                 await cascade.aclose()
             its.append(it)
@@ -500,6 +528,7 @@ def run_modules(
     progress: Progress | None = None,
     config_path: Path | None = None,
     weather: str = "clear",
+    ekf_error: str = "off",
 ) -> dict[str, Any]:
     """Run the three module experiments (module docstring) and return the ``modules`` section of
     results.json.
@@ -512,6 +541,8 @@ def run_modules(
         progress: called after each iteration with a one-line status.
         config_path: companion TOML with the reasoner's profiles, deadlines and fallbacks.
         weather: ``clear``, ``fog`` or ``rain`` for every render.
+        ekf_error: the autopilot's estimator errors for the landing flights (``simbridge.estimate``
+            presets: ``off``, ``nominal``).
 
     Returns:
         ``surface_id.<scenario>``: ``jaccard_mean``/``_min``/``_max``, ``iterations``, ``study``;
@@ -538,4 +569,5 @@ def run_modules(
         )
     for scenario in scenarios:
         roofs_of(scenario)  # fail before any work
-    return asyncio.run(_run(reasoner, iterations, scenarios, contexts, progress, config_path, weather))
+    ekf = estimate_preset(ekf_error)
+    return asyncio.run(_run(reasoner, iterations, scenarios, contexts, progress, config_path, weather, ekf))

@@ -10,6 +10,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from simbridge.estimate import PRESETS
 from simbridge.geo import GeoOrigin
 from simbridge.link import LinkUrl, LinkUrlError, parse_signing_key
 from simbridge.scenarios import scenario_names
@@ -138,6 +139,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--gusts", type=float, default=0.0, metavar="SIGMA", help="gust standard deviation, m/s")
     p.add_argument("--duration", type=float, default=None, help="stop after this many simulated seconds")
+    p.add_argument(
+        "--ekf-error",
+        choices=tuple(PRESETS),
+        default="off",
+        help="the emulated autopilot's estimator errors: off (it knows the truth) or nominal (GPS/EKF bias "
+        "drift, noise, lag, attitude error; its telemetry and its position targets are in that frame)",
+    )
     p.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
     return p
 
@@ -189,6 +197,7 @@ def config_from_args(args: argparse.Namespace) -> SimConfig:
         sensors=sensors,
         launch=args.launch,
         sitl=args.sitl,
+        ekf_error=args.ekf_error,
     )
 
 

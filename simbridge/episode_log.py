@@ -44,10 +44,19 @@ class EpisodeLog:
                 self._fh.write(line)
                 self._fh.flush()
 
-    def state(self, s: VehicleState, mode: str, armed: bool, landed_state: int, battery_pct: float) -> None:
+    def state(
+        self,
+        s: VehicleState,
+        mode: str,
+        armed: bool,
+        landed_state: int,
+        battery_pct: float,
+        est_pos_ned_m: tuple[float, float, float] | None = None,
+    ) -> None:
         if self._fh is None or s.t_s + 1e-9 < self._next_state_s:
             return
         self._next_state_s = s.t_s + self.STATE_INTERVAL_S
+        est = {"est_pos_ned_m": [round(v, 4) for v in est_pos_ned_m]} if est_pos_ned_m is not None else {}
         line = (
             json.dumps(
                 {
@@ -61,6 +70,7 @@ class EpisodeLog:
                     "armed": armed,
                     "landed_state": landed_state,
                     "battery_pct": round(battery_pct, 2),
+                    **est,
                 }
             )
             + "\n"

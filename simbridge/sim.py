@@ -18,6 +18,7 @@ from simbridge.autopilot.core import Autopilot
 from simbridge.autopilot.flavours import flavour_named
 from simbridge.autopilot.server import AutopilotServer
 from simbridge.episode_log import EpisodeLog
+from simbridge.estimate import EstimateError, estimate_preset
 from simbridge.geo import GeoOrigin
 from simbridge.link import MavlinkUdpLink
 from simbridge.physics import GEAR_HEIGHT_M
@@ -50,11 +51,15 @@ class SimConfig:
     sensors: tuple[str, int] | None = None  # serve sensor frames on this TCP endpoint
     launch: tuple[float, ...] | None = None  # (north, east[, height above ground]) override
     sitl: str | None = None  # ArduCopter SITL binary (autopilot "ardupilot-sitl"; default: find_arducopter)
+    ekf_error: str = "off"  # the emulation's estimator errors (simbridge.estimate.PRESETS)
 
     def __post_init__(self) -> None:
         if self.autopilot not in AUTOPILOTS:
             raise ValueError(f"--autopilot must be one of {', '.join(AUTOPILOTS)}, got {self.autopilot!r}")
+        estimate_preset(self.ekf_error)  # raises ValueError naming the flag
         if self.autopilot == SITL_AUTOPILOT:
+            if self.ekf_error != "off":
+                raise ValueError("--ekf-error: real firmware has its own estimator (leave it off)")
             if self.signing_key is not None:
                 raise ValueError(
                     "--signing-key: not with ardupilot-sitl (real firmware takes its key over MAVLink, "
@@ -121,6 +126,7 @@ class SimBridge:
                 "world_digest": sc.world_digest,
                 "start": config.start,
                 "home_ned_m": list(self.home_ned_m),
+                "ekf_error": config.ekf_error,
             },
         )
         self._init_autopilot()
@@ -128,8 +134,15 @@ class SimBridge:
     def _init_autopilot(self) -> None:
         """The emulated autopilot, its telemetry, link and server; ready at once."""
         config = self.config
+        preset = estimate_preset(config.ekf_error)
+        estimate = EstimateError(preset, np.random.default_rng([config.seed, 7])) if preset else None
         self.autopilot = Autopilot(
-            flavour_named(config.autopilot), self.vehicle, self.home_ned_m, self._on_event, self._on_text
+            flavour_named(config.autopilot),
+            self.vehicle,
+            self.home_ned_m,
+            self._on_event,
+            self._on_text,
+            estimate=estimate,
         )
         self.telemetry = Telemetry(self.autopilot, config.origin)
         self.link = MavlinkUdpLink(
@@ -180,8 +193,9 @@ class SimBridge:
         s = self.vehicle.step(sp, ap.armed)
         for msg in self.telemetry.due(s.t_s):
             self.link.send(msg)
+        est = ap.estimated_state.pos_ned_m if ap.estimate is not None else None
         self.episode.state(
-            s, ap.mode.name, ap.armed, ap.landed_state, 100 * self.vehicle.battery.remaining_fraction
+            s, ap.mode.name, ap.armed, ap.landed_state, 100 * self.vehicle.battery.remaining_fraction, est
         )
 
     def stop(self) -> None:

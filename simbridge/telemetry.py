@@ -216,22 +216,22 @@ class Telemetry:
         )
 
     def attitude(self) -> Any:
-        s = self.ap.vehicle.state
+        s = self.ap.estimated_state
         r, p, y = s.euler_rad
         return self._mav.attitude_encode(
             self.time_boot_ms, r, p, math.remainder(y, 2 * math.pi), *s.rates_frd_rad_s
         )
 
     def attitude_quaternion(self) -> Any:
-        s = self.ap.vehicle.state
+        s = self.ap.estimated_state
         return self._mav.attitude_quaternion_encode(self.time_boot_ms, *s.quat, *s.rates_frd_rad_s)
 
     def local_position_ned(self) -> Any:
-        s = self.ap.vehicle.state
+        s = self.ap.estimated_state
         return self._mav.local_position_ned_encode(self.time_boot_ms, *s.pos_ned_m, *s.vel_ned_m_s)
 
     def global_position_int(self) -> Any:
-        s = self.ap.vehicle.state
+        s = self.ap.estimated_state
         lat, lon, alt_mm = self._geo()
         home_alt_m = self.origin.alt_m - self.ap.home_ned_m[2]
         vn, ve, vd = s.vel_ned_m_s
@@ -249,7 +249,7 @@ class Telemetry:
         )
 
     def gps_raw_int(self) -> Any:
-        s = self.ap.vehicle.state
+        s = self.ap.estimated_state
         lat, lon, alt_mm = self._geo()
         vn, ve, _ = s.vel_ned_m_s
         cog = round(math.degrees(math.atan2(ve, vn)) * 100) % 36000
@@ -267,7 +267,7 @@ class Telemetry:
         )
 
     def vfr_hud(self) -> Any:
-        s = self.ap.vehicle.state
+        s = self.ap.estimated_state
         vn, ve, vd = s.vel_ned_m_s
         gs = math.hypot(vn, ve)
         max_thrust_n = MOTOR_COUNT * THRUST_COEFF_N  # all four ESCs at full command

@@ -7,6 +7,7 @@ It speaks in setpoints, modes and MAV_RESULT codes; MAVLink framing lives in
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -23,6 +24,7 @@ from simbridge.autopilot.flavours import (
     Tunables,
 )
 from simbridge.control import Setpoint
+from simbridge.estimate import EstimateError
 from simbridge.geo import Vec3
 from simbridge.physics import GEAR_HEIGHT_M, VehicleState
 from simbridge.vehicle import Vehicle
@@ -60,6 +62,7 @@ class Autopilot:
         home_ned_m: home position (ground level) in the world frame.
         emit_event: called with (event name, fields) for the episode log.
         emit_text: called with (severity, text) for STATUSTEXT.
+        estimate: the estimator's errors (``--ekf-error``); None: the autopilot knows the truth.
     """
 
     def __init__(
@@ -69,8 +72,10 @@ class Autopilot:
         home_ned_m: Vec3,
         emit_event: EventSink,
         emit_text: TextSink,
+        estimate: EstimateError | None = None,
     ) -> None:
         self.flavour = flavour
+        self.estimate = estimate
         self.vehicle = vehicle
         self.home_ned_m = home_ned_m
         self._emit_event = emit_event
@@ -197,8 +202,16 @@ class Autopilot:
         rtl = next(m for m in self.flavour.modes if m.nav is Nav.RTL)
         return self.set_mode(rtl)
 
+    @property
+    def estimated_state(self) -> VehicleState:
+        """What the autopilot believes (its telemetry says this): the truth, or the truth with the
+        estimator's errors."""
+        est = self.estimate.estimate() if self.estimate is not None else None
+        return est if est is not None else self.vehicle.state
+
     def external_setpoint(self, sp: Setpoint, is_velocity: bool) -> CommandOutcome:
-        """A SET_POSITION_TARGET_LOCAL_NED already decoded into the world frame."""
+        """A SET_POSITION_TARGET_LOCAL_NED already decoded into the local frame (the autopilot's
+        estimated one: with an estimator error its positions sit ``bias`` away in the world)."""
         s = self.vehicle.state
         problem = self._fence_problem(sp)
         if problem is not None:
@@ -207,9 +220,17 @@ class Autopilot:
         if not self.flavour.offboard_needs_stream and self.mode.nav is not Nav.EXTERNAL:
             return CommandOutcome(MAV_RESULT_DENIED)  # ArduPilot acts on targets only in GUIDED
         self._external_at_s = s.t_s
-        self._external = sp
+        self._external = self._to_world(sp)
         self._external_is_velocity = is_velocity
         return ACCEPTED
+
+    def _to_world(self, sp: Setpoint) -> Setpoint:
+        if self.estimate is None:
+            return sp
+        bn, be, bd = self.estimate.bias_ned_m
+        ne = (sp.pos_ne_m[0] - bn, sp.pos_ne_m[1] - be) if sp.pos_ne_m is not None else None
+        d = sp.pos_d_m - bd if sp.pos_d_m is not None else None
+        return dataclasses.replace(sp, pos_ne_m=ne, pos_d_m=d)
 
     def reject_setpoint(self, problem: str) -> None:
         """A setpoint that cannot be flown: say so (the same problem at most once a second)."""
@@ -226,6 +247,8 @@ class Autopilot:
     def tick(self, s: VehicleState) -> Setpoint | None:
         """Decide what to fly for the next step. ``None``: motors idle if armed, else stopped."""
         self._t_s = s.t_s
+        if self.estimate is not None:
+            self.estimate.step(s)
         self._update_land_detector(s)
         if not self.armed:
             return None

@@ -1,0 +1,114 @@
+"""The emulated autopilot's estimator errors (``simbridge --ekf-error``, issue 19)."""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+
+from simbridge.autopilot.core import Autopilot
+from simbridge.autopilot.flavours import flavour_named
+from simbridge.control import Setpoint
+from simbridge.estimate import EstimateError, EstimateErrorConfig, estimate_preset
+from simbridge.geo import GeoOrigin
+from simbridge.terrain import FlatTerrain
+from simbridge.vehicle import Vehicle
+from tests.conftest import Rig, SimProcess
+from tests.mavclient import MavClient
+
+
+def test_presets_and_a_clear_error_for_an_unknown_one() -> None:
+    assert estimate_preset("off") is None
+    assert isinstance(estimate_preset("nominal"), EstimateErrorConfig)
+    with pytest.raises(ValueError, match="--ekf-error"):
+        estimate_preset("perfect")
+
+
+def test_the_bias_wanders_with_its_sigma_and_the_estimate_lags() -> None:
+    cfg = EstimateErrorConfig(pos_bias_sigma_m=0.5, pos_bias_tau_s=5.0, lag_s=0.1, pos_noise_m=0.0)
+    v = Vehicle(GeoOrigin(), FlatTerrain())
+    v.reset((0.0, 0.0, -50.0), 0.0)
+    est = EstimateError(cfg, np.random.default_rng(3))
+    biases = []
+    for _ in range(120 * 200):  # 200 s at 120 Hz, hovering
+        v.step(Setpoint.hold((0.0, 0.0, -50.0)))
+        est.step(v.state)
+        biases.append(est.bias_ned_m[0])
+    assert 0.3 < float(np.std(biases)) < 0.7
+    assert len({round(b, 3) for b in biases[::1200]}) > 10  # it moves
+    # lag: climbing at about 1 m/s, the estimate's height trails by about lag x speed
+    for _ in range(240):
+        v.step(Setpoint(pos_ne_m=(0.0, 0.0), pos_d_m=None, vel_ned_m_s=(0.0, 0.0, -1.0)))
+        e = est.step(v.state)
+    lag_m = (e.pos_ned_m[2] - est.bias_ned_m[2]) - v.state.pos_ned_m[2]
+    assert lag_m == pytest.approx(-v.state.vel_ned_m_s[2] * 0.1, abs=0.03)
+
+
+def test_the_autopilot_flies_targets_in_its_estimated_frame() -> None:
+    """A target p is reached when the estimate says so: the airframe holds at p - bias."""
+    cfg = EstimateErrorConfig(
+        pos_bias_sigma_m=1.0, vert_bias_sigma_m=0.5, pos_bias_tau_s=1e6, pos_noise_m=0.0
+    )
+    v = Vehicle(GeoOrigin(), FlatTerrain())
+    v.reset((0.0, 0.0, -30.0), 0.0)
+    est = EstimateError(cfg, np.random.default_rng(5))
+    ap = Autopilot(
+        flavour_named("ardupilot"), v, (0.0, 0.0, 0.0), lambda *_: None, lambda *_: None, estimate=est
+    )
+    ap.spawn_in_air(v.state)
+    assert ap.set_mode(ap.flavour.mode("GUIDED")).result == 0
+    for k in range(120 * 30):
+        if k % 6 == 0:
+            ap.external_setpoint(Setpoint.hold((10.0, 5.0, -30.0)), False)
+        v.step(ap.tick(v.state), ap.armed)
+    bn, be, bd = est.bias_ned_m
+    assert math.hypot(bn, be) > 0.3  # the test means something
+    n, e, d = v.state.pos_ned_m
+    assert (n, e, d) == pytest.approx((10.0 - bn, 5.0 - be, -30.0 - bd), abs=0.25)
+    told = ap.estimated_state.pos_ned_m
+    assert told == pytest.approx((10.0, 5.0, -30.0), abs=0.3)  # what its telemetry says
+
+
+@pytest.mark.slow
+def test_telemetry_carries_the_estimate_and_the_episode_log_both(
+    start_sim: Callable[..., SimProcess], client_for: Callable[..., MavClient]
+) -> None:
+    sim = start_sim("--autopilot", "ardupilot", "--ekf-error", "nominal", "--seed", "4", "--speed", "4")
+    c = client_for(sim.port)
+    c.wait_heartbeat()
+    lpos = c.position()
+    states = []
+    while len(states) < 5:
+        states = [e for e in sim.events("state") if "est_pos_ned_m" in e]
+    truth, told = states[-1]["pos_ned_m"], states[-1]["est_pos_ned_m"]
+    assert isinstance(truth, list)
+    assert isinstance(told, list)
+    off = math.dist(truth, told)
+    assert 0.02 < off < 3.0  # an estimate, not the truth
+    assert math.dist((lpos.x, lpos.y, lpos.z), told) < 2.0
+    assert json.loads(sim.episode_log.read_text().splitlines()[0])["ekf_error"] == "nominal"
+
+
+@pytest.mark.slow
+def test_the_companion_lands_on_the_clear_roof_on_an_estimate_with_errors(
+    start_rig: Callable[..., Rig],
+) -> None:
+    """The companion places its frames with the autopilot's estimate (bias, noise, lag, attitude
+    error) and flies in that frame: it still lands on scenario1's clear roof."""
+    rig = start_rig(["--scenario", "scenario1", "--ekf-error", "nominal", "--seed", "2", "--speed", "4"])
+    rig.wait_log("sensor stream connected", timeout_s=60)
+    out = rig.alarm_accepted("--reason", "GPS spoofing detected", "--criticality", "high")
+    assert out.returncode == 0, out.stdout + out.stderr
+    deadline = time.monotonic() + 200
+    while not rig.sim.events("touchdown"):
+        assert time.monotonic() < deadline, rig.log_text()[-3000:]
+        assert rig.companion.poll() is None, rig.log_text()[-3000:]
+        time.sleep(0.5)
+    td = rig.sim.events("touchdown")[0]
+    assert td["surface"] == "rooftop_clear", (td, rig.log_text()[-2000:])
+    assert td["safe"] is True
+    rig.wait_log("recovery ended: landed", timeout_s=60)
