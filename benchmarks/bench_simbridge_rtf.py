@@ -96,6 +96,7 @@ def bench_process(sim_s: float, autopilot: str = "ardupilot") -> tuple[float, in
         def drive() -> None:
             nonlocal decoded
             conn.wait_heartbeat(timeout=30)
+            conn.mav.request_data_stream_send(1, 1, 0, 0, 1)  # every stream at its default rate
             if sitl:  # simbridge's own link flies the firmware to the launch pose: just listen
                 while not stop.is_set():
                     if conn.recv_match(blocking=True, timeout=0.05) is not None:

@@ -65,6 +65,19 @@ DEFAULT_INTERVALS_S: dict[int, float] = {
 }
 
 
+# REQUEST_DATA_STREAM groups (MAV_DATA_STREAM_*) -> the messages simbridge builds, after ArduCopter's
+# GCS stream groups
+DATA_STREAMS: dict[int, tuple[int, ...]] = {
+    2: (M.MAVLINK_MSG_ID_SYS_STATUS, M.MAVLINK_MSG_ID_GPS_RAW_INT, M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE),
+    6: (M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, M.MAVLINK_MSG_ID_LOCAL_POSITION_NED),
+    10: (M.MAVLINK_MSG_ID_ATTITUDE, M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION),
+    11: (M.MAVLINK_MSG_ID_VFR_HUD,),
+    12: (M.MAVLINK_MSG_ID_SYSTEM_TIME, M.MAVLINK_MSG_ID_DISTANCE_SENSOR, M.MAVLINK_MSG_ID_BATTERY_STATUS,
+         M.MAVLINK_MSG_ID_HOME_POSITION),
+}  # fmt: skip
+DATA_STREAMS[0] = tuple(m for ids in DATA_STREAMS.values() for m in ids)  # MAV_DATA_STREAM_ALL
+
+
 def rangefinder_m(autopilot: Autopilot) -> float:
     """Downward rangefinder reading: distance along body +z to the first surface of the world."""
     s = autopilot.vehicle.state
@@ -95,7 +108,13 @@ class Telemetry:
             M.MAVLINK_MSG_ID_SYSTEM_TIME: self.system_time,
             M.MAVLINK_MSG_ID_AUTOPILOT_VERSION: self.autopilot_version,
         }
-        self._interval_s: dict[int, float] = dict(DEFAULT_INTERVALS_S)
+        self._builders[M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN] = self.gps_global_origin
+        unasked = (
+            DEFAULT_INTERVALS_S
+            if autopilot.flavour.streams_unasked
+            else {M.MAVLINK_MSG_ID_HEARTBEAT: DEFAULT_INTERVALS_S[M.MAVLINK_MSG_ID_HEARTBEAT]}
+        )
+        self._interval_s: dict[int, float] = dict(unasked)
         self._next_due_s: dict[int, float] = dict.fromkeys(self._interval_s, 0.0)
 
     # ------------------------------------------------------------------ scheduling
@@ -104,6 +123,19 @@ class Telemetry:
 
     def build(self, msg_id: int) -> Any:
         return self._builders[msg_id]()
+
+    def request_data_stream(self, stream_id: int, rate_hz: float, start: bool) -> bool:
+        """The legacy REQUEST_DATA_STREAM (ArduPilot's SRn_ groups; MAVProxy and Mission Planner use it):
+        every message of the group at ``rate_hz`` (at their default rate when 0), or stopped."""
+        ids = DATA_STREAMS.get(stream_id)
+        if ids is None or not math.isfinite(rate_hz) or rate_hz < 0:
+            return False
+        for msg_id in ids:
+            if not start:
+                self.set_interval(msg_id, -1)
+            else:
+                self.set_interval(msg_id, 1e6 / rate_hz if rate_hz > 0 else 0)
+        return True
 
     def set_interval(self, msg_id: int, interval_us: float) -> bool:
         """SET_MESSAGE_INTERVAL semantics: -1 stops, 0 restores the default, else microseconds."""
@@ -195,19 +227,27 @@ class Telemetry:
             round(b.remaining_fraction * 100),
         )
 
+    def gps_global_origin(self) -> Any:
+        """The EKF origin: home (where the estimator first had a position)."""
+        lat, lon, alt = self.origin.to_geodetic(*self.ap.local_origin_ned_m)
+        return self._mav.gps_global_origin_encode(
+            round(lat * 1e7), round(lon * 1e7), round(alt * 1000), int(self.ap.vehicle.state.t_s * 1e6)
+        )
+
     def extended_sys_state(self) -> Any:
         return self._mav.extended_sys_state_encode(0, self.ap.landed_state)
 
     def home_position(self) -> Any:
         hn, he, hd = self.ap.home_ned_m
         lat, lon, alt = self.origin.to_geodetic(hn, he, hd)
+        x, y, z = self.ap.to_local(self.ap.home_ned_m)
         return self._mav.home_position_encode(
             round(lat * 1e7),
             round(lon * 1e7),
             round(alt * 1000),
-            hn,
-            he,
-            hd,
+            x,
+            y,
+            z,
             [1.0, 0.0, 0.0, 0.0],
             0.0,
             0.0,
@@ -228,7 +268,8 @@ class Telemetry:
 
     def local_position_ned(self) -> Any:
         s = self.ap.estimated_state
-        return self._mav.local_position_ned_encode(self.time_boot_ms, *s.pos_ned_m, *s.vel_ned_m_s)
+        local = self.ap.to_local(s.pos_ned_m)  # relative to the EKF origin (home), as real autopilots
+        return self._mav.local_position_ned_encode(self.time_boot_ms, *local, *s.vel_ned_m_s)
 
     def global_position_int(self) -> Any:
         s = self.ap.estimated_state

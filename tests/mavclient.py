@@ -33,11 +33,20 @@ class MavClient:
     def close(self) -> None:
         self.conn.close()
 
-    def wait_heartbeat(self, timeout_s: float = 30.0) -> Any:
+    def wait_heartbeat(self, timeout_s: float = 30.0, ask: bool = True) -> Any:
+        """The first heartbeat; then (``ask``) ask for every stream, as a ground station does
+        (ArduPilot sends nothing else unasked)."""
         hb = self.conn.wait_heartbeat(timeout=timeout_s)
         if hb is None:
             raise TimeoutError("no HEARTBEAT from simbridge")
+        if ask:
+            self.request_streams(hb.get_srcSystem())
         return hb
+
+    def request_streams(self, target_system: int = 1, hz: int = 0) -> None:
+        """REQUEST_DATA_STREAM for all groups (MAV_DATA_STREAM_ALL), the legacy way MAVProxy asks;
+        rate 0: each message at the autopilot's default rate."""
+        self.mav.request_data_stream_send(target_system, 1, 0, hz, 1)
 
     def recv(self, msg_type: str | list[str], timeout_s: float = 10.0, cond: Any = None) -> Any:
         types = [msg_type] if isinstance(msg_type, str) else msg_type
@@ -141,4 +150,4 @@ class MavClient:
         nan = float("nan")
         result = self.command(mavutil.mavlink.MAV_CMD_NAV_TAKEOFF, nan, nan, nan, nan, nan, nan, nan)
         assert result == MAV_RESULT_ACCEPTED
-        self.wait_position(0.0, 0.0, -climb_m, tol_m=0.3, timeout_s=30)
+        self.wait_position(0.0, 0.0, -climb_m, tol_m=0.5, timeout_s=30)  # local z from the resting CG

@@ -144,7 +144,8 @@ def test_distance_sensor_reads_known_height(
         c.recv("DISTANCE_SENSOR")  # let the climb settle
     ds = c.recv("DISTANCE_SENSOR")
     pos = c.position()
-    assert ds.current_distance == pytest.approx(-pos.z * 100, abs=15)
+    # the local frame's origin is the EKF origin: the CG resting on the ground, 15 cm up
+    assert ds.current_distance == pytest.approx((-pos.z + 0.15) * 100, abs=15)
     assert ds.current_distance == pytest.approx(2000, abs=35)
     assert ds.min_distance <= ds.current_distance <= ds.max_distance
 

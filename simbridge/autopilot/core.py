@@ -38,7 +38,10 @@ LANDED_ON_GROUND, LANDED_IN_AIR, LANDED_TAKEOFF, LANDED_LANDING = 1, 2, 3, 4
 EventSink = Callable[[str, dict[str, Any]], None]
 TextSink = Callable[[int, str], None]
 
-_LANDED_CONFIRM_S = 0.3
+# the land detector's trigger time: ArduCopter's LAND_DETECTOR_TRIGGER_SEC and PX4's LNDMC_TRIG_TIME are
+# both 1 s (real ArduCopter SITL on simbridge's F450 said ON_GROUND 1.5 s after the gear touched:
+# tests/test_firmware_parity.py)
+_LANDED_CONFIRM_S = 1.0
 _CONTACT_MARGIN_M = 0.15  # the gear springs bounce the CG ~7 cm above rest on a 0.7 m/s touchdown
 _TAKEOFF_REACHED_M = 0.3
 
@@ -76,6 +79,9 @@ class Autopilot:
     ) -> None:
         self.flavour = flavour
         self.estimate = estimate
+        # the local frame's origin (LOCAL_POSITION_NED, position targets): the EKF origin, set where
+        # the estimator first had a position: the vehicle resting at home, under the launch point
+        self.local_origin_ned_m = (home_ned_m[0], home_ned_m[1], home_ned_m[2] - GEAR_HEIGHT_M)
         self.vehicle = vehicle
         self.home_ned_m = home_ned_m
         self._emit_event = emit_event
@@ -202,6 +208,18 @@ class Autopilot:
         rtl = next(m for m in self.flavour.modes if m.nav is Nav.RTL)
         return self.set_mode(rtl)
 
+    def to_local(self, p: Vec3) -> Vec3:
+        """World NED -> the autopilot's local frame (relative to its EKF origin)."""
+        o = self.local_origin_ned_m
+        return (p[0] - o[0], p[1] - o[1], p[2] - o[2])
+
+    def from_local(self, sp: Setpoint) -> Setpoint:
+        """A setpoint in the local frame -> the same in world axes (still the estimated frame)."""
+        on, oe, od = self.local_origin_ned_m
+        ne = (sp.pos_ne_m[0] + on, sp.pos_ne_m[1] + oe) if sp.pos_ne_m is not None else None
+        d = sp.pos_d_m + od if sp.pos_d_m is not None else None
+        return dataclasses.replace(sp, pos_ne_m=ne, pos_d_m=d)
+
     @property
     def estimated_state(self) -> VehicleState:
         """What the autopilot believes (its telemetry says this): the truth, or the truth with the
@@ -300,13 +318,15 @@ class Autopilot:
 
     def _fly_takeoff(self, s: VehicleState) -> Setpoint | None:
         if self._hold is None or self._takeoff_target_d is None:
-            self._takeoff_target_d = -(s.ground_height_m + self.tun.takeoff_alt_m)
+            # the takeoff altitude is over the resting vehicle (home, the local frame's origin)
+            self._takeoff_target_d = -(s.ground_height_m + GEAR_HEIGHT_M + self.tun.takeoff_alt_m)
             self._hold = Setpoint.hold((s.pos_ned_m[0], s.pos_ned_m[1], self._takeoff_target_d))
         if abs(s.pos_ned_m[2] - self._takeoff_target_d) < _TAKEOFF_REACHED_M:
-            self._takeoff_target_d = None
+            target_d, self._takeoff_target_d = self._takeoff_target_d, None
             after = self.flavour.after_takeoff_mode
             if after is not None:
                 self._set_mode(self.flavour.mode(after), s, announce=True)
+                self._hold = Setpoint.hold((s.pos_ned_m[0], s.pos_ned_m[1], target_d))  # hold up there
             self._emit_text(SEV_INFO, "Takeoff complete")
         return self._hold
 

@@ -79,6 +79,9 @@ class Flavour:
     offboard_needs_stream: bool
     # MAVLink PARAM_VALUE encoding of integer parameters: PX4 copies the bytes, ArduPilot casts
     param_bytewise: bool
+    # PX4 streams its telemetry unasked; ArduPilot sends heartbeats only until a ground station asks
+    # (SET_MESSAGE_INTERVAL or REQUEST_DATA_STREAM), as real ArduCopter on a fresh serial port does
+    streams_unasked: bool = True
 
     def mode(self, name: str) -> ModeSpec:
         for m in self.modes:
@@ -214,6 +217,7 @@ class ArduPilotFlavour(Flavour):
     after_takeoff_mode = None
     offboard_needs_stream = False
     param_bytewise = False
+    streams_unasked = False
 
     _NEEDS_RC: ClassVar[dict[int, str]] = {
         0: "STABILIZE",

@@ -52,7 +52,8 @@ class SetpointError(ValueError):
 def decode_local_ned_target(
     msg: Any, pos_ned_m: tuple[float, float, float], yaw_rad: float
 ) -> tuple[Setpoint, bool]:
-    """SET_POSITION_TARGET_LOCAL_NED -> (world-frame setpoint, velocity-only?).
+    """SET_POSITION_TARGET_LOCAL_NED -> (local-frame setpoint, velocity-only?); ``pos_ned_m`` is the
+    vehicle's position in the local frame (the offset frames' reference).
 
     Raises:
         SetpointError: unsupported frame or a mask that leaves an axis without position or velocity.
@@ -113,6 +114,7 @@ class AutopilotServer:
             "PARAM_REQUEST_READ": self._on_param_read,
             "PARAM_SET": self._on_param_set,
             "PING": self._on_ping,
+            "REQUEST_DATA_STREAM": self._on_request_data_stream,
             "TIMESYNC": self._on_timesync,
         }
         names = [p.name for p in autopilot.flavour.params]
@@ -136,6 +138,14 @@ class AutopilotServer:
         self._send(
             self._mav.command_ack_encode(command, result, 0, 0, msg.get_srcSystem(), msg.get_srcComponent())
         )
+
+    def _on_request_data_stream(self, msg: Any) -> None:
+        if not self._for_us(msg):
+            return
+        if not self.tm.request_data_stream(
+            int(msg.req_stream_id), float(msg.req_message_rate), bool(msg.start_stop)
+        ):
+            self._log.info("REQUEST_DATA_STREAM %d not served", msg.req_stream_id)
 
     # ------------------------------------------------------------------ commands
     def _on_command(self, msg: Any) -> None:
@@ -218,14 +228,14 @@ class AutopilotServer:
     def _on_local_target(self, msg: Any) -> None:
         if not self._for_us(msg):
             return
-        s = self.ap.vehicle.state
+        s = self.ap.estimated_state  # offsets are from where the autopilot believes it is
         try:
-            sp, is_velocity = decode_local_ned_target(msg, s.pos_ned_m, s.euler_rad[2])
+            sp, is_velocity = decode_local_ned_target(msg, self.ap.to_local(s.pos_ned_m), s.euler_rad[2])
         except SetpointError as exc:
             self._log.warning("setpoint refused: %s", exc)
             self.ap.reject_setpoint(str(exc))
             return
-        self.ap.external_setpoint(sp, is_velocity)
+        self.ap.external_setpoint(self.ap.from_local(sp), is_velocity)
 
     # ------------------------------------------------------------------ parameters
     def _encode_param(self, name: str) -> float:

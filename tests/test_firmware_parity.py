@@ -1,0 +1,126 @@
+"""The emulated ArduPilot flavour against real ArduCopter (issue 19, part 4): the same checks, flown
+against both, must pass on both. What a companion meets: what arrives unasked, stream requests and
+their ACKs, the local frame's origin (the EKF origin at the launch point, not the scenario's origin),
+HOME_POSITION and GPS_GLOBAL_ORIGIN, GUIDED / arm / takeoff ACKs, the landed states through a takeoff
+and a LAND, position targets in the local frame, the land detector's delay and the disarm after LAND.
+
+The real-firmware runs need ArduPilot's SITL (``../shared/sitl/ardupilot/arducopter``); they skip
+elsewhere, saying how to get it, and fail in CI (``LANDFALL_REQUIRE_SITL=1``).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+
+import pytest
+from pymavlink import mavutil
+
+from simbridge.geo import GeoOrigin
+from tests.conftest import SimProcess
+from tests.mavclient import MavClient
+
+pytestmark = pytest.mark.slow
+M = mavutil.mavlink
+LAUNCH = (12.0, 8.0)
+ON_GROUND, IN_AIR, TAKEOFF, LANDING = 1, 2, 3, 4
+
+
+@pytest.fixture(params=["ardupilot", pytest.param("ardupilot-sitl", marks=pytest.mark.sitl)])
+def vehicle(request: pytest.FixtureRequest, start_sim: Callable[..., SimProcess]) -> tuple[str, SimProcess]:
+    autopilot = str(request.param)
+    extra: list[str] = []
+    if autopilot == "ardupilot-sitl":
+        extra = ["--sitl", str(request.getfixturevalue("arducopter"))]
+    sim = start_sim("--autopilot", autopilot, *extra, "--scenario", "flat", "--start", "ground",
+                    "--launch", f"{LAUNCH[0]},{LAUNCH[1]}", "--speed", "10")  # fmt: skip
+    return autopilot, sim
+
+
+def _ready(sim: SimProcess, timeout_s: float = 120.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not sim.events("ready"):
+        assert sim.proc.poll() is None, sim.stderr_path.read_text()[-3000:]
+        assert time.monotonic() < deadline, "no ready event"
+        time.sleep(0.2)
+
+
+def _seen(c: MavClient, wall_s: float) -> set[str]:
+    kinds: set[str] = set()
+    end = time.monotonic() + wall_s
+    while time.monotonic() < end:
+        m = c.conn.recv_match(blocking=True, timeout=0.1)
+        if m is not None:
+            kinds.add(m.get_type())
+    return kinds
+
+
+def _landed(c: MavClient, want: int, timeout_s: float) -> float:
+    """Wall time at which EXTENDED_SYS_STATE first says ``want``."""
+    c.recv("EXTENDED_SYS_STATE", timeout_s, cond=lambda m: m.landed_state == want)
+    return time.monotonic()
+
+
+def test_the_emulation_and_the_firmware_meet_a_companion_alike(
+    vehicle: tuple[str, SimProcess], client_for: Callable[..., MavClient]
+) -> None:
+    autopilot, sim = vehicle
+    c = client_for(sim.port)
+    hb = c.wait_heartbeat(60, ask=False)
+    assert hb.autopilot == M.MAV_AUTOPILOT_ARDUPILOTMEGA
+    assert hb.type == M.MAV_TYPE_QUADROTOR
+    unasked = _seen(c, 2.0)
+    assert not unasked & {"LOCAL_POSITION_NED", "ATTITUDE", "ATTITUDE_QUATERNION", "GLOBAL_POSITION_INT"}
+    _ready(sim)
+    for msg_id, hz in ((M.MAVLINK_MSG_ID_LOCAL_POSITION_NED, 10), (M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, 5),
+                       (M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, 10)):  # fmt: skip
+        assert c.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / hz) == 0
+    # the local frame starts at the EKF origin: the launch point, 14 m from the scenario's origin
+    p = c.position(10)
+    assert math.hypot(p.x, p.y) < 0.5
+    assert abs(p.z) < 0.5
+    first = c.position()
+    count = 0
+    while (m := c.position()).time_boot_ms < first.time_boot_ms + 3000:
+        count += 1
+    assert count == pytest.approx(30, abs=6), f"{autopilot}: {count} LOCAL_POSITION_NED in 3 s asked at 10 Hz"
+    assert m.time_boot_ms > first.time_boot_ms
+    assert c.command(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN) == 0
+    origin = c.recv("GPS_GLOBAL_ORIGIN", 10)
+    launch = GeoOrigin().to_geodetic(LAUNCH[0], LAUNCH[1], 0.0)
+    n, e, _ = GeoOrigin().to_ned(origin.latitude / 1e7, origin.longitude / 1e7, launch[2])
+    assert math.hypot(n - LAUNCH[0], e - LAUNCH[1]) < 1.0
+    # GUIDED, arm, take off: accepted by both; the landed state goes through TAKEOFF or straight to IN_AIR
+    assert c.set_mode_ap("GUIDED") == 0
+    assert c.arm() == 0
+    assert c.command(M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, 0, 0, 10) == 0
+    c.recv("EXTENDED_SYS_STATE", 30, cond=lambda m: m.landed_state in (TAKEOFF, IN_AIR))
+    c.wait_position(0.0, 0.0, -10.0, 1.0, 60)
+    # a position target in the local frame lands in the world at the launch point plus it
+    c.wait_position(5.0, 0.0, -10.0, 0.3, 60, stream=True)
+    c.stream_position(5.0, 0.0, -10.0, wall_s=1.0)  # settle (10 s simulated)
+    told = c.position()
+    state = sim.events("state")[-1]
+    wn, we, _ = state["pos_ned_m"]  # type: ignore[misc]
+    assert math.hypot(wn - (LAUNCH[0] + 5.0), we - LAUNCH[1]) < 1.0
+    assert math.hypot(wn - (LAUNCH[0] + told.x), we - (LAUNCH[1] + told.y)) < 1.0
+    # LAND: LANDING, then ON_GROUND a land detector's delay after the gear touches, then disarmed
+    assert c.set_mode_ap("LAND") == 0
+    c.recv("EXTENDED_SYS_STATE", 10, cond=lambda m: m.landed_state == LANDING)
+    t_boot = contact = on_ground = None
+    deadline = time.monotonic() + 120
+    while on_ground is None:
+        assert time.monotonic() < deadline, f"{autopilot}: no ON_GROUND after LAND"
+        m = c.recv(["LOCAL_POSITION_NED", "EXTENDED_SYS_STATE"], 10)
+        if m.get_type() == "LOCAL_POSITION_NED":
+            t_boot = m.time_boot_ms / 1000.0
+            if contact is None and m.z > -0.05:  # the CG within 5 cm of its resting height
+                contact = t_boot
+        elif m.landed_state == ON_GROUND and t_boot is not None:
+            on_ground = t_boot
+    assert contact is not None
+    delay = on_ground - contact
+    print(f"{autopilot}: ON_GROUND {delay:.2f} s after contact")
+    assert 0.5 <= delay <= 3.0, f"{autopilot}: ON_GROUND {delay:.2f} s after contact"
+    c.wait_disarmed(30)
