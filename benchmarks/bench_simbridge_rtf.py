@@ -34,6 +34,7 @@ from pymavlink import mavutil
 from simbridge.control import Setpoint
 from simbridge.geo import GeoOrigin
 from simbridge.physics import F450Physics
+from simbridge.telemetry import DEFAULT_INTERVALS_S
 from simbridge.terrain import FlatTerrain
 from simbridge.vehicle import Vehicle
 
@@ -96,7 +97,8 @@ def bench_process(sim_s: float, autopilot: str = "ardupilot") -> tuple[float, in
         def drive() -> None:
             nonlocal decoded
             conn.wait_heartbeat(timeout=30)
-            conn.mav.request_data_stream_send(1, 1, 0, 0, 1)  # every stream at its default rate
+            for msg_id, interval_s in DEFAULT_INTERVALS_S.items():  # every stream at the PX4 defaults
+                conn.mav.command_long_send(1, 1, 511, 0, msg_id, interval_s * 1e6, 0, 0, 0, 0, 0)
             if sitl:  # simbridge's own link flies the firmware to the launch pose: just listen
                 while not stop.is_set():
                     if conn.recv_match(blocking=True, timeout=0.05) is not None:

@@ -126,15 +126,13 @@ class Telemetry:
 
     def request_data_stream(self, stream_id: int, rate_hz: float, start: bool) -> bool:
         """The legacy REQUEST_DATA_STREAM (ArduPilot's SRn_ groups; MAVProxy and Mission Planner use it):
-        every message of the group at ``rate_hz`` (at their default rate when 0), or stopped."""
+        every message of the group at ``rate_hz``; stopped when ``start`` is false or the rate is 0, as
+        ArduPilot does."""
         ids = DATA_STREAMS.get(stream_id)
         if ids is None or not math.isfinite(rate_hz) or rate_hz < 0:
             return False
         for msg_id in ids:
-            if not start:
-                self.set_interval(msg_id, -1)
-            else:
-                self.set_interval(msg_id, 1e6 / rate_hz if rate_hz > 0 else 0)
+            self.set_interval(msg_id, 1e6 / rate_hz if start and rate_hz > 0 else -1)
         return True
 
     def set_interval(self, msg_id: int, interval_us: float) -> bool:

@@ -39,13 +39,13 @@ class MavClient:
         hb = self.conn.wait_heartbeat(timeout=timeout_s)
         if hb is None:
             raise TimeoutError("no HEARTBEAT from simbridge")
-        if ask:
+        if ask and hb.autopilot == mavutil.mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA:
             self.request_streams(hb.get_srcSystem())
         return hb
 
-    def request_streams(self, target_system: int = 1, hz: int = 0) -> None:
-        """REQUEST_DATA_STREAM for all groups (MAV_DATA_STREAM_ALL), the legacy way MAVProxy asks;
-        rate 0: each message at the autopilot's default rate."""
+    def request_streams(self, target_system: int = 1, hz: int = 20) -> None:
+        """REQUEST_DATA_STREAM for all groups (MAV_DATA_STREAM_ALL) at ``hz``, the legacy way MAVProxy
+        asks ArduPilot (PX4 streams unasked and ignores it)."""
         self.mav.request_data_stream_send(target_system, 1, 0, hz, 1)
 
     def recv(self, msg_type: str | list[str], timeout_s: float = 10.0, cond: Any = None) -> Any:

@@ -124,3 +124,23 @@ def test_the_emulation_and_the_firmware_meet_a_companion_alike(
     print(f"{autopilot}: ON_GROUND {delay:.2f} s after contact")
     assert 0.5 <= delay <= 3.0, f"{autopilot}: ON_GROUND {delay:.2f} s after contact"
     c.wait_disarmed(30)
+
+
+def test_the_legacy_stream_request_starts_and_stops_a_group_alike(
+    vehicle: tuple[str, SimProcess], client_for: Callable[..., MavClient]
+) -> None:
+    """REQUEST_DATA_STREAM (MAVProxy's way): MAV_DATA_STREAM_POSITION at 5 Hz brings LOCAL_POSITION_NED
+    at 5 Hz of the autopilot's clock; start_stop 0 stops it."""
+    autopilot, sim = vehicle
+    c = client_for(sim.port)
+    c.wait_heartbeat(60, ask=False)
+    _ready(sim)
+    c.mav.request_data_stream_send(1, 1, M.MAV_DATA_STREAM_POSITION, 5, 1)
+    first = c.recv("LOCAL_POSITION_NED", 10)
+    count = 0
+    while c.position().time_boot_ms < first.time_boot_ms + 4000:
+        count += 1
+    assert count == pytest.approx(20, abs=4), f"{autopilot}: {count} in 4 s at 5 Hz"
+    c.mav.request_data_stream_send(1, 1, M.MAV_DATA_STREAM_POSITION, 5, 0)
+    c.drain(0.5)
+    assert "LOCAL_POSITION_NED" not in _seen(c, 1.5), f"{autopilot}: still streaming after the stop"

@@ -140,8 +140,8 @@ class AutopilotServer:
         )
 
     def _on_request_data_stream(self, msg: Any) -> None:
-        if not self._for_us(msg):
-            return
+        if not self._for_us(msg) or self.ap.flavour.streams_unasked:
+            return  # PX4 does not implement the legacy request (it streams anyway)
         if not self.tm.request_data_stream(
             int(msg.req_stream_id), float(msg.req_message_rate), bool(msg.start_stop)
         ):
