@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from companion.alarms import ALARM_TEXT_PREFIX, MAV_CMD_USER_1, Criticality, ReasonCode
-from simbridge.link import LinkUrl, LinkUrlError, MavlinkUdpLink, parse_signing_key
+from landfall_link.mavlink import LinkUrl, LinkUrlError, MavlinkUdpLink, parse_signing_key
 
 RESULTS = {
     0: "accepted: recovery started",

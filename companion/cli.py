@@ -111,7 +111,7 @@ def _ground_feed(cfg: CompanionConfig) -> GroundFeed | None:
 
 
 def build_companion(cfg: CompanionConfig) -> Companion:
-    from simbridge.sensorstream import parse_endpoint
+    from landfall_link.sensorstream import parse_endpoint
 
     record: Any = None
     if cfg.record.dir is not None:

@@ -19,7 +19,7 @@ from companion.reasoning.cascade import Cascade
 from companion.reasoning.onboard import OnboardReasoner
 from companion.recovery import FrameUnavailable, Outcome, Record, Recovery, RecoveryParams
 from companion.telemetry import TelemetryCache
-from simbridge.link import MavlinkUdpLink
+from landfall_link.mavlink import MavlinkUdpLink
 
 MAV_TYPE_ONBOARD_CONTROLLER = 18
 MAV_AUTOPILOT_INVALID = 8
@@ -239,7 +239,7 @@ class Companion:
 
     async def _frame(self) -> Any:
         """A fresh frame for the recovery, or ``FrameUnavailable`` saying why there is none."""
-        from simbridge.sensorstream import SensorStreamError
+        from landfall_link.sensorstream import SensorStreamError
 
         if self._client is None:
             raise FrameUnavailable("sensor stream not connected")
@@ -349,7 +349,7 @@ class Companion:
     async def _connect_sensors(self, stack: contextlib.AsyncExitStack, client_cls: Any) -> None:
         """Connect to the sensor stream, retrying every second: it may come up after us. Alarms
         are answered TEMPORARILY_REJECTED until it is there."""
-        from simbridge.sensorstream import SensorStreamError
+        from landfall_link.sensorstream import SensorStreamError
 
         assert self._sensors is not None
         warned = False
@@ -370,7 +370,7 @@ class Companion:
         self._stop.set()
 
     async def run(self) -> None:
-        from simbridge.sensorstream import SensorClient
+        from landfall_link.sensorstream import SensorClient
 
         async with contextlib.AsyncExitStack() as stack:
             await stack.enter_async_context(self.link)

@@ -10,9 +10,9 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from landfall_link.mavlink import LinkUrl, LinkUrlError, parse_signing_key
 from simbridge.estimate import PRESETS
 from simbridge.geo import GeoOrigin
-from simbridge.link import LinkUrl, LinkUrlError, parse_signing_key
 from simbridge.scenarios import scenario_names
 from simbridge.sim import AUTOPILOTS, SimConfig, make_bridge
 from simbridge.sitl import ENV_BINARY, SitlError
@@ -170,7 +170,7 @@ def config_from_args(args: argparse.Namespace) -> SimConfig:
         raise ValueError(f"--scenario: unknown scenario {args.scenario!r}; known: {names} or a .toml path")
     sensors = None
     if args.sensors:
-        from simbridge.sensorstream import parse_endpoint
+        from landfall_link.sensorstream import parse_endpoint
 
         try:
             sensors = parse_endpoint(args.sensors)

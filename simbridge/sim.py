@@ -14,13 +14,13 @@ from typing import Any
 
 import numpy as np
 
+from landfall_link.mavlink import MavlinkUdpLink
 from simbridge.autopilot.core import Autopilot
 from simbridge.autopilot.flavours import flavour_named
 from simbridge.autopilot.server import AutopilotServer
 from simbridge.episode_log import EpisodeLog
 from simbridge.estimate import EstimateError, estimate_preset
 from simbridge.geo import GeoOrigin
-from simbridge.link import MavlinkUdpLink
 from simbridge.physics import GEAR_HEIGHT_M
 from simbridge.scenarios import Scenario, load_scenario
 from simbridge.telemetry import Telemetry
@@ -235,7 +235,7 @@ class SimBridge:
         self.log.info("sensors ready (%.1f s to warm up the renderer)", time.perf_counter() - t0)
 
     def _sensor_server(self, host: str, port: int) -> contextlib.AbstractAsyncContextManager[object]:
-        from simbridge.sensorstream import SensorStreamServer
+        from landfall_link.sensorstream import SensorStreamServer
         from simbridge.world.live import LiveWorld
 
         terrain = self.scenario.terrain
@@ -262,7 +262,7 @@ class SimBridge:
 
     async def _capture(self, want: set[str]) -> Any:
         """Render what ``want`` asks for at the vehicle's pose now (in a worker thread)."""
-        from simbridge.sensorstream import SensorFrame
+        from landfall_link.sensorstream import SensorFrame
         from simbridge.world.live import LiveWorld
 
         world = self.scenario.terrain

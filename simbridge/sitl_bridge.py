@@ -21,7 +21,7 @@ import signal
 import time
 from typing import Any
 
-from simbridge.link import LinkUrl
+from landfall_link.mavlink import LinkUrl
 from simbridge.physics import GEAR_HEIGHT_M, VehicleState
 from simbridge.sim import SimBridge, SimConfig
 from simbridge.sitl import LockStep, SitlError, SitlProcess, claim_instance, find_arducopter, heading_deg

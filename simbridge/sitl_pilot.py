@@ -27,8 +27,8 @@ from typing import Any
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
+from landfall_link.mavlink import MavlinkUdpLink
 from simbridge.autopilot.flavours import ArduPilotFlavour
-from simbridge.link import MavlinkUdpLink
 from simbridge.sitl import SitlError
 
 M = mavlink2

@@ -22,7 +22,7 @@ from companion.daemon import Companion
 from companion.ground import alarm_from_mqtt
 from companion.reasoning.base import ReasonerError
 from companion.reasoning.parsing import parse_confirm, parse_rank
-from simbridge.sensorstream import (
+from landfall_link.sensorstream import (
     ImageEncoding,
     Part,
     SensorFrame,

@@ -8,8 +8,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from landfall_link.mavlink import LinkUrl, LinkUrlError, parse_signing_key
 from simbridge.geo import GeoOrigin, euler_to_quat, quat_to_euler, rotate_body_to_ned, wrap_pi
-from simbridge.link import LinkUrl, LinkUrlError, parse_signing_key
 
 angles = st.floats(min_value=-1.5, max_value=1.5)
 

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from simbridge.sensorstream import (
+from landfall_link.sensorstream import (
     MAX_LINE_BYTES,
     EndpointError,
     SensorClient,

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from simbridge.sensorstream import SensorClient
+from landfall_link.sensorstream import SensorClient
 from tests.conftest import SimProcess, free_udp_port
 from tests.mavclient import MAV_RESULT_ACCEPTED, MavClient
 

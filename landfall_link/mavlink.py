@@ -100,7 +100,7 @@ class MavlinkUdpLink(asyncio.DatagramProtocol):
         self.mav.robust_parsing = True
         self.stats = LinkStats()
         self._handler = handler
-        self._log = logger or logging.getLogger("simbridge.link")
+        self._log = logger or logging.getLogger("landfall_link.mavlink")
         self._transport: asyncio.DatagramTransport | None = None
         self._fixed: Address | None = None
         self._peers: dict[Address, float] = {}
