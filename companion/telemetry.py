@@ -18,7 +18,7 @@ import collections
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 MAV_COMP_ID_AUTOPILOT1 = 1
 MAV_TYPE_GCS = 6
@@ -61,6 +61,46 @@ class Pose:
     quat_wxyz: tuple[float, float, float, float]
 
 
+T = TypeVar("T")
+
+
+class _Samples(Generic[T]):
+    """Values by boot-clock time, newest last, the last ``history_s`` seconds kept."""
+
+    def __init__(self, history_s: float, reboot_back_s: float) -> None:
+        self.history_s, self.reboot_back_s = history_s, reboot_back_s
+        self.t: collections.deque[float] = collections.deque()
+        self.v: collections.deque[T] = collections.deque()
+
+    def add(self, t_s: float, value: T) -> None:
+        if self.t and t_s <= self.t[-1]:
+            if t_s >= self.t[-1] - self.reboot_back_s:
+                return  # a duplicate or a late packet
+            self.t.clear()  # the autopilot rebooted: its clock started again
+            self.v.clear()
+        self.t.append(t_s)
+        self.v.append(value)
+        while self.t[0] < t_s - self.history_s:
+            self.t.popleft()
+            self.v.popleft()
+
+    def around(self, t: float, extrapolate_s: float, max_gap_s: float) -> tuple[int, float] | None:
+        """``(k, w)``: ``t`` lies at weight ``w`` between samples ``k - 1`` and ``k``; ``(len, dt)``
+        when it is ``dt`` past the newest (at most ``extrapolate_s``); None otherwise."""
+        ts = self.t
+        if not ts or t < ts[0]:
+            return None
+        k = bisect.bisect_right(ts, t)
+        if k == len(ts):
+            dt = t - ts[-1]
+            return (k, dt) if dt <= extrapolate_s else None
+        t0, t1 = ts[k - 1], ts[k]
+        return (k, (t - t0) / (t1 - t0)) if t1 - t0 <= max_gap_s else None
+
+
+Vec3 = tuple[float, float, float]
+
+
 class PoseHistory:
     """Position and attitude samples of the last ``HISTORY_S`` seconds, by ``time_boot_ms``."""
 
@@ -70,44 +110,19 @@ class PoseHistory:
     REBOOT_BACK_S = 2.0  # a sample this much older than the newest: the autopilot's clock restarted
 
     def __init__(self) -> None:
-        self._pt: collections.deque[float] = collections.deque()
-        self._pos: collections.deque[tuple[tuple[float, float, float], tuple[float, float, float]]] = (
-            collections.deque()
-        )
-        self._qt: collections.deque[float] = collections.deque()
-        self._q: collections.deque[tuple[float, float, float, float]] = collections.deque()
+        self._pos: _Samples[tuple[Vec3, Vec3]] = _Samples(self.HISTORY_S, self.REBOOT_BACK_S)
+        self._att: _Samples[tuple[float, float, float, float]] = _Samples(self.HISTORY_S, self.REBOOT_BACK_S)
 
-    def add_position(
-        self, t_s: float, pos: tuple[float, float, float], vel: tuple[float, float, float]
-    ) -> None:
-        if self._pt and t_s <= self._pt[-1]:
-            if t_s < self._pt[-1] - self.REBOOT_BACK_S:  # the autopilot rebooted: its clock started again
-                self._pt.clear()
-                self._pos.clear()
-            else:
-                return  # a duplicate or a late packet
-        self._pt.append(t_s)
-        self._pos.append((pos, vel))
-        while self._pt and self._pt[0] < t_s - self.HISTORY_S:
-            self._pt.popleft()
-            self._pos.popleft()
+    def add_position(self, t_s: float, pos: Vec3, vel: Vec3) -> None:
+        self._pos.add(t_s, (pos, vel))
 
     def add_attitude(self, t_s: float, quat: tuple[float, float, float, float]) -> None:
-        if self._qt and t_s <= self._qt[-1]:
-            if t_s < self._qt[-1] - self.REBOOT_BACK_S:
-                self._qt.clear()
-                self._q.clear()
-            else:
-                return
-        self._qt.append(t_s)
-        self._q.append(quat)
-        while self._qt and self._qt[0] < t_s - self.HISTORY_S:
-            self._qt.popleft()
-            self._q.popleft()
+        self._att.add(t_s, quat)
 
     def span(self) -> tuple[float, float] | None:
         """(oldest, newest) boot-clock seconds with a position, or None."""
-        return (self._pt[0], self._pt[-1]) if self._pt else None
+        ts = self._pos.t
+        return (ts[0], ts[-1]) if ts else None
 
     def at(self, t_s: float) -> Pose | None:
         """The estimate at ``t_s``: positions interpolated linearly, attitudes normalised-linearly;
@@ -119,36 +134,27 @@ class PoseHistory:
             return None
         return Pose(t_s, pos, quat)
 
-    def _position_at(self, t: float) -> tuple[float, float, float] | None:
-        ts = self._pt
-        if not ts or t < ts[0]:
+    def _position_at(self, t: float) -> Vec3 | None:
+        found = self._pos.around(t, self.EXTRAPOLATE_S, self.MAX_GAP_S)
+        if found is None:
             return None
-        k = bisect.bisect_right(ts, t)
-        if k == len(ts):
-            dt = t - ts[-1]
-            if dt > self.EXTRAPOLATE_S:
-                return None
-            (n, e, d), (vn, ve, vd) = self._pos[-1]
-            return (n + vn * dt, e + ve * dt, d + vd * dt)
-        t0, t1 = ts[k - 1], ts[k]
-        if t1 - t0 > self.MAX_GAP_S:
-            return None
-        w = (t - t0) / (t1 - t0)
-        p0, p1 = self._pos[k - 1][0], self._pos[k][0]
+        k, w = found
+        values = self._pos.v
+        if k == len(values):  # w is the time past the newest sample
+            (n, e, d), (vn, ve, vd) = values[-1]
+            return (n + vn * w, e + ve * w, d + vd * w)
+        p0, p1 = values[k - 1][0], values[k][0]
         return (p0[0] + w * (p1[0] - p0[0]), p0[1] + w * (p1[1] - p0[1]), p0[2] + w * (p1[2] - p0[2]))
 
     def _attitude_at(self, t: float) -> tuple[float, float, float, float] | None:
-        ts = self._qt
-        if not ts or t < ts[0]:
+        found = self._att.around(t, self.EXTRAPOLATE_S, self.MAX_GAP_S)
+        if found is None:
             return None
-        k = bisect.bisect_right(ts, t)
-        if k == len(ts):
-            return self._q[-1] if t - ts[-1] <= self.EXTRAPOLATE_S else None
-        t0, t1 = ts[k - 1], ts[k]
-        if t1 - t0 > self.MAX_GAP_S:
-            return None
-        w = (t - t0) / (t1 - t0)
-        q0, q1 = self._q[k - 1], self._q[k]
+        k, w = found
+        values = self._att.v
+        if k == len(values):
+            return values[-1]
+        q0, q1 = values[k - 1], values[k]
         sign = 1.0 if sum(a * b for a, b in zip(q0, q1, strict=True)) >= 0.0 else -1.0  # the shorter way
         q = [a + w * (sign * b - a) for a, b in zip(q0, q1, strict=True)]
         norm = math.sqrt(sum(c * c for c in q)) or 1.0

@@ -21,6 +21,7 @@ import collections
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -106,33 +107,30 @@ class EstimateError:
         dt = 0.0 if self._t_last is None else max(0.0, s.t_s - self._t_last)
         self._t_last = s.t_s
         if dt > 0.0:
-            a = math.exp(-dt / c.pos_bias_tau_s)
-            self.pos_bias = a * self.pos_bias + math.sqrt(1 - a * a) * self._pos_sigma * self.rng.normal(
-                0, 1, 3
-            )
-            b = math.exp(-dt / c.att_bias_tau_s)
-            self.att_bias = b * self.att_bias + math.sqrt(1 - b * b) * self._att_sigma * self.rng.normal(
-                0, 1, 3
-            )
+            self.pos_bias = self._gauss_markov(self.pos_bias, self._pos_sigma, c.pos_bias_tau_s, dt)
+            self.att_bias = self._gauss_markov(self.att_bias, self._att_sigma, c.att_bias_tau_s, dt)
         self._history.append(s)
         while len(self._history) > 1 and self._history[1].t_s <= s.t_s - c.lag_s:
             self._history.popleft()
         late = self._history[0]
-        noise = self.rng.normal(0.0, c.pos_noise_m, 3)
-        p0, p1, p2 = (float(p + b + n) for p, b, n in zip(late.pos_ned_m, self.pos_bias, noise, strict=True))
-        att = self.att_bias + self.rng.normal(0.0, math.radians(c.att_noise_deg), 3)
-        quat = _small_rotation(late.quat, float(att[0]), float(att[1]), float(att[2]))
+        pos, quat = self._apply(late.pos_ned_m, late.quat)
         self._estimate = dataclasses.replace(
-            late,
-            t_s=s.t_s,
-            pos_ned_m=(p0, p1, p2),
-            quat=quat,
-            euler_rad=_euler(quat),
+            late, t_s=s.t_s, pos_ned_m=pos, quat=quat, euler_rad=_euler(quat)
         )
         return self._estimate
 
+    def _gauss_markov(self, x: np.ndarray, sigma: Any, tau_s: float, dt: float) -> np.ndarray:
+        """One step of a first-order Gauss-Markov process of stationary deviation ``sigma``."""
+        a = math.exp(-dt / tau_s)
+        out: np.ndarray = a * x + math.sqrt(1 - a * a) * sigma * self.rng.normal(0.0, 1.0, 3)
+        return out
+
     def perturb(self, pos_ned_m: Vec3, quat: Quat) -> tuple[Vec3, Quat]:
         """A pose as the estimator would report it now, for a vehicle holding still (no lag)."""
+        return self._apply(pos_ned_m, quat)
+
+    def _apply(self, pos_ned_m: Vec3, quat: Quat) -> tuple[Vec3, Quat]:
+        """The bias and a fresh draw of noise, on position and attitude."""
         c = self.config
         noise = self.rng.normal(0.0, c.pos_noise_m, 3)
         p0, p1, p2 = (float(p + b + n) for p, b, n in zip(pos_ned_m, self.pos_bias, noise, strict=True))

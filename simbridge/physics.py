@@ -23,6 +23,7 @@ FT_M = 0.3048
 LBF_N = 4.4482216152605
 _SLUG_KG = 14.593902937
 GEAR_HEIGHT_M = 0.1524  # CG height above the ground when resting on the gear (F450 Gear.xml)
+CONTACT_MARGIN_M = 0.15  # the gear springs bounce the CG ~7 cm above rest on a 0.7 m/s touchdown
 MOTOR_COUNT = 4
 CONTACT_DT_S = 1.0 / 240.0  # the longest JSBSim step while a gear leg touches
 _ESC_PROPS = ("fcs/cmdFR_ext_nd", "fcs/cmdAL_ext_nd", "fcs/cmdFL_ext_nd", "fcs/cmdAR_ext_nd")

@@ -459,16 +459,5 @@ class LockStep:
                 self.on_state(s)
 
 
-def wait_for(event: threading.Event, timeout_s: float) -> bool:
-    """``event.wait`` in small steps (a signal handler gets to run between them)."""
-    deadline = time.monotonic() + timeout_s
-    while not event.is_set():
-        left = deadline - time.monotonic()
-        if left <= 0:
-            return False
-        event.wait(min(left, 0.1))
-    return True
-
-
 def heading_deg(yaw_rad: float) -> float:
     return math.degrees(yaw_rad) % 360.0

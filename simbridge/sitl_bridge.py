@@ -15,19 +15,17 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import logging
 import math
 import signal
 import time
 from typing import Any
 
 from landfall_link.mavlink import LinkUrl
-from simbridge.physics import GEAR_HEIGHT_M, VehicleState
-from simbridge.sim import SimBridge, SimConfig
+from simbridge.physics import CONTACT_MARGIN_M, GEAR_HEIGHT_M, VehicleState
+from simbridge.sim import SimBridge
 from simbridge.sitl import LockStep, SitlError, SitlProcess, claim_instance, find_arducopter, heading_deg
 from simbridge.sitl_pilot import READY_POS_M, READY_SPEED_M_S, SitlNotReady, SitlPilot
 
-_CONTACT_MARGIN_M = 0.15  # as the emulation's land detector
 _LANDED_CONFIRM_S = 0.3
 _AIRBORNE_M = 0.25
 _EKF_GOOD = 0x33F  # attitude, velocities, positions (rel/abs, vertical), predicted positions
@@ -49,7 +47,7 @@ class TouchdownWatch:
         if not self.armed_watch:
             return False
         agl = s.height_agl_m
-        near = s.on_ground or agl < GEAR_HEIGHT_M + _CONTACT_MARGIN_M
+        near = s.on_ground or agl < GEAR_HEIGHT_M + CONTACT_MARGIN_M
         if agl > GEAR_HEIGHT_M + _AIRBORNE_M:
             self.flown = True
             self.landed = False
@@ -69,9 +67,6 @@ class TouchdownWatch:
 
 class SitlBridge(SimBridge):
     """:class:`SimBridge` with real ArduCopter SITL in place of the emulation (module docstring)."""
-
-    def __init__(self, config: SimConfig, logger: logging.Logger | None = None) -> None:
-        super().__init__(config, logger)
 
     def _init_autopilot(self) -> None:
         cfg = self.config
@@ -116,9 +111,6 @@ class SitlBridge(SimBridge):
         with contextlib.suppress(RuntimeError):  # the loop is closing
             self._loop_ref.call_soon_threadsafe(fn, *args)
 
-    def _on_pilot_event(self, name: str, fields: dict[str, Any]) -> None:
-        self._on_event(name, fields)
-
     def _at_launch(self) -> bool:
         s = self.vehicle.state
         ln, le, ld = self.launch_ned_m
@@ -143,7 +135,7 @@ class SitlBridge(SimBridge):
         home = (lat, lon, alt, heading_deg(self.scenario.launch_yaw_rad))
         try:
             async with contextlib.AsyncExitStack() as stack:
-                pilot = SitlPilot(cfg.system_id, self._on_pilot_event, self.sim_time_s, logger=self.log)
+                pilot = SitlPilot(cfg.system_id, self._on_event, self.sim_time_s, logger=self.log)
                 await stack.enter_async_context(pilot)
                 self.pilot = pilot
                 pilot.on_boot_time = self._on_boot_time

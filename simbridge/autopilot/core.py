@@ -26,7 +26,7 @@ from simbridge.autopilot.flavours import (
 from simbridge.control import Setpoint
 from simbridge.estimate import EstimateError
 from simbridge.geo import Vec3
-from simbridge.physics import GEAR_HEIGHT_M, VehicleState
+from simbridge.physics import CONTACT_MARGIN_M, GEAR_HEIGHT_M, VehicleState
 from simbridge.vehicle import Vehicle
 
 # STATUSTEXT severities
@@ -42,7 +42,6 @@ TextSink = Callable[[int, str], None]
 # both 1 s (real ArduCopter SITL on simbridge's F450 said ON_GROUND 1.5 s after the gear touched:
 # tests/test_firmware_parity.py)
 _LANDED_CONFIRM_S = 1.0
-_CONTACT_MARGIN_M = 0.15  # the gear springs bounce the CG ~7 cm above rest on a 0.7 m/s touchdown
 _TAKEOFF_REACHED_M = 0.3
 
 
@@ -390,7 +389,7 @@ class Autopilot:
     # ------------------------------------------------------------------ land detector
     def _update_land_detector(self, s: VehicleState) -> None:
         # contact by geometry (the gear's springs bounce their weight-on-wheels flags)
-        near_ground = s.on_ground or s.height_agl_m < GEAR_HEIGHT_M + _CONTACT_MARGIN_M
+        near_ground = s.on_ground or s.height_agl_m < GEAR_HEIGHT_M + CONTACT_MARGIN_M
         if self.landed:
             if not near_ground and s.height_agl_m > GEAR_HEIGHT_M + 0.25:
                 self.landed = False
