@@ -20,7 +20,7 @@ from pathlib import Path
 
 import atheris
 
-with atheris.instrument_imports(include=["companion", "simbridge"]):
+with atheris.instrument_imports(include=["companion", "simbridge", "landfall_link"]):
     from companion.config import ConfigError, load_config
     from companion.daemon import Companion
     from companion.ground import alarm_from_mqtt
