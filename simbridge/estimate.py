@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from simbridge.geo import Quat, Vec3
+from simbridge.geo import Quat, Vec3, quat_to_euler
 from simbridge.physics import VehicleState
 
 __all__ = ["PRESETS", "EstimateError", "EstimateErrorConfig", "estimate_preset"]
@@ -70,14 +70,6 @@ def _small_rotation(q: Quat, rx: float, ry: float, rz: float) -> Quat:
     )
 
 
-def _euler(q: Quat) -> Vec3:
-    w, x, y, z = q
-    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
-    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
-    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
-    return (roll, pitch, yaw)
-
-
 class EstimateError:
     """Advance with :meth:`step` once per physics step; read :meth:`estimate` and :attr:`bias_ned_m`."""
 
@@ -115,7 +107,7 @@ class EstimateError:
         late = self._history[0]
         pos, quat = self._apply(late.pos_ned_m, late.quat)
         self._estimate = dataclasses.replace(
-            late, t_s=s.t_s, pos_ned_m=pos, quat=quat, euler_rad=_euler(quat)
+            late, t_s=s.t_s, pos_ned_m=pos, quat=quat, euler_rad=quat_to_euler(quat)
         )
         return self._estimate
 
