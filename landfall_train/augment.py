@@ -7,7 +7,8 @@ with a random scale (``SCALE``), rotation and flip, then varies what a real came
 - colour: per-channel gain (white balance), gamma, brightness and contrast, saturation; a hue shift
   (now and then any hue) on roof, object and ground pixels only (water's blue and vegetation's green
   carry meaning); sometimes a blue or grey cast over the whole image (flat grey roofs must not read as
-  water);
+  water); water itself now and then turns murky (``MURKY_P``: the green, brown or slate of ponds, rivers
+  and flooded pits, which are rarely the renderer's clear blue);
 - overlays that keep the labels: soft shadow polygons, low-frequency stains on roof pixels (moss, rust,
   dirt); now and then a foreign texture over the roof or the ground (ridges, rows with joints or
   blotches at any angle, period and contrast: ``TEXTURE_SWAP_P``), so the net learns that a roof is a
@@ -36,6 +37,11 @@ CELL_MIN_PX = 2
 CELL_MIN_SHARE = 0.03
 SCALE = (0.7, 1.4)  # output pixels per patch pixel, log-uniform
 TEXTURE_SWAP_P = 0.2  # chance of a foreign texture over one roof or ground region (Tobin et al. 2017)
+MURKY_P = 0.35  # chance that the water of a patch is tinted toward one of MURKY_WATER
+MURKY_WATER = np.array(
+    [[0.22, 0.30, 0.16], [0.33, 0.29, 0.19], [0.18, 0.21, 0.22], [0.28, 0.33, 0.26]], np.float32
+)  # algae green, silty brown, dark slate, grey-green (RGB)
+_WATER = 5
 _SWAPPABLE = (0, 0, 10)  # roof twice as often as ground
 _HUE_FREE = np.zeros(256, bool)
 _HUE_FREE[[0, 1, 2, 10]] = True  # roof, object, edge, ground: any colour is plausible
@@ -105,6 +111,12 @@ def _colour(x: np.ndarray, lab: np.ndarray, rng: np.random.Generator) -> np.ndar
             hsv = cv2.cvtColor(x, cv2.COLOR_RGB2HSV)  # float: H in degrees
             hsv[..., 0][free] = (hsv[..., 0][free] + turn * 360.0) % 360.0
             x = cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)
+    if rng.random() < MURKY_P:  # murky water: what a pond or a river looks like more often than not
+        water = (lab == _WATER)[..., None]
+        if water.any():
+            tint = MURKY_WATER[int(rng.integers(len(MURKY_WATER)))] * np.float32(rng.uniform(0.7, 1.3))
+            a = np.float32(rng.uniform(0.4, 0.9))
+            x = np.where(water, x * (1.0 - a) + tint * a, x).astype(np.float32)
     if rng.random() < 0.2:  # a cast over everything: bluish (shade, overcast) or grey (haze)
         cast = np.array([0.55, 0.62, 0.75] if rng.random() < 0.5 else [0.6, 0.6, 0.6], np.float32)
         x = x * np.float32(1.0 - (a := float(rng.uniform(0.1, 0.3)))) + cast * np.float32(a)

@@ -86,6 +86,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=int, default=2, help="processes rendering patches")
     p.add_argument("--threads", type=int, default=1, help="torch threads")
     p.add_argument(
+        "--head", choices=("fused", "features"), default="fused",
+        help="clear-site head: pooled features and cell logits (fused) or pooled features only",
+    )  # fmt: skip
+    p.add_argument(
         "--widths", type=_widths, default=WIDTHS, help="channels of the net's four stages, e.g. 16,32,64,96"
     )
     return p
@@ -149,7 +153,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                         "tests/onboard_scene.toml: never rendered for training",
         },
         "training": {
-            "widths": list(args.widths), "steps_planned": args.steps, "steps_done": steps_done,
+            "widths": list(args.widths), "head": args.head, "steps_planned": args.steps,
+            "steps_done": steps_done,
             "batch": args.batch, "lr": args.lr,
             "render_s": round(t_render, 1), "train_s": round(t_train, 1), "threads": args.threads,
             "torch": _torch_version(), "python": platform.python_version(), "commit": _commit(),
@@ -169,7 +174,7 @@ def fit(x: np.ndarray, y: np.ndarray, args: argparse.Namespace) -> tuple[Any, in
     torch.manual_seed(args.seed)
     torch.set_num_threads(args.threads)
     torch.use_deterministic_algorithms(True)
-    net = LandNetS(len(CLASSES), args.widths)
+    net = LandNetS(len(CLASSES), args.widths, fused=args.head == "fused")
     opt = torch.optim.AdamW(net.parameters(), lr=args.lr, weight_decay=1e-4)
     warm: int = max(1, min(200, int(args.steps) // 20))
 
