@@ -115,8 +115,8 @@ def _colour(x: np.ndarray, lab: np.ndarray, rng: np.random.Generator) -> np.ndar
         water = (lab == _WATER)[..., None]
         if water.any():
             tint = MURKY_WATER[int(rng.integers(len(MURKY_WATER)))] * np.float32(rng.uniform(0.7, 1.3))
-            a = np.float32(rng.uniform(0.4, 0.9))
-            x = np.where(water, x * (1.0 - a) + tint * a, x).astype(np.float32)
+            depth = np.float32(rng.uniform(0.4, 0.9))
+            x = np.where(water, x * (1.0 - depth) + tint * depth, x).astype(np.float32)
     if rng.random() < 0.2:  # a cast over everything: bluish (shade, overcast) or grey (haze)
         cast = np.array([0.55, 0.62, 0.75] if rng.random() < 0.5 else [0.6, 0.6, 0.6], np.float32)
         x = x * np.float32(1.0 - (a := float(rng.uniform(0.1, 0.3)))) + cast * np.float32(a)
