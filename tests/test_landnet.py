@@ -4,6 +4,7 @@ config, close-ups of simbridge scenes, and a training smoke test (landfall_train
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 from concurrent.futures import ThreadPoolExecutor
@@ -13,12 +14,30 @@ import numpy as np
 import pytest
 
 from companion.config import ConfigError, ReasonerConfig
-from companion.reasoning.base import ConfirmRequest, RankRequest
+from companion.perception.surface_id import Candidate
+from companion.reasoning.base import ConfirmRequest, Ranking, RankRequest
 from companion.reasoning.landnet import DEFAULT_MODEL, LandNet, LandNetError, SceneReading
 from companion.reasoning.onboard import OnboardReasoner
 from companion.reasoning.tiers import build_cascade
+from simbridge.world.camera import Frame
 from simbridge.world.live import LiveWorld
-from tests.views import close_up, open_field_toml, site_cut
+from simbridge.world.model import SurfaceClass as C
+from tests.views import (
+    CLEAR_ROOF,
+    CLUTTERED_ROOF,
+    HIGHWAY,
+    LAUNCH,
+    ROAD,
+    WATER,
+    WEATHERS,
+    close_up,
+    crop,
+    ground_box,
+    open_field_toml,
+    render,
+    share,
+    site_cut,
+)
 
 
 @pytest.fixture(scope="module")
@@ -270,3 +289,80 @@ def test_landnet_confirm_open_country_field_passes_but_not_among_buildings(
     assert "street_level" in d.hazards
     d = judge.confirm_sync(ConfirmRequest(image))  # no geometry: the image alone, a clear roof or nothing
     assert not d.accept, d.rationale
+
+
+# --- rank with Surface ID's geometry: the net's reading in place of the cues' hazard terms ------------
+def _geometry_rank(
+    judge: OnboardReasoner, crops: list[np.ndarray], cands: list[Candidate], reverse: bool
+) -> tuple[int, Ranking, list[dict[str, object]]]:
+    idx = [1, 0] if reverse else [0, 1]
+    transcript: list[dict[str, object]] = []
+    request = RankRequest(
+        tuple(crops[k] for k in idx),
+        tuple(dataclasses.replace(cands[k], index=j) for j, k in enumerate(idx)),
+        transcript=transcript,
+    )
+    ranking = judge.rank_sync(request)
+    assert sorted(ranking.order) == [0, 1]
+    return idx[ranking.order[0]], ranking, transcript
+
+
+RIVALS = {  # name: (ground rectangle, its geometry as Surface ID would see it)
+    "cluttered roof": (CLUTTERED_ROOF, {"up_m": 18.0, "edge_m": 3.0}),
+    "road": (ROAD, {"up_m": 0.0, "edge_m": 5.0}),
+    "highway": (HIGHWAY, {"up_m": 9.0, "edge_m": 6.0}),  # a deck 9 m up: geometrically a roof
+    "water": (WATER, {"up_m": 0.0, "edge_m": 8.0}),
+}
+
+
+@pytest.mark.parametrize("rival", list(RIVALS))
+@pytest.mark.parametrize("weather", WEATHERS)
+@pytest.mark.parametrize("reverse", [False, True])
+def test_landnet_rank_with_geometry_reads_the_crops_with_the_net(
+    judge: OnboardReasoner, city: LiveWorld, launch: dict[str, Frame], rival: str, weather: str, reverse: bool
+) -> None:
+    """With the net as judge, the rank with geometry scores each candidate by its geometry less the
+    net's hazard (not the image cues'): scenario1's clear roof still beats the cluttered roof, the road,
+    the highway deck and the river, and the rationale and transcript carry the net's reading."""
+    from tests.test_onboard_reasoner import truth_candidate
+
+    frame = launch[weather]
+    rect, geo = RIVALS[rival]
+    roof_box, other_box = ground_box(city, LAUNCH, *CLEAR_ROOF), ground_box(city, LAUNCH, *rect)
+    cands = [
+        truth_candidate(roof_box, CLEAR_ROOF, up_m=22.0, edge_m=13.0),
+        truth_candidate(other_box, rect, **geo),
+    ]
+    best, ranking, transcript = _geometry_rank(
+        judge, [crop(frame, roof_box), crop(frame, other_box)], cands, reverse
+    )
+    assert best == 0, ranking.rationale
+    chosen = ranking.rationale.split(";")[0]
+    assert "elevated flat roof 22 m up" in chosen
+    assert "[landnet-s]" in chosen  # the net's confidence, not a cue
+    assert "no geometry" not in ranking.rationale
+    assert transcript[0]["judge"] == "landnet"
+    readings = transcript[0]["readings"]
+    assert isinstance(readings, list)
+    assert len(readings) == 2
+    assert "cues" not in transcript[0]
+
+
+def test_landnet_rank_with_geometry_a_roof_with_a_person_on_it_comes_second(
+    judge: OnboardReasoner, scene: LiveWorld
+) -> None:
+    from tests.test_onboard_reasoner import truth_candidate
+
+    cam = (0.0, 0.0, -80.0)
+    frame = render(scene, cam, "clear")
+    clear_rect = ((-13.0, 13.0), (-48.0, -22.0), 20.0)
+    walked_rect = ((-13.0, 13.0), (22.0, 48.0), 20.0)
+    boxes = [ground_box(scene, cam, *clear_rect), ground_box(scene, cam, *walked_rect)]
+    assert share(frame, boxes[1], [C.PEDESTRIAN]) > 0.0
+    cands = [
+        truth_candidate(b, r, up_m=20.0, edge_m=13.0, margin_m=0.0)
+        for b, r in zip(boxes, (clear_rect, walked_rect), strict=True)
+    ]
+    for reverse in (False, True):
+        best, ranking, _t = _geometry_rank(judge, [crop(frame, b) for b in boxes], cands, reverse)
+        assert best == 0, ranking.rationale

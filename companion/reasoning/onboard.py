@@ -65,7 +65,7 @@ from companion.perception.site_check import SiteCheck
 from companion.perception.surface_id import Candidate
 from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequest, Reasoner
 from companion.reasoning.image_cues import ImageCues, analyse
-from companion.reasoning.landnet import LandNet
+from companion.reasoning.landnet import LandNet, SceneReading
 from companion.reasoning.net_judge import confirm_reading, rank_readings
 
 __all__ = [
@@ -125,7 +125,7 @@ class _Site:
     score: float
     fallback: bool
     geometry: str  # what the geometry says, or "" without it
-    cues: ImageCues = field(repr=False)
+    cues: ImageCues | SceneReading = field(repr=False)  # what the judge saw in the crop
 
 
 def geometry_score(c: Candidate, w: GeometryWeights | None = None) -> tuple[float, str]:
@@ -224,7 +224,12 @@ class OnboardReasoner:
             if request.transcript is not None:
                 request.transcript.append({"tier": self.name, "judge": self.judge, **body})
             return Ranking(order, text, self.name, time.perf_counter() - t0)
-        all_cues = [analyse(_core(request, k)) for k in range(len(request.crops))]  # validates them first
+        cores = [_core(request, k) for k in range(len(request.crops))]
+        # what reads the crops: the net when it is the judge (its reading replaces the cues' hazard terms
+        # beside the geometry too), else the image cues; both validate the crops first
+        all_cues: list[ImageCues | SceneReading] = (
+            [self.landnet.read(c) for c in cores] if self.landnet is not None else [analyse(c) for c in cores]
+        )
         largest = max(c.size_px[0] * c.size_px[1] for c in all_cues)
         sites: list[_Site] = []
         for k, cues in enumerate(all_cues):
@@ -239,13 +244,15 @@ class OnboardReasoner:
             fallback = cand is not None and cand.fallback
             sites.append(_Site(k, g - cues.hazard, fallback, geometry, cues))
         ranked = sorted(sites, key=lambda s: (s.fallback, -s.score, s.index))
-        rationale = _rank_rationale(ranked, request.candidates is None)
+        threshold = None if self.landnet is None else self.landnet.clear_threshold
+        rationale = _rank_rationale(ranked, request.candidates is None, threshold)
         if request.transcript is not None:
             request.transcript.append(
                 {
                     "tier": self.name,
+                    "judge": self.judge,
                     "scores": {str(s.index): round(s.score, 3) for s in sites},
-                    "cues": [s.cues.to_json() for s in sites],
+                    "readings" if self.landnet is not None else "cues": [s.cues.to_json() for s in sites],
                 }
             )
         order = tuple(s.index for s in ranked)
@@ -411,12 +418,19 @@ def _describe(site: _Site, limit: int) -> str:
     return ", ".join(parts)
 
 
-def _rank_rationale(ranked: list[_Site], images_only: bool) -> str:
+def _rank_rationale(ranked: list[_Site], images_only: bool, clear_threshold: float | None = None) -> str:
+    """``clear_threshold``: the net's, when it read the crops (a runner-up under it is "rejected")."""
     best = ranked[0]
     text = f"site {best.index}: {_describe(best, 3)}"
     if len(ranked) > 1:
         nxt = ranked[1]
-        verdict = "rejected" if nxt.cues.hazard >= 1.0 or nxt.fallback else "next"
+        seen = nxt.cues
+        poor = (
+            seen.clear_p < clear_threshold
+            if isinstance(seen, SceneReading) and clear_threshold is not None
+            else seen.hazard >= 1.0
+        )
+        verdict = "rejected" if poor or nxt.fallback else "next"
         text += f"; site {nxt.index} {verdict}: {_describe(nxt, 2)}"
     if images_only:
         text += " (no geometry: image cues only)"
