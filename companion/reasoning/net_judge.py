@@ -1,10 +1,11 @@
 """The onboard tier's judgement from LandNet-S's reading (``reasoner.onboard_judge = "landnet"``).
 
 In place of the hand-written image cues (:mod:`companion.reasoning.image_cues`), the confirm stage and
-the images-only rank read the image with :class:`companion.reasoning.landnet.LandNet`. Everything that is
-not the image's business stays as :class:`companion.reasoning.onboard.OnboardReasoner` has it: the LiDAR
-veto, the street-level and built-up rules, binding "no"s, the ranking with Surface ID's geometry (which
-keeps the image cues' hazard terms).
+both ranks read the image with :class:`companion.reasoning.landnet.LandNet` (the rank with Surface ID's
+geometry subtracts the net's ``SceneReading.hazard`` from each candidate's geometry score, in
+:class:`companion.reasoning.onboard.OnboardReasoner`). Everything that is not the image's business stays
+as the onboard tier has it: the geometry score, the LiDAR veto, the street-level and built-up rules,
+binding "no"s.
 
 **Confirm.** The net reads the site window: the middle ``FRAME_WINDOW`` of each side of a whole camera
 frame (16:9, ``FRAME_ASPECT``), else the middle ``CROP_WINDOW`` of a close-up cut around the site (or

@@ -43,7 +43,8 @@ check nothing about raised objects is relaxed.
 **Judges.** ``judge="cues"`` (this class's default) reads images with the hand-written cues above;
 ``judge="landnet"`` (the companion's default, ``reasoner.onboard_judge``: far better on real aerial
 photographs) reads them with the learned LandNet-S (:mod:`companion.reasoning.net_judge` says
-how its reading replaces the cues in confirm and in images-only rank; geometry, the LiDAR veto and the
+how its reading replaces the cues in confirm and in images-only rank; in the rank with geometry its
+``SceneReading.hazard`` takes the cues' place beside the geometry score); geometry, the LiDAR veto and the
 binding rules are the same). Its weights load at construction: a missing or corrupt file is a
 :class:`~companion.reasoning.landnet.LandNetError` naming it.
 
