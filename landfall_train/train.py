@@ -10,12 +10,18 @@
    come from ``np.random.default_rng([seed, step, slot])``, so the run does not depend on worker timing;
    AdamW with a warm-up and a cosine decay over ``--steps``; ``--max-minutes`` stops it early (the
    sidecar says where it stopped);
-3. calibrate on the validation renders only (one seeded randomised view of each): the ``clear``
-   threshold maximises Youden's J (true-accept rate less false-accept rate), each class's cell threshold
-   maximises F1; then report the sim metrics at those thresholds;
+3. calibrate on the validation renders only (one seeded randomised view of each), read as the
+   companion reads images (``--views``: 4, the patch and its three mirror images averaged, as
+   :meth:`companion.reasoning.landnet.LandNet.read` does with the sidecar's ``input.views``): the
+   ``clear`` threshold maximises Youden's J (true-accept rate less false-accept rate), each class's cell
+   threshold maximises F1; then report the sim metrics at those thresholds;
 4. export ONNX (opset 13, dynamic batch and size, batch norm folded), check that OpenCV's DNN module
    gives the same outputs as torch, and write ``MODEL.onnx`` and ``MODEL.json`` (the sidecar: classes,
    normalisation, thresholds, seed, command, data digest, sim metrics, the ONNX file's sha256).
+
+``python -m landfall_train --recalibrate [--views V]`` redoes step 3 alone for the model at ``--out``
+(its ONNX file through OpenCV's DNN module, no training, the weights untouched) and rewrites the
+sidecar's thresholds, sim metrics and ``input.views``; the sidecar's ``calibration`` says how.
 """
 
 from __future__ import annotations
@@ -31,12 +37,13 @@ import subprocess
 import sys
 import time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from companion.reasoning.landnet import VIEWS, average_views, view_batch
 from landfall_train import patches
 from landfall_train.augment import augment, targets
 from landfall_train.labels import CLASSES, HAZARD_CLASSES
@@ -70,10 +77,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, default=MODEL, help="model path without suffix (.onnx and .json)")
     p.add_argument("--cache", type=Path, default=Path("runs/train-cache"), help="rendered patches")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--steps", type=int, default=5500)
+    p.add_argument("--steps", type=int, default=6000)
     p.add_argument("--batch", type=int, default=64)
     p.add_argument("--lr", type=float, default=2e-3)
-    p.add_argument("--max-minutes", type=float, default=45.0, help="stop training after this long")
+    p.add_argument("--max-minutes", type=float, default=60.0, help="stop training after this long")
     p.add_argument("--train-cities", type=int, default=len(TRAIN_SEEDS), help="how many of TRAIN_SEEDS")
     p.add_argument("--per-city", type=int, default=PER_CITY)
     p.add_argument("--val-cities", type=int, default=len(VAL_SEEDS))
@@ -85,6 +92,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--val-vignettes", type=int, default=VAL_VIGNETTES)
     p.add_argument("--workers", type=int, default=2, help="processes rendering patches")
     p.add_argument("--threads", type=int, default=1, help="torch threads")
+    p.add_argument(
+        "--views", type=int, choices=VIEWS, default=4,
+        help="readings averaged per image at calibration and in the companion (4: with mirror images)",
+    )  # fmt: skip
+    p.add_argument(
+        "--recalibrate", action="store_true",
+        help="only calibrate the model at --out again (its ONNX file; no training) and rewrite its sidecar",
+    )  # fmt: skip
     p.add_argument(
         "--head", choices=("fused", "features"), default="fused",
         help="clear-site head: pooled features and cell logits (fused) or pooled features only",
@@ -105,13 +120,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     train_seeds = TRAIN_SEEDS[: args.train_cities]
     val_seeds = VAL_SEEDS[: args.val_cities]
     _log.info("rendering %d + %d cities into %s", len(train_seeds), len(val_seeds), cache)
+    val_paths = patches.generate(
+        cache / f"val-{args.val_per_city}", val_seeds, args.val_per_city, args.seed, args.workers
+    ) + patches.generate_vignettes(
+        cache / f"val-vignettes-{args.per_vignette}", VAL_FIRST_VIGNETTE, args.val_vignettes,
+        args.per_vignette, args.seed, args.workers,
+    )  # fmt: skip
+    x_val, y_val, val_digest = patches.load_shards(val_paths)
+    if args.recalibrate:  # the validation renders only
+        val = validation_views(x_val, y_val, args.seed)
+        return recalibrate(args.out, val, args.views, command, val_digest)
     train_paths = patches.generate(
         cache / f"train-{args.per_city}", train_seeds, args.per_city, args.seed, args.workers
     )
-    val_paths = patches.generate(
-        cache / f"val-{args.val_per_city}", val_seeds, args.val_per_city, args.seed, args.workers
-    )
-    _log.info("rendering %d + %d vignettes", args.vignettes, args.val_vignettes)
+    _log.info("rendering %d vignettes", args.vignettes)
     train_paths += patches.generate_vignettes(
         cache / f"vignettes-{args.per_vignette}",
         0,
@@ -120,24 +142,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.seed,
         args.workers,
     )
-    val_paths += patches.generate_vignettes(
-        cache / f"val-vignettes-{args.per_vignette}", VAL_FIRST_VIGNETTE, args.val_vignettes,
-        args.per_vignette, args.seed, args.workers,
-    )  # fmt: skip
     x_train, y_train, train_digest = patches.load_shards(train_paths)
-    x_val, y_val, val_digest = patches.load_shards(val_paths)
     t_render = time.monotonic() - t0
     _log.info("%d training and %d validation patches in %.0f s", len(x_train), len(x_val), t_render)
     net, steps_done, t_train = fit(x_train, y_train, args)
     val = validation_views(x_val, y_val, args.seed)
-    calib = calibrate(net, val)
+    calib = calibrate(lambda x: _torch_predict(net, x), val, args.views)
     sidecar = {
         "name": args.out.name,
         "format": "landfall-landnet/1",
         "classes": list(CLASSES),
         "hazard_classes": [CLASSES[k] for k in HAZARD_CLASSES],
         "input": {"mean": [0.5] * 3, "std": [0.25] * 3, "multiple": 16, "short_side_px": INPUT_PX,
-                  "max_long_side_px": 2 * INPUT_PX, "order": "RGB", "scale": 1 / 255},
+                  "max_long_side_px": 2 * INPUT_PX, "order": "RGB", "scale": 1 / 255, "views": args.views},
         "outputs": {"cells": "(N, K, H/8, W/8) presence logits", "clear": "(N, 1, 1, 1) clear-site logit"},
         "thresholds": calib["thresholds"],
         "sim_metrics": calib["metrics"],
@@ -264,22 +281,62 @@ def validation_views(x: np.ndarray, y: np.ndarray, seed: int) -> dict[str, np.nd
     return {k: np.stack(v) if k != "clear" else np.array(v, np.float32) for k, v in out.items()}
 
 
-def _predict(net: Any, img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+Predict = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]  # normalised NCHW -> (cell, clear) logits
+
+
+def _torch_predict(net: Any, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     import torch
 
-    cells, clears = [], []
     with torch.no_grad():
-        for k in range(0, len(img), 128):
-            batch = torch.from_numpy(img[k : k + 128].transpose(0, 3, 1, 2).copy())
-            c, s = net(_normalise(batch))
-            cells.append(torch.sigmoid(c).numpy())
-            clears.append(torch.sigmoid(s).view(-1).numpy())
+        c, s = net(torch.from_numpy(x))
+    return c.numpy(), s.numpy().reshape(-1)
+
+
+def _onnx_predict(path: Path) -> Predict:
+    import cv2
+
+    dnn = cv2.dnn.readNetFromONNX(str(path))
+
+    def predict(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        dnn.setInput(x)
+        c, s = dnn.forward(["cells", "clear"])
+        return np.asarray(c), np.asarray(s).reshape(-1)
+
+    return predict
+
+
+def _predict(predict: Predict, img: np.ndarray, views: int) -> tuple[np.ndarray, np.ndarray]:
+    """Cell and clear probabilities of NHWC uint8 images, each read in ``views`` views and averaged as
+    the companion does (:func:`companion.reasoning.landnet.average_views`)."""
+    cells, clears = [], []
+    for k in range(0, len(img), 64):
+        x = (img[k : k + 64].astype(np.float32) / np.float32(255.0) - np.float32(0.5)) / np.float32(0.25)
+        batch = np.concatenate([view_batch(chw, views) for chw in x.transpose(0, 3, 1, 2)])
+        c, s = predict(batch)
+        c_p, s_p = average_views(1.0 / (1.0 + np.exp(-c.astype(np.float64))), 1.0 / (1.0 + np.exp(-s)), views)
+        cells.append(c_p)
+        clears.append(s_p)
     return np.concatenate(cells), np.concatenate(clears)
 
 
-def calibrate(net: Any, val: dict[str, np.ndarray]) -> dict[str, Any]:
+def recalibrate(out: Path, val: dict[str, np.ndarray], views: int, command: str, val_digest: str) -> int:
+    """Calibrate the exported model at ``out`` again (``--recalibrate``) and rewrite its sidecar."""
+    meta_path = out.with_suffix(".json")
+    meta = json.loads(meta_path.read_text())
+    calib = calibrate(_onnx_predict(out.with_suffix(".onnx")), val, views)
+    meta["thresholds"] = calib["thresholds"]
+    meta["sim_metrics"] = calib["metrics"]
+    meta["input"]["views"] = views
+    meta["calibration"] = {"command": command, "views": views, "val_digest": val_digest, "commit": _commit()}
+    meta_path.write_text(json.dumps(meta, indent=2) + "\n")
+    _log.info("recalibrated %s: clear threshold %.4f, sim AUC %.4f", meta_path, calib["thresholds"]["clear"],
+              calib["metrics"]["clear_auc"])  # fmt: skip
+    return 0
+
+
+def calibrate(predict: Predict, val: dict[str, np.ndarray], views: int = 1) -> dict[str, Any]:
     """Thresholds and sim metrics on the validation views (module docstring, 3)."""
-    cells, clear = _predict(net, val["img"])
+    cells, clear = _predict(predict, val["img"], views)
     truth = val["clear"] > 0.5
     t_clear, j = _youden(clear, truth)
     metrics: dict[str, Any] = {

@@ -16,7 +16,14 @@ import pytest
 from companion.config import ConfigError, ReasonerConfig
 from companion.perception.surface_id import Candidate
 from companion.reasoning.base import ConfirmRequest, Ranking, RankRequest
-from companion.reasoning.landnet import DEFAULT_MODEL, LandNet, LandNetError, SceneReading
+from companion.reasoning.landnet import (
+    DEFAULT_MODEL,
+    LandNet,
+    LandNetError,
+    SceneReading,
+    average_views,
+    view_batch,
+)
 from companion.reasoning.onboard import OnboardReasoner
 from companion.reasoning.tiers import build_cascade
 from simbridge.world.camera import Frame
@@ -105,6 +112,45 @@ def test_landnet_load_bad_sidecar_is_an_error_naming_it(tmp_path: Path) -> None:
     onnx.with_suffix(".json").write_text(json.dumps(meta))
     with pytest.raises(LandNetError, match=r"m\.json: unreadable model sidecar"):
         LandNet.load(onnx)
+    meta = json.loads(DEFAULT_MODEL.with_suffix(".json").read_text())
+    meta["input"]["views"] = 3
+    onnx.with_suffix(".json").write_text(json.dumps(meta))
+    with pytest.raises(LandNetError, match=r"m\.json: .*input\.views must be one of \(1, 4\), got 3"):
+        LandNet.load(onnx)
+
+
+# --- views: the image and its mirror images ------------------------------------------------------------
+def test_average_views_flips_each_reading_back_before_averaging() -> None:
+    rng = np.random.default_rng(3)
+    base = rng.random((2, 11, 6, 9))  # two images' cell probabilities
+    flips = (lambda a: a, lambda a: a[..., ::-1], lambda a: a[..., ::-1, :], lambda a: a[..., ::-1, ::-1])
+    readings = np.stack([f(b) for b in base for f in flips])  # as a net would answer view_batch's input
+    clear = np.array([0.1, 0.3, 0.5, 0.7, 0.2, 0.2, 0.2, 0.2])
+    cells, clear_p = average_views(readings, clear, 4)
+    np.testing.assert_allclose(cells, base)
+    np.testing.assert_allclose(clear_p, [0.4, 0.2])
+    chw = rng.random((3, 4, 6))
+    batch = view_batch(chw, 4)
+    assert batch.shape == (4, 3, 4, 6)
+    np.testing.assert_array_equal(batch[3], chw[:, ::-1, ::-1])
+    assert view_batch(chw, 1).shape == (1, 3, 4, 6)
+
+
+def test_landnet_views_four_average_the_mirror_images_and_one_reads_alone(tmp_path: Path) -> None:
+    onnx = _copy_model(tmp_path)
+    four = LandNet.load(onnx)
+    assert four.views == 4  # the packaged model reads with its mirror images
+    meta = json.loads(onnx.with_suffix(".json").read_text())
+    meta["input"]["views"] = 1
+    onnx.with_suffix(".json").write_text(json.dumps(meta))
+    one = LandNet.load(onnx)
+    img = _image(96, 128, 5)
+    mirrored = [img, img[:, ::-1], img[::-1], img[::-1, ::-1]]
+    mean_of_ones = float(np.mean([one.read(np.ascontiguousarray(m)).clear_p for m in mirrored]))
+    assert four.read(img).clear_p == pytest.approx(mean_of_ones, abs=1e-5)
+    assert one.read(img).clear_p != pytest.approx(four.read(img).clear_p, abs=1e-6)
+    flat = np.full((64, 64, 3), 128, np.uint8)  # mirror-symmetric: every view is the same image
+    assert four.read(flat).clear_p == pytest.approx(one.read(flat).clear_p, abs=1e-5)
 
 
 # --- reading --------------------------------------------------------------------------------------------
@@ -243,6 +289,17 @@ def test_landfall_train_smoke_renders_trains_and_exports(tmp_path: Path) -> None
     assert meta["data"]["train_patches"] == 4 + 3
     assert meta["parity_max_abs_diff"] < 1e-3
     assert tiny.read(_image(64, 64)).grid == (16, 16)
+    assert meta["input"]["views"] == 4  # calibrated as the companion reads: with the mirror images
+    assert tiny.views == 4
+    # --recalibrate through OpenCV's DNN module gives the thresholds training gave through torch
+    thresholds = meta["thresholds"]
+    meta["thresholds"] = {"clear": 0.5, "cells": dict.fromkeys(thresholds["cells"], 0.5)}
+    out.with_suffix(".json").write_text(json.dumps(meta))
+    assert main([*argv, "--recalibrate"]) == 0
+    again = json.loads(out.with_suffix(".json").read_text())
+    assert again["thresholds"]["clear"] == pytest.approx(thresholds["clear"], abs=2e-4)
+    assert again["calibration"]["views"] == 4
+    assert again["sha256"] == meta["sha256"]  # the weights are untouched
     from landfall_train.patches import generate
 
     with pytest.raises(ValueError, match="reserved for evaluation"):

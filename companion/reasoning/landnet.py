@@ -9,7 +9,11 @@ the thresholds (calibrated on held-out simbridge renders only) and the ONNX file
 :meth:`LandNet.load` checks.
 
 :meth:`LandNet.read` takes an RGB uint8 image of any size (H, W, 3), scales it so the shorter side is
-``short_side_px`` (the longer at most ``max_long_side_px``), both sides multiples of 16, and returns a
+``short_side_px`` (the longer at most ``max_long_side_px``), both sides multiples of 16, reads it as the
+sidecar's ``input.views`` says (1: as it is; 4: it and its three mirror images, left-right, up-down and
+both, in one batch, each answer flipped back and the probabilities averaged: a nadir view has no
+preferred side, and the average of four readings is steadier on imagery unlike the renders it learnt
+from; :func:`view_batch` and :func:`average_views`, which calibration uses too), and returns a
 :class:`SceneReading`: the clear-site probability, per class the share of the image's cells where it is
 present and where (a 3 x 3 compass: "upper left" ... "centre" ... "lower right"), and how many separate
 groups of cells hold objects, people or vehicles. One ``cv2.dnn.Net`` is not safe to call from two
@@ -20,7 +24,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 import threading
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,12 +34,13 @@ import numpy as np
 
 from companion.reasoning.image_cues import check_rgb
 
-__all__ = ["DEFAULT_MODEL", "LandNet", "LandNetError", "SceneReading"]
+__all__ = ["DEFAULT_MODEL", "VIEWS", "LandNet", "LandNetError", "SceneReading", "average_views", "view_batch"]
 
 DEFAULT_MODEL = Path(__file__).with_name("models") / "landnet-s.onnx"
 HAZARD_SCALE = 3.0  # rank: hazard points of a surely-not-clear site (the image cues' water weight)
 COUNTED = ("object", "person", "vehicle")  # classes counted as separate groups of cells
 _INPUT_KEYS = ("mean", "std", "multiple", "short_side_px", "max_long_side_px")
+VIEWS = (1, 4)  # sidecar input.views: the image alone, or with its three mirror images
 _PLACES = (
     ("upper left", "top", "upper right"),
     ("left", "centre", "right"),
@@ -55,6 +59,27 @@ _WORDS = {
     "marking": "painted lane markings",
     "ground": "paving or bare ground",
 }
+
+
+def view_batch(chw: np.ndarray, views: int) -> np.ndarray:
+    """(views, C, H, W): an image (C, H, W) and, for 4 views, its left-right, up-down and two-way mirror
+    images."""
+    if views == 1:
+        return np.ascontiguousarray(chw[None])
+    return np.ascontiguousarray(np.stack([chw, chw[:, :, ::-1], chw[:, ::-1, :], chw[:, ::-1, ::-1]]))
+
+
+def average_views(cells_p: np.ndarray, clear_p: np.ndarray, views: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per image, the mean of its ``views`` readings, each cell map flipped back first.
+
+    ``cells_p`` (N * views, K, h, w) and ``clear_p`` (N * views,) probabilities, the views of one image
+    consecutive (as :func:`view_batch` makes them); returns (N, K, h, w) and (N,).
+    """
+    n = len(clear_p) // views
+    c = cells_p.reshape(n, views, *cells_p.shape[1:])
+    if views == 4:
+        c = np.stack([c[:, 0], c[:, 1, :, :, ::-1], c[:, 2, :, ::-1, :], c[:, 3, :, ::-1, ::-1]], axis=1)
+    return c.mean(axis=1), clear_p.reshape(n, views).mean(axis=1)
 
 
 class LandNetError(RuntimeError):
@@ -119,6 +144,10 @@ class SceneReading:
         }
 
 
+def _sigmoid(x: np.ndarray) -> np.ndarray:
+    return np.asarray(1.0 / (1.0 + np.exp(-x.astype(np.float64))), np.float64)
+
+
 class LandNet:
     """One loaded model; :meth:`read` is safe to call from several threads."""
 
@@ -133,6 +162,7 @@ class LandNet:
         self.multiple = int(inp["multiple"])
         self.short_side_px = int(inp["short_side_px"])
         self.max_long_side_px = int(inp["max_long_side_px"])
+        self.views = int(inp.get("views", 1))
         thresholds = meta["thresholds"]
         self.clear_threshold = float(thresholds["clear"])
         self.cell_thresholds = np.array([float(thresholds["cells"][c]) for c in self.classes], np.float32)
@@ -158,6 +188,8 @@ class LandNet:
             missing = [k for k in _INPUT_KEYS if k not in inp]
             if missing:
                 raise ValueError(f"input lacks {', '.join(missing)}")
+            if inp.get("views", 1) not in VIEWS:
+                raise ValueError(f"input.views must be one of {VIEWS}, got {inp.get('views')!r}")
             float(thr["clear"])
         except (OSError, ValueError, KeyError, TypeError) as exc:
             raise LandNetError(f"unreadable model sidecar: {exc!r}", meta_path) from exc
@@ -195,14 +227,13 @@ class LandNet:
         ih, iw = self.input_size(h, w)
         interp = cv2.INTER_AREA if ih * iw < h * w else cv2.INTER_LINEAR
         x = cv2.resize(img, (iw, ih), interpolation=interp).astype(np.float32) * np.float32(1.0 / 255.0)
-        blob = np.ascontiguousarray(((x - self.mean) / self.std).transpose(2, 0, 1)[None])
+        blob = view_batch(((x - self.mean) / self.std).transpose(2, 0, 1), self.views)
         with self._lock:
             self._net.setInput(blob)
             cells, clear = self._net.forward(["cells", "clear"])
-        p = 1.0 / (1.0 + np.exp(-cells[0].astype(np.float64)))
-        clear_p = float(1.0 / (1.0 + math.exp(-float(np.asarray(clear).reshape(-1)[0]))))
-        present = p >= self.cell_thresholds[:, None, None]
-        return self._reading((h, w), present, clear_p)
+        p, clear_p = average_views(_sigmoid(cells), _sigmoid(np.asarray(clear).reshape(-1)), self.views)
+        present = p[0] >= self.cell_thresholds[:, None, None]
+        return self._reading((h, w), present, float(clear_p[0]))
 
     def _reading(self, size: tuple[int, int], present: np.ndarray, clear_p: float) -> SceneReading:
         _k, gh, gw = present.shape
