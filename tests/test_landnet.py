@@ -348,6 +348,33 @@ def test_landnet_confirm_open_country_field_passes_but_not_among_buildings(
     assert not d.accept, d.rationale
 
 
+@pytest.mark.parametrize("ground", ["soil", "paving"])
+def test_landnet_confirm_refuses_a_plain_road_at_street_level_in_open_country(
+    judge: OnboardReasoner, tmp_path: Path, ground: str
+) -> None:
+    """A wide asphalt road with no markings through open country: from above it looks like a tar roof
+    (the net may read it so, with a high clear-site probability), but Surface ID measured it at street
+    level, where roof-like paving is a road or a car park. Never a landing site, with or without a clear
+    LiDAR disc; the same window off a roof (no geometry) is the net's to judge."""
+    from simbridge.world.scenario_file import load_scenario_file
+
+    path = tmp_path / "open_road.toml"
+    path.write_text(
+        open_field_toml(60.0, 60.0).replace('ground = "soil"', f'ground = "{ground}"')
+        + '\n[[roads]]\nkind = "road"\npoints = [[-60.0, 0.0], [60.0, 0.0]]\nwidth_m = 40.0\n'
+        "markings = false\n"
+    )
+    road = LiveWorld(load_scenario_file(path))
+    frame, check = close_up(road, (0.0, 0.0), 0.0, HEIGHT_M)
+    assert check.clear  # flat, smooth, nothing in the rotor disc: only what it is says no
+    image = site_cut(road, frame, HEIGHT_M)
+    d = judge.confirm_sync(ConfirmRequest(image, check=check, site_up_m=0.0, built_up=False))
+    assert not d.accept, d.rationale
+    assert "street_asphalt" in d.hazards, d.rationale
+    assert d.binding  # street level: no remote tier's yes overrules it
+    assert "a road or a car park" in d.rationale or "paving" in d.rationale
+
+
 # --- rank with Surface ID's geometry: the net's reading in place of the cues' hazard terms ------------
 def _geometry_rank(
     judge: OnboardReasoner, crops: list[np.ndarray], cands: list[Candidate], reverse: bool

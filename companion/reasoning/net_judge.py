@@ -12,10 +12,13 @@ frame (16:9, ``FRAME_ASPECT``), else the middle ``CROP_WINDOW`` of a close-up cu
 ``ConfirmParams.site_window``). Water over ``max_water`` of the window's cells, or painted markings over
 ``MAX_MARKING_SHARE`` (any at street level), veto it bindingly, as the cues' water and lane markings do.
 Otherwise the site is accepted when the net's clear-site probability reaches the sidecar's threshold
-(calibrated on simbridge renders). That probability means a clear *roof*; in open country (a site
-Surface ID measured at street level, no roof measured during the recovery: ``built_up`` false) level
-ground with nothing on it passes too: no object, person, vehicle, water or marking in the window, road
-and trees within their limits (a bare field, a yard, a lawn), as with the cues. A rejection names what
+(calibrated on simbridge renders). That probability means a clear *roof*, which a surface Surface ID
+measured at street level is not: there the window's road *and* roof-like cells count as paving (a plain
+asphalt road looks like a tar roof from above; the height tells them apart), over
+``max_street_asphalt`` a road or a car park. In open country (street level, no roof measured during the
+recovery: ``built_up`` false) only level ground with nothing on it passes, whatever the clear-site
+probability: no object, person, vehicle, water or marking in the window, paving and trees within their
+limits (a bare field, a yard, a lawn). Among buildings street level is a last resort. A rejection names what
 was seen where (objects, people, vehicles, vegetation, road surface, ...). With a critical alarm and a
 clear LiDAR disc, one group of objects in view is tolerated, as the cues' one raised blob is.
 
@@ -79,8 +82,9 @@ def confirm_reading(
         vetoes.append(("markings", f"{r.phrase('marking')} {where if street_level else ''}".rstrip()
                        + ": a road stays risky even when empty"))  # fmt: skip
         categorical = True
-    if street_level and r.share("road") > p.max_street_asphalt:
-        vetoes.append(("street_asphalt", f"{r.phrase('road')} {where}: a road or a car park"))
+    paved = _paved(r)
+    if street_level and paved > p.max_street_asphalt:
+        vetoes.append(("street_asphalt", f"{_paved_phrase(r, paved)} {where}: a road or a car park"))
     if street_level and request.built_up and not vetoes:
         vetoes.append(
             ("street_level", f"{where} among buildings: people and traffic come back (a last resort only)")
@@ -89,8 +93,13 @@ def confirm_reading(
     groups = sum(r.count(c) for c in COUNTED)
     vegetation = r.share("low_vegetation") + r.share("tree")
     open_country = street_level and not request.built_up
-    if not vetoes and r.clear_p < net.clear_threshold and open_country and _open_ground(r, p, groups):
-        note = " (open country: level ground with nothing on it; the net's clear site means a clear roof)"
+    if not vetoes and open_country:
+        # the net's clear site means a clear roof, which a surface measured at street level is not: there
+        # only level ground with nothing on it passes, whatever the clear-site probability
+        if _open_ground(r, p, groups):
+            note = " (open country: level ground with nothing on it)"
+        else:
+            vetoes.append(_not_open_ground(r, groups, vegetation))
     elif not vetoes and r.clear_p < net.clear_threshold:
         lidar_clear = request.check is not None and request.check.clear
         tolerate = (
@@ -106,16 +115,42 @@ def confirm_reading(
     return vetoes, categorical, note, r
 
 
+def _paved(r: SceneReading) -> float:
+    """Share of the window read as road or as roof surface. At street level both are paving where
+    traffic runs: a plain asphalt road or car park looks like a tar roof from above (Surface ID's
+    height tells them apart, not the image)."""
+    return min(1.0, r.share("road") + r.share("roof"))
+
+
+def _paved_phrase(r: SceneReading, paved: float) -> str:
+    where = ", ".join(list(dict.fromkeys([*r.where("road"), *r.where("roof")]))[:3])
+    return f"road or tar-like paving ({100 * paved:.0f} %: {where})"
+
+
 def _open_ground(r: SceneReading, p: ConfirmParams, groups: int) -> bool:
     """A field, a yard or a lawn with nothing on it: no object, person, vehicle, water or marking seen,
-    road at most ``max_street_asphalt`` and trees at most ``max_vegetation`` of the window."""
+    road or tar-like paving (:func:`_paved`) at most ``max_street_asphalt`` and trees at most
+    ``max_vegetation`` of the window."""
     hazards = r.share("water") + r.share("marking")
     return (
         groups == 0
         and hazards == 0.0
-        and r.share("road") <= p.max_street_asphalt
+        and _paved(r) <= p.max_street_asphalt
         and r.share("tree") <= p.max_vegetation
     )
+
+
+def _not_open_ground(r: SceneReading, groups: int, vegetation: float) -> tuple[str, str]:
+    seen = [r.phrase(c) for c in ("person", "vehicle", "object") if r.count(c)]
+    if r.share("tree") > 0.0:
+        seen.append(r.phrase("tree"))
+    paved = _paved(r)
+    if paved > 0.0:
+        seen.append(_paved_phrase(r, paved))
+    what = ", ".join(seen[:4]) if seen else "nothing named"
+    kind = "raised" if groups else "vegetation" if vegetation > 0.0 and not paved else "street_asphalt"
+    return kind, f"not level open ground with nothing on it: {what}"
+
 
 
 def _not_clear(
