@@ -45,6 +45,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from simbridge.autopilot.flavours import ArduPilotFlavour
 from simbridge.geo import Quat, Vec3
 from simbridge.physics import VehicleState
 from simbridge.vehicle import Vehicle
@@ -94,6 +95,10 @@ PARAMS: dict[str, float] = {
     "RNGFND1_MAX": RANGE_MAX_M,
     "RNGFND1_ORIENT": 25,  # pointing down
 }
+# The flight envelope the emulated ArduPilot flies (and companion-bench's kinematic bound assumes) in
+# place of airsim-quadX.parm's (20 m/s across, 3 m/s down, 4 m/s2): the same F450 whoever flies it.
+_ENVELOPE = ("WPNAV_SPEED", "WPNAV_SPEED_UP", "WPNAV_SPEED_DN", "WPNAV_ACCEL", "ANGLE_MAX")
+PARAMS.update({p.name: p.default for p in ArduPilotFlavour.params if p.name in _ENVELOPE})
 
 
 class SitlError(RuntimeError):
