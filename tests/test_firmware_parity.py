@@ -19,7 +19,7 @@ from pymavlink import mavutil
 
 from simbridge.geo import GeoOrigin
 from tests.conftest import SimProcess
-from tests.mavclient import MavClient
+from tests.mavclient import AP_MODES, MavClient
 
 pytestmark = pytest.mark.slow
 M = mavutil.mavlink
@@ -124,6 +124,36 @@ def test_the_emulation_and_the_firmware_meet_a_companion_alike(
     print(f"{autopilot}: ON_GROUND {delay:.2f} s after contact")
     assert 0.5 <= delay <= 3.0, f"{autopilot}: ON_GROUND {delay:.2f} s after contact"
     c.wait_disarmed(30)
+    c.statustext("Disarming motors")
+    c.drain(1.0)  # 10 s simulated
+    assert c.heartbeat().custom_mode == AP_MODES["LAND"], f"{autopilot}: left LAND after the disarm"
+
+
+def test_mode_changes_and_arming_refusals_on_the_ground_alike(
+    vehicle: tuple[str, SimProcess], client_for: Callable[..., MavClient]
+) -> None:
+    """Disarmed on the ground with a position: every mode a companion uses is accepted, and arming is
+    refused (FAILED, with the firmware's words) in the modes that cannot take off, accepted in GUIDED
+    and LOITER; no STATUSTEXT answers a mode change."""
+    autopilot, sim = vehicle
+    c = client_for(sim.port)
+    c.wait_heartbeat(60)
+    _ready(sim)
+    for name in ("LAND", "RTL", "BRAKE"):
+        assert c.set_mode_ap(name) == M.MAV_RESULT_ACCEPTED, f"{autopilot}: {name}"
+        c.drain(0.3)
+        assert c.heartbeat().custom_mode == AP_MODES[name]
+        assert c.arm() == M.MAV_RESULT_FAILED, f"{autopilot}: armed in {name}"
+        c.statustext(f"Arm: {name} mode not armable")
+    for name in ("LOITER", "GUIDED"):
+        assert c.set_mode_ap(name) == M.MAV_RESULT_ACCEPTED, f"{autopilot}: {name}"
+        c.drain(0.3)
+        assert c.arm() == M.MAV_RESULT_ACCEPTED, f"{autopilot}: not armed in {name}"
+        c.statustext("Arming motors")
+        assert c.arm(False) == M.MAV_RESULT_ACCEPTED
+        c.drain(0.3)
+    said = [m.text for m in c.texts]
+    assert not [t for t in said if t.startswith("Mode ")], f"{autopilot}: {said}"
 
 
 def test_the_legacy_stream_request_starts_and_stops_a_group_alike(
