@@ -258,10 +258,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         )  # fmt: skip
     out: Path = args.out
     try:
-        out.mkdir(parents=True, exist_ok=True)
-        results = load_results(out)
         specs = episode_specs(args) if args.command != "modules" else []
         sitl = resolve_sitl(args)
+        out.mkdir(parents=True, exist_ok=True)
+        results = load_results(out)
     except (OSError, ValueError) as exc:
         ap.error(str(exc))
     config = {

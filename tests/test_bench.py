@@ -338,10 +338,10 @@ def test_bad_arguments_and_a_foreign_results_file_are_refused(tmp_path: Path) ->
     assert "--sitl goes with --autopilot ardupilot-sitl" in res.stderr
     missing = tmp_path / "no-arducopter"
     res = bench("curated", "--scenario", "scenario1", "--autopilot", "ardupilot-sitl", "--sitl", str(missing),
-                "--out", str(tmp_path))  # fmt: skip
+                "--out", str(tmp_path / "sitl"))  # fmt: skip
     assert res.returncode == 2
     assert f"{missing} is not a file" in res.stderr
-    assert not (tmp_path / "results.json").exists()
+    assert not (tmp_path / "sitl").exists()  # refused before anything was written
     (tmp_path / "results.json").write_text('{"something": "else"}')
     res = bench("city", "--seeds", "1", "--out", str(tmp_path))
     assert res.returncode == 2
