@@ -9,7 +9,7 @@ call with its tier and latency, the rationales). Everything the processes wrote 
 directory: ``episode.jsonl`` (simbridge), ``companion.log``, ``record/``.
 
 The alarm goes out only once simbridge's episode log says ``ready`` (the vehicle holds at its launch
-pose): at once with the emulated autopilots, after about 75 simulated seconds of initialisation and
+pose): at once with the emulated autopilots, after 80-90 simulated seconds of initialisation and
 take-off with real ArduCopter (``--autopilot ardupilot-sitl``).
 
 Times are simulated seconds from simbridge's episode log: ``time_to_touchdown_s`` runs from the moment
@@ -100,7 +100,7 @@ class EpisodeTimes:
     sim_s: float = 600.0
     start_wall_s: float = 90.0  # simbridge and the companion must be up and talking by then
     settle_wall_s: float = 10.0  # after the touchdown, for the companion to close its record
-    ready_sim_s: float = 240.0  # for the autopilot to hold at the launch pose (real firmware: ~75 s)
+    ready_sim_s: float = 240.0  # for the autopilot to hold at the launch pose (real firmware: 83-87 s)
 
     @property
     def wall_s(self) -> float:
