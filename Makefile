@@ -1,4 +1,5 @@
 # Set-up and entry points. `make demo` and `make test` work on a fresh machine with python3.
+# The sim extra (JSBSim, numba) is what simbridge and companion-bench need beyond the companion.
 VENV ?= .venv
 PYTHON ?= python3
 STAMP := $(VENV)/.installed
@@ -9,7 +10,7 @@ DEPTH_STAMP := $(VENV)/.installed-depth
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(VENV)/bin/pip install --quiet --upgrade pip
-	$(VENV)/bin/pip install --quiet -e '.[dev]'
+	$(VENV)/bin/pip install --quiet -e '.[dev,sim]'
 	touch $(STAMP)
 
 # Tests also exercise the optional monocular-depth and bench (report figures, rationale clusters) extras.
@@ -17,7 +18,7 @@ $(STAMP): pyproject.toml
 # build); the demo does not need it.
 $(DEPTH_STAMP): $(STAMP)
 	$(VENV)/bin/pip install --quiet 'torch==2.13.0'
-	$(VENV)/bin/pip install --quiet -e '.[dev,depth,bench,train]'
+	$(VENV)/bin/pip install --quiet -e '.[dev,sim,depth,bench,train]'
 	touch $(DEPTH_STAMP)
 
 demo: $(STAMP)
@@ -41,7 +42,7 @@ test: $(DEPTH_STAMP) mosquitto
 # from procedural cities, train LandNet-S on the CPU (seeded), calibrate on held-out renders, export ONNX.
 # About an hour on 2 cores; patches are cached under runs/train-cache.
 model: $(DEPTH_STAMP)
-	$(VENV)/bin/pip install --quiet -e '.[train]'
+	$(VENV)/bin/pip install --quiet -e '.[sim,train]'
 	$(VENV)/bin/python -m landfall_train --seed 0
 
 bench: $(STAMP)

@@ -150,8 +150,11 @@ class Companion:
         if self.ground is not None:
             self.ground.alarm(alarm, result)
         if result == RESULT_ACCEPTED and self.record is not None:
-            # what a restarted daemon resumes when this recovery never records its outcome
-            self.record.record_event("alarm", alarm.to_json())
+            # what a restarted daemon resumes when this recovery never records its outcome; the
+            # autopilot's clock places the alarm on the autopilot's (and a simulator's) time line
+            seen = self.tm.state.t_boot_s > 0
+            boot_ms = round(1000 * self.tm.state.t_boot_s) if seen else None
+            self.record.record_event("alarm", {**alarm.to_json(), "vehicle_time_boot_ms": boot_ms})
         return result
 
     async def _resume(self, alarm: Alarm) -> None:

@@ -219,7 +219,10 @@ class TelemetryCache:
             self.poses.add_attitude(msg.time_boot_ms / 1000.0, s.quat_wxyz)
             self._stamp("attitude")
         elif kind == "DISTANCE_SENSOR" and msg.orientation == 25:
-            s.rangefinder_m = msg.current_distance / 100.0
+            # a rangefinder that sees nothing reports its maximum (ArduCopter: 40 m on a 40 m sensor
+            # 100 m up): the ground is farther, not there, so no reading (NaN)
+            beyond = 0 < msg.max_distance <= msg.current_distance
+            s.rangefinder_m = math.nan if beyond else msg.current_distance / 100.0
             self._stamp("rangefinder")
         elif kind == "EXTENDED_SYS_STATE":
             s.landed_state = int(msg.landed_state)

@@ -42,6 +42,7 @@ __all__ = ["SCHEMA", "load_results", "main", "save_results"]
 SCHEMA = "landfall-bench/1"
 CONTEXTS = ("crop", "pad20", "pad30", "pad40", "pad50", "pad60", "full")
 WEATHERS = ("clear", "fog", "rain")
+AUTOPILOTS = ("px4", "ardupilot", "ardupilot-sitl")
 RESULTS = "results.json"
 IMAGE_CONTEXTS = ("crop", "full")  # landfall_eval.images.CONTEXTS, without importing it for every command
 
@@ -100,7 +101,15 @@ def build_parser() -> argparse.ArgumentParser:
     flying.add_argument(
         "--context", choices=CONTEXTS, default="crop", help="what the reasoner sees per candidate"
     )
-    flying.add_argument("--autopilot", choices=("px4", "ardupilot"), default="px4")
+    flying.add_argument(
+        "--autopilot", choices=AUTOPILOTS, default="px4",
+        help="px4 or ardupilot: simbridge's emulation; ardupilot-sitl: real ArduCopter firmware (SITL)",
+    )  # fmt: skip
+    flying.add_argument(
+        "--sitl", type=Path, metavar="PATH",
+        help="ArduCopter SITL binary for --autopilot ardupilot-sitl "
+        "(default: $LANDFALL_ARDUCOPTER, else ../shared/sitl/ardupilot/arducopter)",
+    )  # fmt: skip
     flying.add_argument(
         "--workers", type=_positive(int, "--workers"), default=os.cpu_count() or 1,
         help="episodes at once (default: the number of cores)",
@@ -145,6 +154,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def episode_specs(args: argparse.Namespace) -> list[EpisodeSpec]:
     """The episodes a curated or city command asks for, in order."""
+    if args.sitl is not None and args.autopilot != "ardupilot-sitl":
+        raise ValueError("--sitl goes with --autopilot ardupilot-sitl")
     base = dict(reasoner=args.reasoner, context=args.context, weather=args.weather, autopilot=args.autopilot)
     if args.command == "curated":
         return [EpisodeSpec("curated", args.scenario, k, run=k, **base) for k in range(args.runs)]
@@ -179,8 +190,26 @@ def _line(entry: dict[str, Any]) -> str:
     )
 
 
+def resolve_sitl(args: argparse.Namespace) -> Path | None:
+    """The ArduCopter binary an ``ardupilot-sitl`` run flies (None for the emulation), found once so a
+    missing one is a bad argument, not an error in every episode. Raises ValueError saying where it
+    looked."""
+    if getattr(args, "autopilot", None) != "ardupilot-sitl":
+        return None
+    from simbridge.sitl import SitlNotFound, find_arducopter
+
+    try:
+        return find_arducopter(args.sitl)
+    except SitlNotFound as exc:
+        raise ValueError(str(exc)) from None
+
+
 def run_episodes(
-    args: argparse.Namespace, results: dict[str, Any], specs: Sequence[EpisodeSpec], out: Path
+    args: argparse.Namespace,
+    results: dict[str, Any],
+    specs: Sequence[EpisodeSpec],
+    out: Path,
+    sitl: Path | None = None,
 ) -> int:
     done = {e["id"] for e in results["episodes"]}
     todo = [s for s in specs if s.id not in done]
@@ -195,7 +224,9 @@ def run_episodes(
     )
     with ThreadPoolExecutor(max_workers=args.workers) as pool:
         futures = {
-            pool.submit(run_episode, s, out / "episodes" / s.id, times=times, config_path=args.config): s
+            pool.submit(
+                run_episode, s, out / "episodes" / s.id, times=times, config_path=args.config, sitl=sitl
+            ): s
             for s in todo
         }
         for fut in as_completed(futures):
@@ -227,9 +258,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         )  # fmt: skip
     out: Path = args.out
     try:
+        specs = episode_specs(args) if args.command != "modules" else []
+        sitl = resolve_sitl(args)
         out.mkdir(parents=True, exist_ok=True)
         results = load_results(out)
-        specs = episode_specs(args) if args.command != "modules" else []
     except (OSError, ValueError) as exc:
         ap.error(str(exc))
     config = {
@@ -251,6 +283,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             config[key] = getattr(args, key)
     if args.command == "city":
         config["start_index"] = args.start_index
+    if sitl is not None:
+        config["sitl"] = str(sitl)
     results["command"] = args.command
     results["created_unix_s"] = round(time.time(), 3)
     results.setdefault("runs", []).append(config)
@@ -274,7 +308,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         bar.close()
         save_results(out, results)
     else:
-        errors = run_episodes(args, results, specs, out)
+        errors = run_episodes(args, results, specs, out, sitl)
         save_results(out, results)
     s = results["summary"]
     if s["episodes"]:

@@ -8,14 +8,21 @@ ground truth (:mod:`landfall_eval.grading`) and the companion's flight record (r
 call with its tier and latency, the rationales). Everything the processes wrote stays in the episode's
 directory: ``episode.jsonl`` (simbridge), ``companion.log``, ``record/``.
 
+The alarm goes out only once simbridge's episode log says ``ready`` (the vehicle holds at its launch
+pose): at once with the emulated autopilots, after 80-90 simulated seconds of initialisation and
+take-off with real ArduCopter (``--autopilot ardupilot-sitl``).
+
 Times are simulated seconds from simbridge's episode log: ``time_to_touchdown_s`` runs from the moment
-the companion took control (the vehicle's switch to OFFBOARD or GUIDED, milliseconds after the alarm)
-to the touchdown. The companion's peak RSS and CPU time are sampled from ``/proc`` every poll (Linux).
+the companion took control (the vehicle's switch to OFFBOARD or GUIDED after ``ready``, milliseconds
+after the alarm; where the vehicle already holds in GUIDED, as real ArduCopter does after its take-off,
+the alarm's acceptance, placed on the log's clock through the autopilot's boot clock) to the touchdown.
+The companion's peak RSS and CPU time are sampled from ``/proc`` every poll (Linux).
 """
 
 from __future__ import annotations
 
 import json
+import math
 import os
 import socket
 import subprocess
@@ -32,7 +39,9 @@ __all__ = [
     "EpisodeSpec",
     "EpisodeTimes",
     "JsonlTail",
+    "LogWatch",
     "ProcessSample",
+    "alarm_sim_time_s",
     "describe_last_state",
     "free_port",
     "run_episode",
@@ -40,6 +49,7 @@ __all__ = [
     "simbridge_command",
     "sped_up_env",
     "stop_process",
+    "touchdown_to_site_m",
 ]
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -63,7 +73,7 @@ class EpisodeSpec:
     reasoner: str = "onboard"
     context: str = "crop"
     weather: str = "clear"
-    autopilot: str = "px4"
+    autopilot: str = "px4"  # px4 | ardupilot (the emulation) | ardupilot-sitl (real ArduCopter)
     launch: tuple[float, float, float] | None = None
     launch_index: int | None = None
     run: int | None = None
@@ -90,10 +100,17 @@ class EpisodeTimes:
     sim_s: float = 600.0
     start_wall_s: float = 90.0  # simbridge and the companion must be up and talking by then
     settle_wall_s: float = 10.0  # after the touchdown, for the companion to close its record
+    ready_sim_s: float = 240.0  # for the autopilot to hold at the launch pose (real firmware: 83-87 s)
 
     @property
     def wall_s(self) -> float:
         return self.start_wall_s + 3.0 * self.sim_s / self.speed + 60.0
+
+    @property
+    def ready_wall_s(self) -> float:
+        """Wall seconds from the start until the episode log must say ``ready``; at 3x the simulated
+        allowance, as for the flight, since lock-stepped firmware can fall behind ``speed``."""
+        return self.start_wall_s + 3.0 * self.ready_sim_s / self.speed
 
 
 @dataclass(slots=True)
@@ -193,21 +210,82 @@ def send_alarm(
 
 
 def simbridge_command(
-    spec: EpisodeSpec, *, udp_port: int, sensors_port: int, episode_log: Path, speed: float
+    spec: EpisodeSpec,
+    *,
+    udp_port: int,
+    sensors_port: int,
+    episode_log: Path,
+    speed: float,
+    sitl: Path | None = None,
 ) -> list[str]:
     """The ``simbridge`` command line that flies ``spec``: MAVLink to ``udp_port`` on loopback, the
-    sensor stream on ``sensors_port``, the episode log at ``episode_log``, ``speed`` x real time."""
+    sensor stream on ``sensors_port``, the episode log at ``episode_log``, ``speed`` x real time;
+    ``sitl`` the ArduCopter binary for ``ardupilot-sitl`` (None: simbridge's own default)."""
     cmd = [
         sys.executable, "-m", "simbridge", "--scenario", spec.scenario, "--seed", str(spec.seed),
         "--autopilot", spec.autopilot, "--weather", spec.weather, "--speed", f"{speed:g}",
         "--mavlink", f"udpout:127.0.0.1:{udp_port}", "--sensors", f"127.0.0.1:{sensors_port}",
         "--episode-log", str(episode_log), "--log-level", "WARNING",
     ]  # fmt: skip
+    if spec.autopilot == "ardupilot-sitl" and sitl is not None:
+        cmd += ["--sitl", str(sitl)]
     if spec.city_seed is not None:
         cmd += ["--city-seed", str(spec.city_seed)]
     if spec.launch is not None:
         cmd.append("--launch=" + ",".join(f"{v:.2f}" for v in spec.launch))  # "=": it may start with "-"
     return cmd
+
+
+class LogWatch:
+    """What an episode keeps of simbridge's episode log as it is written: the state lines, the ``start``
+    line (the world flown), ``ready``, the first switch to a control mode after ``ready`` (the
+    companion taking over) and the touchdown."""
+
+    def __init__(self) -> None:
+        self.states: list[dict[str, Any]] = []
+        self.header: dict[str, Any] | None = None
+        self.ready: dict[str, Any] | None = None
+        self.takeover: dict[str, Any] | None = None
+        self.touchdown: dict[str, Any] | None = None
+        self.last_vehicle: dict[str, Any] | None = None  # the latest state line, read to the very end
+
+    def take(self, rows: list[dict[str, Any]], *, final: bool = False) -> None:
+        """Sort ``rows`` in; ``final``: read after the processes were stopped, so only the last
+        state and the header count (a touchdown then came too late to grade)."""
+        for row in rows:
+            kind = row.get("event")
+            if kind == "state":
+                self.last_vehicle = row
+                if not final:
+                    self.states.append(row)
+            elif kind == "start" and self.header is None:
+                self.header = row
+            elif final:
+                continue
+            elif kind == "ready" and self.ready is None:
+                self.ready = row
+            elif (
+                kind == "mode"
+                and self.ready is not None  # real firmware flies GUIDED to the launch pose before it
+                and self.takeover is None
+                and row.get("mode") in CONTROL_MODES
+            ):
+                self.takeover = row
+            elif kind == "touchdown" and self.touchdown is None:
+                self.touchdown = row
+
+
+def alarm_sim_time_s(ready: Mapping[str, Any] | None, events: list[dict[str, Any]]) -> float | None:
+    """The simulated time at which the companion accepted the alarm: its flight record's ``alarm``
+    event carries the autopilot's boot clock then (``vehicle_time_boot_ms``), and simbridge's ``ready``
+    event ties that clock to the episode log's ``t_s``. None when either is missing."""
+    alarm = next((e for e in reversed(events) if e.get("kind") == "alarm"), None)
+    if ready is None or alarm is None:
+        return None
+    boot_ms, ready_boot_ms = alarm.get("vehicle_time_boot_ms"), ready.get("time_boot_ms")
+    if not isinstance(boot_ms, int | float) or not isinstance(ready_boot_ms, int | float):
+        return None
+    return float(ready["t_s"]) + (boot_ms - ready_boot_ms) / 1000.0
 
 
 def run_episode(
@@ -217,6 +295,7 @@ def run_episode(
     times: EpisodeTimes | None = None,
     config_path: Path | None = None,
     on_line: Callable[[str, str], None] | None = None,
+    sitl: Path | None = None,
 ) -> dict[str, Any]:
     """Fly one episode; returns its results.json entry (``episodes[]`` in docs/bench.md).
 
@@ -225,7 +304,7 @@ def run_episode(
     process that dies, an alarm that is refused or a landing that never comes is an ``outcome`` of
     ``error`` or ``timeout`` with the ``error`` text, and ``last_state`` says where the companion and
     the vehicle stood at the end. ``city_seed`` and ``world_digest`` come from simbridge's episode log:
-    the world it flew.
+    the world it flew. ``sitl``: the ArduCopter binary when ``spec.autopilot`` is ``ardupilot-sitl``.
     """
     times = times or EpisodeTimes()
     workdir.mkdir(parents=True, exist_ok=True)
@@ -238,7 +317,7 @@ def run_episode(
         stale.unlink(missing_ok=True)
     udp, tcp = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_STREAM)
     sim_cmd = simbridge_command(
-        spec, udp_port=udp, sensors_port=tcp, episode_log=episode_log, speed=times.speed
+        spec, udp_port=udp, sensors_port=tcp, episode_log=episode_log, speed=times.speed, sitl=sitl
     )
     comp_cmd = [
         sys.executable, "-m", "companion", "--mavlink", f"udp:{udp}", "--sensors", f"127.0.0.1:{tcp}",
@@ -270,19 +349,21 @@ def run_episode(
         comp = subprocess.Popen(comp_cmd, cwd=ROOT, env=env, stdout=fh, stderr=subprocess.STDOUT)
     usage = ProcessSample(comp.pid)
     tail = JsonlTail(episode_log)
-    states: list[dict[str, Any]] = []
-    header: dict[str, Any] | None = None  # simbridge's start line: the world it flies
-    last_vehicle: dict[str, Any] | None = None  # its latest state line, read to the very end
-    touchdown: dict[str, Any] | None = None
-    takeover: dict[str, Any] | None = None
+    log = LogWatch()
+    alarm_t_s: float | None = None  # the takeover where the vehicle already holds in GUIDED
     outcome, error = "landed", None
     shown = 0
     try:
-        while "sensor stream connected" not in comp_log.read_text(errors="replace"):
+        while log.ready is None or "sensor stream connected" not in comp_log.read_text(errors="replace"):
+            log.take(tail.lines())
             if comp.poll() is not None or sim.poll() is not None:
-                raise _EpisodeError("simbridge or the companion exited before the sensor stream was up")
-            if time.monotonic() - t_wall > times.start_wall_s:
-                raise _EpisodeError(f"no sensor stream after {times.start_wall_s:.0f} s")
+                who = "simbridge" if sim.poll() is not None else "the companion"
+                raise _EpisodeError(f"{who} exited before the vehicle was ready and the sensor stream up")
+            waited = time.monotonic() - t_wall
+            if log.ready is None and waited > times.ready_wall_s:
+                raise _EpisodeError(f"simbridge's autopilot not ready after {times.ready_wall_s:.0f} s")
+            if log.ready is not None and waited > times.ready_wall_s + times.start_wall_s:
+                raise _EpisodeError(f"no sensor stream after {waited:.0f} s")
             time.sleep(0.2)
         res = send_alarm(udp, spec.reason, spec.criticality, time.monotonic() + 30.0)
         if on_line is not None:
@@ -290,34 +371,25 @@ def run_episode(
         if res.returncode != 0:
             raise _EpisodeError(f"alarm not accepted: {(res.stdout or res.stderr).strip()[:200]}")
         t_alarm = time.monotonic()
+        alarm_t_s = alarm_sim_time_s(log.ready, _record_events(record_dir))
         ended = None
         while True:
             usage.sample()
-            for row in tail.lines():
-                kind = row.get("event")
-                if kind == "state":
-                    states.append(row)
-                    last_vehicle = row
-                elif kind == "start" and header is None:
-                    header = row
-                elif kind == "mode" and takeover is None and row.get("mode") in CONTROL_MODES:
-                    takeover = row
-                elif kind == "touchdown" and touchdown is None:
-                    touchdown = row
+            log.take(tail.lines())
             if on_line is not None:
                 lines = comp_log.read_text(errors="replace").splitlines()
                 for line in lines[shown:]:
                     on_line("companion", line)
                 shown = len(lines)
-            if touchdown is not None:
+            if log.touchdown is not None:
                 if ended is None:
                     ended = time.monotonic()
                 if "recovery ended" in comp_log.read_text(errors="replace"):
                     break
                 if time.monotonic() - ended > times.settle_wall_s:
                     break
-            t0 = float(takeover["t_s"]) if takeover is not None else None
-            if t0 is not None and states and float(states[-1]["t_s"]) - t0 > times.sim_s:
+            t0 = float(log.takeover["t_s"]) if log.takeover is not None else alarm_t_s
+            if t0 is not None and log.states and float(log.states[-1]["t_s"]) - t0 > times.sim_s:
                 outcome, error = "timeout", f"no touchdown within {times.sim_s:.0f} simulated seconds"
                 break
             if time.monotonic() - t_alarm > times.wall_s:
@@ -338,22 +410,45 @@ def run_episode(
             for line in comp_log.read_text(errors="replace").splitlines()[shown:]:
                 on_line("companion", line)
         sim_err.close()
-        for row in tail.lines():  # what simbridge wrote since the last look (all of it, on an early error)
-            if row.get("event") == "state":
-                last_vehicle = row
-            elif row.get("event") == "start" and header is None:
-                header = row
+        log.take(tail.lines(), final=True)  # what simbridge wrote since the last look
         tail.close()
-    if header is not None:
-        entry["city_seed"] = header.get("city_seed", entry["city_seed"])
-        entry["world_digest"] = header.get("world_digest")
-    entry.update(_grade(states, takeover, touchdown, record_dir))
-    entry["outcome"] = outcome if touchdown is None or outcome != "timeout" else "landed"
-    entry["error"] = error if touchdown is None else None
-    entry["last_state"] = _last_state(_record_events(record_dir), last_vehicle)
+    if log.header is not None:
+        entry["city_seed"] = log.header.get("city_seed", entry["city_seed"])
+        entry["world_digest"] = log.header.get("world_digest")
+    takeover = log.takeover
+    if takeover is None and alarm_t_s is not None:
+        takeover = {"t_s": alarm_t_s}
+    events = _record_events(record_dir)
+    entry.update(_grade(log.states, takeover, log.touchdown, events))
+    entry["touchdown_to_site_m"] = touchdown_to_site_m(log.touchdown, log.header, events)
+    entry["outcome"] = outcome if log.touchdown is None or outcome != "timeout" else "landed"
+    entry["error"] = error if log.touchdown is None else None
+    entry["last_state"] = _last_state(events, log.last_vehicle)
     entry["companion"] = {"peak_rss_mb": round(usage.peak_rss_mb, 1), "cpu_s": round(usage.cpu_s, 2)}
     entry["wall_s"] = round(time.monotonic() - t_wall, 2)
     return entry
+
+
+def touchdown_to_site_m(
+    touchdown: Mapping[str, Any] | None, header: Mapping[str, Any] | None, events: list[dict[str, Any]]
+) -> float | None:
+    """Horizontal distance (m) from the touchdown to the site the companion last confirmed for descent.
+
+    The site is in the autopilot's local frame (its EKF origin, which simbridge puts at ``home_ned_m``
+    for every autopilot), the touchdown in the scenario's: so this is how far from its aim the
+    autopilot put the vehicle, the estimator's error at touchdown included; it is not the distance to
+    what the chosen pixel truly shows (``companion-bench modules`` measures that). None without a
+    touchdown, a home or a confirmed site.
+    """
+    site = next(
+        (e.get("site_ned_m") for e in reversed(events) if e.get("kind") == "confirm" and e.get("accept")),
+        None,
+    )
+    home = header.get("home_ned_m") if header is not None else None
+    if touchdown is None or not isinstance(site, list) or not isinstance(home, list):
+        return None
+    td = touchdown["pos_ned_m"]
+    return round(math.hypot(td[0] - home[0] - site[0], td[1] - home[1] - site[1]), 2)
 
 
 class _EpisodeError(Exception):
@@ -362,9 +457,9 @@ class _EpisodeError(Exception):
 
 def _grade(
     states: list[dict[str, Any]],
-    takeover: dict[str, Any] | None,
-    touchdown: dict[str, Any] | None,
-    record_dir: Path,
+    takeover: Mapping[str, Any] | None,
+    touchdown: Mapping[str, Any] | None,
+    events: list[dict[str, Any]],
 ) -> dict[str, Any]:
     """Ground-truth grade, times, trajectory and the reasoner's calls for one episode."""
     t0 = float(takeover["t_s"]) if takeover is not None else None
@@ -405,7 +500,6 @@ def _grade(
                 kinematic_lower_bound_s=round(bound, 2),
                 kinematic_ratio=round(took / bound, 3) if bound > 0 else None,
             )
-    events = _record_events(record_dir)
     calls, rationales, rounds = [], [], 0
     for ev in events:
         kind = ev.get("kind")

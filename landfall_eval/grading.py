@@ -124,6 +124,7 @@ def summarise(episodes: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         "by_surface": {s: by_surface[s] for s in SURFACES if by_surface[s]},
         "median_time_to_touchdown_s": _median(e.get("time_to_touchdown_s") for e in episodes),
         "median_kinematic_ratio": _median(e.get("kinematic_ratio") for e in episodes),
+        "median_touchdown_to_site_m": _median(e.get("touchdown_to_site_m") for e in episodes),
         "companion_peak_rss_mb": round(max(rss), 1) if rss else None,
         "latency_s": {
             stage: {

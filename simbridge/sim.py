@@ -167,6 +167,7 @@ class SimBridge:
             "pos_ned_m": [round(v, 3) for v in s.pos_ned_m],
             "autopilot": self.config.autopilot,
             "start": self.config.start,
+            "time_boot_ms": self.time_boot_ms(s.t_s),  # ties the autopilot's clock to the log's t_s
         }
 
     # ------------------------------------------------------------------ callbacks

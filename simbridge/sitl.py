@@ -45,8 +45,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from simbridge.autopilot.flavours import ArduPilotFlavour
 from simbridge.geo import Quat, Vec3
 from simbridge.physics import VehicleState
+from simbridge.telemetry import RANGEFINDER_MAX_CM, RANGEFINDER_MIN_CM
 from simbridge.vehicle import Vehicle
 
 __all__ = [
@@ -76,7 +78,7 @@ PWM_MIN_US, PWM_MAX_US = 1000.0, 2000.0
 MOTORS = 4
 RATE_HZ = 600  # SIM_RATE_HZ: physics frames per simulated second (>= 1.8 x the 300 Hz loop)
 RANGE_EVERY = 12  # frames between two rangefinder casts (50 Hz at 600 Hz)
-RANGE_MAX_M = 40.0
+RANGE_MAX_M = RANGEFINDER_MAX_CM / 100  # the emulation's rangefinder: the same F450's sensor
 FIRST_FRAME_S = 20.0  # wall seconds SITL may take to send its first servo frame
 STALL_S = 10.0  # wall seconds without a frame after the first: SITL is not answering
 _TAIL_LINES = 60
@@ -91,9 +93,14 @@ PARAMS: dict[str, float] = {
     "MOT_THST_EXPO": 0.65,
     "MOT_THST_HOVER": 0.2,
     "RNGFND1_TYPE": 100,  # SITL's rangefinder, fed by the reply's rng_1
+    "RNGFND1_MIN": RANGEFINDER_MIN_CM / 100,
     "RNGFND1_MAX": RANGE_MAX_M,
     "RNGFND1_ORIENT": 25,  # pointing down
 }
+# The flight envelope the emulated ArduPilot flies (and companion-bench's kinematic bound assumes) in
+# place of airsim-quadX.parm's (20 m/s across, 3 m/s down, 4 m/s2): the same F450 whoever flies it.
+_ENVELOPE = ("WPNAV_SPEED", "WPNAV_SPEED_UP", "WPNAV_SPEED_DN", "WPNAV_ACCEL", "ANGLE_MAX")
+PARAMS.update({p.name: p.default for p in ArduPilotFlavour.params if p.name in _ENVELOPE})
 
 
 class SitlError(RuntimeError):

@@ -44,8 +44,8 @@ _SENSORS = (
     | 0x100000
     | 0x400000  # AHRS, laser position (rangefinder)
 )
-_MAX_RANGE_CM = 20000
-_MIN_RANGE_CM = 10
+RANGEFINDER_MAX_CM = 20000  # the downward rangefinder's range, 0.1-200 m (real firmware too: sitl.py)
+RANGEFINDER_MIN_CM = 10
 
 # default stream intervals, seconds of simulated time
 DEFAULT_INTERVALS_S: dict[int, float] = {
@@ -81,7 +81,7 @@ DATA_STREAMS[0] = tuple(m for ids in DATA_STREAMS.values() for m in ids)  # MAV_
 def rangefinder_m(autopilot: Autopilot) -> float:
     """Downward rangefinder reading: distance along body +z to the first surface of the world."""
     s = autopilot.vehicle.state
-    return autopilot.vehicle.physics.terrain.rangefinder_m(s.pos_ned_m, s.quat, _MAX_RANGE_CM / 100)
+    return autopilot.vehicle.physics.terrain.rangefinder_m(s.pos_ned_m, s.quat, RANGEFINDER_MAX_CM / 100)
 
 
 class Telemetry:
@@ -316,11 +316,11 @@ class Telemetry:
 
     def distance_sensor(self) -> Any:
         cm = round(rangefinder_m(self.ap) * 100)
-        cm = min(max(cm, _MIN_RANGE_CM), _MAX_RANGE_CM)
+        cm = min(max(cm, RANGEFINDER_MIN_CM), RANGEFINDER_MAX_CM)
         return self._mav.distance_sensor_encode(
             self.time_boot_ms,
-            _MIN_RANGE_CM,
-            _MAX_RANGE_CM,
+            RANGEFINDER_MIN_CM,
+            RANGEFINDER_MAX_CM,
             cm,
             0,
             0,

@@ -41,7 +41,7 @@ def test_ardupilot_guided_takeoff_target_land(
     assert abs(n - 15.0) < 0.5
     assert abs(e + 10.0) < 0.5
     modes = [ev["mode"] for ev in sim.events("mode")]
-    assert modes == ["GUIDED", "LAND", "LOITER"]
+    assert modes == ["GUIDED", "LAND"]  # ArduCopter stays in LAND once disarmed
     assert [ev["event"] for ev in sim.events() if ev["event"] in ("armed", "disarmed")] == [
         "armed",
         "disarmed",

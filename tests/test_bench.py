@@ -12,7 +12,16 @@ from typing import Any
 
 import pytest
 
-from landfall_eval.episode import EpisodeSpec, EpisodeTimes, _grade, run_episode
+from landfall_eval.episode import (
+    EpisodeSpec,
+    EpisodeTimes,
+    LogWatch,
+    _grade,
+    _record_events,
+    alarm_sim_time_s,
+    run_episode,
+    touchdown_to_site_m,
+)
 from landfall_eval.grading import (
     SURFACES,
     kinematic_lower_bound_s,
@@ -28,6 +37,7 @@ EPISODE_KEYS = {
     "launch_ned_m", "touchdown_ned_m", "surface", "safe", "reasons", "outcome", "error", "rounds",
     "time_to_touchdown_s", "kinematic_lower_bound_s", "kinematic_ratio", "calls", "rationales",
     "trajectory_ne_m", "companion", "wall_s", "city_seed", "world_digest", "last_state",
+    "touchdown_to_site_m",
 }  # fmt: skip
 LAST_STATE_KEYS = {
     "recovery_state", "round", "outcome_state", "outcome_reason", "vehicle_t_s", "vehicle_mode",
@@ -90,7 +100,7 @@ def test_grade_reads_the_episode_log_and_the_flight_record(tmp_path: Path) -> No
         "safe": True,
         "reasons": [],
     }
-    got = _grade(states, takeover, touchdown, tmp_path / "record")
+    got = _grade(states, takeover, touchdown, _record_events(tmp_path / "record"))
     assert got["launch_ned_m"] == [0.5, 0.0, -109.0]  # where the companion took control
     assert got["rounds"] == 2
     assert [c["tier"] for c in got["calls"]] == ["onboard", "gpt-5", "onboard"]
@@ -100,10 +110,60 @@ def test_grade_reads_the_episode_log_and_the_flight_record(tmp_path: Path) -> No
     assert got["kinematic_ratio"] == pytest.approx(39.0 / bound, abs=1e-3)
     assert got["trajectory_ne_m"][0] == [0.5, 0.0]
     assert got["trajectory_ne_m"][-1] == [20.0, 0.0]
-    none = _grade(states, takeover, None, tmp_path / "nothing")
+    none = _grade(states, takeover, None, [])
     assert none["surface"] == "no_landing"
     assert not none["safe"]
     assert none["time_to_touchdown_s"] is None
+
+
+def test_log_watch_takes_the_takeover_only_after_ready() -> None:
+    """Real ArduCopter flies GUIDED to the launch pose before ``ready``: that switch is simbridge's
+    take-off, not the companion taking control."""
+    log = LogWatch()
+    log.take([
+        {"t_s": 0.0, "event": "start", "home_ned_m": [12.0, 8.0, 0.0]},
+        {"t_s": 30.0, "event": "mode", "mode": "GUIDED"},
+        {"t_s": 75.0, "event": "ready", "time_boot_ms": 74996},
+        {"t_s": 75.1, "event": "state", "pos_ned_m": [12.0, 8.0, -110.0]},
+    ])  # fmt: skip
+    assert log.ready is not None
+    assert log.takeover is None
+    assert [s["t_s"] for s in log.states] == [75.1]
+    log.take(
+        [{"t_s": 80.0, "event": "mode", "mode": "GUIDED"}, {"t_s": 81.0, "event": "mode", "mode": "LAND"}]
+    )
+    assert log.takeover is not None
+    assert log.takeover["t_s"] == 80.0
+    log.take(
+        [{"t_s": 99.0, "event": "touchdown", "pos_ned_m": [0, 0, 0]}, {"t_s": 99.1, "event": "state"}],
+        final=True,
+    )
+    assert log.touchdown is None  # read after the processes were stopped: too late to grade
+    assert log.last_vehicle == {"t_s": 99.1, "event": "state"}
+    assert len(log.states) == 1
+
+
+def test_alarm_time_is_placed_on_the_log_through_the_autopilot_clock() -> None:
+    ready = {"t_s": 75.0, "event": "ready", "time_boot_ms": 74996}
+    events = [{"kind": "state", "state": "idle"}, {"kind": "alarm", "vehicle_time_boot_ms": 80496}]
+    assert alarm_sim_time_s(ready, events) == pytest.approx(80.5)
+    assert alarm_sim_time_s(None, events) is None
+    assert alarm_sim_time_s(ready, [{"kind": "alarm", "vehicle_time_boot_ms": None}]) is None
+    assert alarm_sim_time_s({"t_s": 0.0}, events) is None  # a simbridge that does not say its clock
+
+
+def test_touchdown_to_site_uses_the_last_confirmed_site_in_the_autopilot_frame() -> None:
+    header = {"event": "start", "home_ned_m": [12.0, 8.0, 0.0]}  # the EKF origin in the scenario
+    events = [
+        {"kind": "confirm", "accept": True, "site_ned_m": [-40.0, 3.0, -20.0]},
+        {"kind": "confirm", "accept": True, "site_ned_m": [3.0, 4.0, -20.0]},
+        {"kind": "confirm", "accept": False, "site_ned_m": [90.0, 90.0, -20.0]},
+    ]
+    touchdown = {"pos_ned_m": [15.3, 12.4, -20.0]}
+    assert touchdown_to_site_m(touchdown, header, events) == pytest.approx(0.5)
+    assert touchdown_to_site_m(None, header, events) is None
+    assert touchdown_to_site_m(touchdown, header, events[2:]) is None  # nothing confirmed
+    assert touchdown_to_site_m(touchdown, None, events) is None
 
 
 def test_summary_counts_safe_landings_rounds_and_latency() -> None:
@@ -273,6 +333,15 @@ def test_bad_arguments_and_a_foreign_results_file_are_refused(tmp_path: Path) ->
     res = bench("curated", "--scenario", "scenario1", "--runs", "0", "--out", str(tmp_path))
     assert res.returncode == 2
     assert "--runs must be > 0" in res.stderr
+    res = bench("curated", "--scenario", "scenario1", "--sitl", "/bin/true", "--out", str(tmp_path))
+    assert res.returncode == 2
+    assert "--sitl goes with --autopilot ardupilot-sitl" in res.stderr
+    missing = tmp_path / "no-arducopter"
+    res = bench("curated", "--scenario", "scenario1", "--autopilot", "ardupilot-sitl", "--sitl", str(missing),
+                "--out", str(tmp_path / "sitl"))  # fmt: skip
+    assert res.returncode == 2
+    assert f"{missing} is not a file" in res.stderr
+    assert not (tmp_path / "sitl").exists()  # refused before anything was written
     (tmp_path / "results.json").write_text('{"something": "else"}')
     res = bench("city", "--seeds", "1", "--out", str(tmp_path))
     assert res.returncode == 2
@@ -282,3 +351,36 @@ def test_bad_arguments_and_a_foreign_results_file_are_refused(tmp_path: Path) ->
     assert res.returncode == 2
     assert "is not valid JSON" in res.stderr
     assert (tmp_path / "results.json").read_text() == "{broken"  # never overwritten
+
+
+@pytest.mark.slow
+@pytest.mark.sitl
+def test_curated_episode_flies_real_arducopter(arducopter: Path, tmp_path: Path) -> None:
+    """``--autopilot ardupilot-sitl``: the harness waits out the firmware's initialisation and take-off
+    (``ready``), raises the alarm, and grades the landing as with the emulation; the takeover is the
+    alarm (the vehicle already holds in GUIDED), so the times are those of the companion's flight."""
+    out = tmp_path / "sitl"
+    res = bench(
+        "curated", "--scenario", "scenario2", "--runs", "1", "--workers", "1", "--autopilot",
+        "ardupilot-sitl", "--sitl", str(arducopter), "--quiet", "--out", str(out),
+    )  # fmt: skip
+    results = json.loads((out / "results.json").read_text())
+    (e,) = results["episodes"]
+    why = f"{e['error']}\n{_log_tail(out / 'episodes' / e['id'] / 'companion.log')}"
+    assert res.returncode == 0, res.stderr[-3000:] + why
+    assert e["id"] == "scenario2-r0-onboard-crop-clear-ardupilot-sitl"
+    assert e["autopilot"] == "ardupilot-sitl"
+    assert results["config"]["sitl"] == str(arducopter)
+    assert e["outcome"] == "landed", why
+    assert e["surface"] == "rooftop_clear", why
+    assert e["safe"], e["reasons"]
+    assert set(e) >= EPISODE_KEYS, EPISODE_KEYS - set(e)
+    log = [json.loads(x) for x in (out / "episodes" / e["id"] / "episode.jsonl").read_text().splitlines()]
+    ready = next(r for r in log if r["event"] == "ready")
+    touchdown = next(r for r in log if r["event"] == "touchdown")
+    assert ready["t_s"] > 30  # the firmware initialised and took off first
+    # from the alarm (after ready) to the touchdown, not from simbridge's take-off
+    assert 0 < e["time_to_touchdown_s"] < touchdown["t_s"] - ready["t_s"]
+    assert e["kinematic_ratio"] >= 1.0
+    assert math.dist(e["launch_ned_m"], ready["pos_ned_m"]) < 1.0  # control taken at the launch pose
+    assert e["touchdown_to_site_m"] < 3.0

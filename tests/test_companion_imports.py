@@ -13,14 +13,14 @@ ROOT = Path(__file__).resolve().parent.parent
 
 CHECK = """
 import sys
-for name in ("simbridge", "landfall_eval", "jsbsim", "numba"):
+for name in ("simbridge", "landfall_eval", "jsbsim", "numba", "tqdm"):
     sys.modules[name] = None  # importing any of them now raises ImportError
 import companion.cli, companion.daemon, companion.alarm_cli, companion.eval_cli, companion.recovery
 import runpy
 runpy.run_path("trigger_alarm.py", run_name="not_main")
 from companion.cli import build_parser
 build_parser().parse_args(["--mavlink", "udp:14550", "--sensors", "127.0.0.1:5600"])
-sim = ("simbridge", "landfall_eval", "jsbsim")
+sim = ("simbridge", "landfall_eval", "jsbsim", "numba", "tqdm")
 loaded = sorted(m for m, mod in sys.modules.items() if mod is not None and m.split(".")[0] in sim)
 print("LOADED", loaded)
 """

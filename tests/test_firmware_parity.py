@@ -12,14 +12,16 @@ from __future__ import annotations
 
 import math
 import time
+from collections import Counter
 from collections.abc import Callable
 
 import pytest
 from pymavlink import mavutil
 
+from companion.daemon import STREAMS_HZ
 from simbridge.geo import GeoOrigin
 from tests.conftest import SimProcess
-from tests.mavclient import MavClient
+from tests.mavclient import AP_MODES, MavClient
 
 pytestmark = pytest.mark.slow
 M = mavutil.mavlink
@@ -73,19 +75,25 @@ def test_the_emulation_and_the_firmware_meet_a_companion_alike(
     unasked = _seen(c, 2.0)
     assert not unasked & {"LOCAL_POSITION_NED", "ATTITUDE", "ATTITUDE_QUATERNION", "GLOBAL_POSITION_INT"}
     _ready(sim)
-    for msg_id, hz in ((M.MAVLINK_MSG_ID_LOCAL_POSITION_NED, 10), (M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, 5),
-                       (M.MAVLINK_MSG_ID_ATTITUDE_QUATERNION, 10)):  # fmt: skip
+    for msg_id, hz in STREAMS_HZ.items():  # what the companion asks for, at its rates
         assert c.command(M.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / hz) == 0
     # the local frame starts at the EKF origin: the launch point, 14 m from the scenario's origin
     p = c.position(10)
     assert math.hypot(p.x, p.y) < 0.5
     assert abs(p.z) < 0.5
+    # each stream at the rate asked, counted over 4 s of the autopilot's clock
     first = c.position()
-    count = 0
-    while (m := c.position()).time_boot_ms < first.time_boot_ms + 3000:
-        count += 1
-    assert count == pytest.approx(30, abs=6), f"{autopilot}: {count} LOCAL_POSITION_NED in 3 s asked at 10 Hz"
-    assert m.time_boot_ms > first.time_boot_ms
+    counts: Counter[int] = Counter()
+    while True:
+        m = c.recv(["LOCAL_POSITION_NED", *(M.mavlink_map[i].msgname for i in STREAMS_HZ)], 5)
+        if m.get_type() == "LOCAL_POSITION_NED" and m.time_boot_ms >= first.time_boot_ms + 4000:
+            break
+        counts[m.get_msgId()] += 1
+    for msg_id, hz in STREAMS_HZ.items():
+        name = M.mavlink_map[msg_id].msgname
+        assert counts[msg_id] == pytest.approx(4 * hz, rel=0.2), (
+            f"{autopilot}: {counts[msg_id]} {name} in 4 s at {hz} Hz"
+        )
     assert c.command(M.MAV_CMD_REQUEST_MESSAGE, M.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN) == 0
     origin = c.recv("GPS_GLOBAL_ORIGIN", 10)
     launch = GeoOrigin().to_geodetic(LAUNCH[0], LAUNCH[1], 0.0)
@@ -124,6 +132,36 @@ def test_the_emulation_and_the_firmware_meet_a_companion_alike(
     print(f"{autopilot}: ON_GROUND {delay:.2f} s after contact")
     assert 0.5 <= delay <= 3.0, f"{autopilot}: ON_GROUND {delay:.2f} s after contact"
     c.wait_disarmed(30)
+    c.statustext("Disarming motors")
+    c.drain(1.0)  # 10 s simulated
+    assert c.heartbeat().custom_mode == AP_MODES["LAND"], f"{autopilot}: left LAND after the disarm"
+
+
+def test_mode_changes_and_arming_refusals_on_the_ground_alike(
+    vehicle: tuple[str, SimProcess], client_for: Callable[..., MavClient]
+) -> None:
+    """Disarmed on the ground with a position: every mode a companion uses is accepted, and arming is
+    refused (FAILED, with the firmware's words) in the modes that cannot take off, accepted in GUIDED
+    and LOITER; no STATUSTEXT answers a mode change."""
+    autopilot, sim = vehicle
+    c = client_for(sim.port)
+    c.wait_heartbeat(60)
+    _ready(sim)
+    for name in ("LAND", "RTL", "BRAKE"):
+        assert c.set_mode_ap(name) == M.MAV_RESULT_ACCEPTED, f"{autopilot}: {name}"
+        c.drain(0.3)
+        assert c.heartbeat().custom_mode == AP_MODES[name]
+        assert c.arm() == M.MAV_RESULT_FAILED, f"{autopilot}: armed in {name}"
+        c.statustext(f"Arm: {name} mode not armable")
+    for name in ("LOITER", "GUIDED"):
+        assert c.set_mode_ap(name) == M.MAV_RESULT_ACCEPTED, f"{autopilot}: {name}"
+        c.drain(0.3)
+        assert c.arm() == M.MAV_RESULT_ACCEPTED, f"{autopilot}: not armed in {name}"
+        c.statustext("Arming motors")
+        assert c.arm(False) == M.MAV_RESULT_ACCEPTED
+        c.drain(0.3)
+    said = [m.text for m in c.texts]
+    assert not [t for t in said if t.startswith("Mode ")], f"{autopilot}: {said}"
 
 
 def test_the_legacy_stream_request_starts_and_stops_a_group_alike(

@@ -1,9 +1,10 @@
-"""The daemon's own alarm sources (battery, failsafe STATUSTEXT, GPS), fed real MAVLink frames through
-the companion's receive path."""
+"""The daemon's own alarm sources (battery, failsafe STATUSTEXT, GPS) and its rangefinder reading, fed
+real MAVLink frames through the companion's receive path."""
 
 from __future__ import annotations
 
 import logging
+import math
 
 import pytest
 from pymavlink.dialects.v20 import common as mavlink2
@@ -56,3 +57,22 @@ def test_texts_that_came_on_the_ground_are_passed_over(caplog: pytest.LogCapture
     _feed(c, AUTOPILOT.extended_sys_state_encode(0, 2))  # airborne again
     c.watch_once()
     assert "watcher alarm" not in caplog.text
+
+
+def test_a_rangefinder_at_its_maximum_is_no_reading() -> None:
+    """ArduCopter reports a rangefinder that sees nothing as its maximum (a 40 m sensor 100 m up says
+    4000 cm): taken for the ground, it made the companion climb away from a LiDAR that was out of
+    range (found flying real SITL). Beyond its range is no reading; in range is the distance."""
+    c = _flying()
+    down = 25  # MAV_SENSOR_ROTATION_PITCH_270
+
+    def reading(cm: int) -> float:
+        _feed(c, AUTOPILOT.distance_sensor_encode(1000, 20, 4000, cm, 0, 0, down, 0))
+        return c.tm.state.rangefinder_m
+
+    assert reading(2091) == 20.91
+    assert math.isnan(reading(4000))
+    assert math.isnan(reading(4001))
+    assert reading(15) == 0.15  # too close still says the ground is right there
+    _feed(c, AUTOPILOT.distance_sensor_encode(1000, 20, 0, 3000, 0, 0, down, 0))  # no maximum given
+    assert c.tm.state.rangefinder_m == 30.0

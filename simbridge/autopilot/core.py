@@ -140,8 +140,8 @@ class Autopilot:
             if not self.mode.armable and not force:
                 text = (
                     f"Arming denied: {self.mode.name} mode"
-                    if self.flavour.name == "px4"
-                    else "Arm: Mode not armable"
+                    if self._px4
+                    else f"Arm: {self.mode.name} mode not armable"  # ArduCopter 4.7's words
                 )
                 return self._refuse(text, self._arm_refusal())
             if not self.landed and not force:
@@ -153,7 +153,7 @@ class Autopilot:
             self.vehicle.controller.reset()
             self._hold = Setpoint.hold(s.pos_ned_m, s.euler_rad[2])
             self._emit_event("armed", {})
-            self._emit_text(SEV_INFO, "Armed by external command")
+            self._emit_text(SEV_INFO, "Armed by external command" if self._px4 else "Arming motors")
             return ACCEPTED
         if not self.armed:
             return ACCEPTED
@@ -162,8 +162,12 @@ class Autopilot:
         self._disarm("external command")
         return ACCEPTED
 
+    @property
+    def _px4(self) -> bool:
+        return self.flavour.name == "px4"
+
     def _arm_refusal(self) -> int:
-        return MAV_RESULT_TEMPORARILY_REJECTED if self.flavour.name == "px4" else MAV_RESULT_FAILED
+        return MAV_RESULT_TEMPORARILY_REJECTED if self._px4 else MAV_RESULT_FAILED
 
     def set_mode(self, spec: ModeSpec) -> CommandOutcome:
         s = self.vehicle.state
@@ -417,8 +421,9 @@ class Autopilot:
         self._external_at_s = -math.inf
         self.failsafe = False
         self._emit_event("disarmed", {"reason": why})
-        self._emit_text(SEV_INFO, f"Disarmed ({why})")
-        if self.mode.nav in (Nav.LAND, Nav.RTL, Nav.TAKEOFF, Nav.EXTERNAL):
+        self._emit_text(SEV_INFO, f"Disarmed ({why})" if self._px4 else "Disarming motors")
+        # ArduCopter stays in its mode (LAND after a landing); PX4 falls back to its ground mode
+        if self._px4 and self.mode.nav in (Nav.LAND, Nav.RTL, Nav.TAKEOFF, Nav.EXTERNAL):
             self._set_mode(self.flavour.mode(self.flavour.ground_start_mode), self.vehicle.state)
 
     def _set_mode(self, spec: ModeSpec, s: VehicleState, announce: bool = True) -> None:
@@ -436,7 +441,7 @@ class Autopilot:
             self._external_at_s = s.t_s
         if changed:
             self._emit_event("mode", {"mode": spec.name})
-            if announce:
+            if announce and self._px4:  # ArduCopter says nothing when a ground station sets a mode
                 self._emit_text(SEV_INFO, f"Mode {spec.name}")
 
     def _stopping_point(self, s: VehicleState) -> Vec3:

@@ -1,0 +1,14 @@
+"""``companion-bench`` and ``python -m landfall_eval``: the command line, or one line saying to install
+the ``sim`` extra where its dependencies are missing (:mod:`simbridge.extra`)."""
+
+import sys
+
+from simbridge.extra import run_command
+
+
+def main() -> int:
+    return run_command("companion-bench", "landfall_eval.cli")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
