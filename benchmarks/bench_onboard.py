@@ -10,7 +10,8 @@ Single-threaded: this process is pinned to one CPU, OpenCV runs one thread, BLAS
 Baseline, measured in the same run: with the cues, the same analysis without the working-size reduction
 (every crop and the close-up's window analysed at full resolution, ``WORK_AREA_PX`` unbounded); with
 ``--judge landnet`` (LandNet-S, companion/reasoning/landnet.py, reading every crop and the close-up), the
-same net reading each image once instead of with its three mirror images (sidecar ``input.views``).
+same net reading each image once instead of with its mirror images (sidecar ``input.views`` for the
+confirmation, ``input.rank_views`` for the crops of a rank).
 Printed as the ratio baseline / ours, with whether the baseline picks the same site and makes the same
 decision.
 
@@ -102,9 +103,10 @@ def main(argv: list[str] | None = None) -> int:
     ours = measure(onboard)
     if onboard.landnet is not None:  # baseline: one reading of each image
         single = LandNet.load()
-        single.views = 1
+        single.views = single.rank_views = 1
         base = measure(OnboardReasoner(judge="landnet", landnet=single))
-        baseline = f"baseline: one view (shipped: {onboard.landnet.views})"
+        views = f"{onboard.landnet.rank_views} to rank, {onboard.landnet.views} to confirm"
+        baseline = f"baseline: one view (shipped: {views})"
     else:
         work_area = image_cues.WORK_AREA_PX
         image_cues.WORK_AREA_PX = 10**9  # baseline: analyse at full resolution

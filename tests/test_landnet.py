@@ -115,7 +115,7 @@ def test_landnet_load_bad_sidecar_is_an_error_naming_it(tmp_path: Path) -> None:
     meta = json.loads(DEFAULT_MODEL.with_suffix(".json").read_text())
     meta["input"]["views"] = 3
     onnx.with_suffix(".json").write_text(json.dumps(meta))
-    with pytest.raises(LandNetError, match=r"m\.json: .*input\.views must be one of \(1, 4\), got 3"):
+    with pytest.raises(LandNetError, match=r"m\.json: .*input\.views must be one of \(1, 2, 4\), got 3"):
         LandNet.load(onnx)
 
 
@@ -134,6 +134,12 @@ def test_average_views_flips_each_reading_back_before_averaging() -> None:
     assert batch.shape == (4, 3, 4, 6)
     np.testing.assert_array_equal(batch[3], chw[:, ::-1, ::-1])
     assert view_batch(chw, 1).shape == (1, 3, 4, 6)
+    two = view_batch(chw, 2)
+    np.testing.assert_array_equal(two[1], chw[:, :, ::-1])
+    pairs = np.stack([f(b) for b in base for f in flips[:2]])
+    cells, clear_p = average_views(pairs, np.array([0.2, 0.4, 0.6, 0.6]), 2)
+    np.testing.assert_allclose(cells, base)
+    np.testing.assert_allclose(clear_p, [0.3, 0.6])
 
 
 def test_landnet_views_four_average_the_mirror_images_and_one_reads_alone(tmp_path: Path) -> None:
@@ -151,6 +157,33 @@ def test_landnet_views_four_average_the_mirror_images_and_one_reads_alone(tmp_pa
     assert one.read(img).clear_p != pytest.approx(four.read(img).clear_p, abs=1e-6)
     flat = np.full((64, 64, 3), 128, np.uint8)  # mirror-symmetric: every view is the same image
     assert four.read(flat).clear_p == pytest.approx(one.read(flat).clear_p, abs=1e-5)
+    two = (img, img[:, ::-1])
+    assert four.read(img, 2).clear_p == pytest.approx(
+        float(np.mean([one.read(np.ascontiguousarray(m)).clear_p for m in two])), abs=1e-5
+    )
+
+
+def test_landnet_ranks_read_with_rank_views(net: LandNet, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Ranks read each crop with the sidecar's rank_views (2 for the packaged model: five crops where a
+    confirmation reads one image), confirmations with its views (4)."""
+    assert (net.views, net.rank_views) == (4, 2)
+    asked: list[int | None] = []
+    read = LandNet.read
+
+    def spy(self: LandNet, rgb: np.ndarray, views: int | None = None) -> SceneReading:
+        asked.append(views)
+        return read(self, rgb, views)
+
+    monkeypatch.setattr(LandNet, "read", spy)
+    judge = OnboardReasoner(judge="landnet", landnet=net)
+    crops = (_image(40, 60, 1), _image(50, 50, 2))
+    judge.rank_sync(RankRequest(crops))
+    cands = tuple(Candidate(k, (0, 0, 10, 10), (5.0, 5.0), area_m2=100.0) for k in range(2))
+    judge.rank_sync(RankRequest(crops, cands))
+    assert asked == [2, 2, 2, 2]
+    asked.clear()
+    judge.confirm_sync(ConfirmRequest(_image(90, 160, 3)))
+    assert asked == [None]  # the sidecar's views
 
 
 # --- reading --------------------------------------------------------------------------------------------

@@ -10,10 +10,13 @@ the thresholds (calibrated on held-out simbridge renders only) and the ONNX file
 
 :meth:`LandNet.read` takes an RGB uint8 image of any size (H, W, 3), scales it so the shorter side is
 ``short_side_px`` (the longer at most ``max_long_side_px``), both sides multiples of 16, reads it as the
-sidecar's ``input.views`` says (1: as it is; 4: it and its three mirror images, left-right, up-down and
-both, in one batch, each answer flipped back and the probabilities averaged: a nadir view has no
-preferred side, and the average of four readings is steadier on imagery unlike the renders it learnt
-from; :func:`view_batch` and :func:`average_views`, which calibration uses too), and returns a
+sidecar's ``input.views`` says (1: as it is; 2: it and its left-right mirror image; 4: it and its three
+mirror images, left-right, up-down and both; in one batch, each answer flipped back and the
+probabilities averaged: a nadir view has no preferred side, and the average of several readings is
+steadier on imagery unlike the renders it learnt from; :func:`view_batch` and :func:`average_views`,
+which calibration uses too). Ranks read their crops with ``input.rank_views`` (default: ``views``): a
+rank reads five crops where a confirmation reads one image, and only orders them, which two views do
+nearly as well as four on the held-out renders. :meth:`LandNet.read` returns a
 :class:`SceneReading`: the clear-site probability, per class the share of the image's cells where it is
 present and where (a 3 x 3 compass: "upper left" ... "centre" ... "lower right"), and how many separate
 groups of cells hold objects, people or vehicles. One ``cv2.dnn.Net`` is not safe to call from two
@@ -40,7 +43,7 @@ DEFAULT_MODEL = Path(__file__).with_name("models") / "landnet-s.onnx"
 HAZARD_SCALE = 3.0  # rank: hazard points of a surely-not-clear site (the image cues' water weight)
 COUNTED = ("object", "person", "vehicle")  # classes counted as separate groups of cells
 _INPUT_KEYS = ("mean", "std", "multiple", "short_side_px", "max_long_side_px")
-VIEWS = (1, 4)  # sidecar input.views: the image alone, or with its three mirror images
+VIEWS = (1, 2, 4)  # sidecar input.views: the image alone, with its left-right mirror, with all three
 _PLACES = (
     ("upper left", "top", "upper right"),
     ("left", "centre", "right"),
@@ -62,10 +65,12 @@ _WORDS = {
 
 
 def view_batch(chw: np.ndarray, views: int) -> np.ndarray:
-    """(views, C, H, W): an image (C, H, W) and, for 4 views, its left-right, up-down and two-way mirror
-    images."""
+    """(views, C, H, W): an image (C, H, W) and, for 2 views, its left-right mirror image; for 4, its
+    left-right, up-down and two-way mirror images."""
     if views == 1:
         return np.ascontiguousarray(chw[None])
+    if views == 2:
+        return np.ascontiguousarray(np.stack([chw, chw[:, :, ::-1]]))
     return np.ascontiguousarray(np.stack([chw, chw[:, :, ::-1], chw[:, ::-1, :], chw[:, ::-1, ::-1]]))
 
 
@@ -77,7 +82,9 @@ def average_views(cells_p: np.ndarray, clear_p: np.ndarray, views: int) -> tuple
     """
     n = len(clear_p) // views
     c = cells_p.reshape(n, views, *cells_p.shape[1:])
-    if views == 4:
+    if views == 2:
+        c = np.stack([c[:, 0], c[:, 1, :, :, ::-1]], axis=1)
+    elif views == 4:
         c = np.stack([c[:, 0], c[:, 1, :, :, ::-1], c[:, 2, :, ::-1, :], c[:, 3, :, ::-1, ::-1]], axis=1)
     return c.mean(axis=1), clear_p.reshape(n, views).mean(axis=1)
 
@@ -163,6 +170,7 @@ class LandNet:
         self.short_side_px = int(inp["short_side_px"])
         self.max_long_side_px = int(inp["max_long_side_px"])
         self.views = int(inp.get("views", 1))
+        self.rank_views = int(inp.get("rank_views", self.views))
         thresholds = meta["thresholds"]
         self.clear_threshold = float(thresholds["clear"])
         self.cell_thresholds = np.array([float(thresholds["cells"][c]) for c in self.classes], np.float32)
@@ -188,8 +196,9 @@ class LandNet:
             missing = [k for k in _INPUT_KEYS if k not in inp]
             if missing:
                 raise ValueError(f"input lacks {', '.join(missing)}")
-            if inp.get("views", 1) not in VIEWS:
-                raise ValueError(f"input.views must be one of {VIEWS}, got {inp.get('views')!r}")
+            for key in ("views", "rank_views"):
+                if inp.get(key, 1) not in VIEWS:
+                    raise ValueError(f"input.{key} must be one of {VIEWS}, got {inp.get(key)!r}")
             float(thr["clear"])
         except (OSError, ValueError, KeyError, TypeError) as exc:
             raise LandNetError(f"unreadable model sidecar: {exc!r}", meta_path) from exc
@@ -216,8 +225,9 @@ class LandNet:
 
         return side(h), side(w)
 
-    def read(self, rgb: np.ndarray) -> SceneReading:
-        """What the image shows (module docstring).
+    def read(self, rgb: np.ndarray, views: int | None = None) -> SceneReading:
+        """What the image shows (module docstring), read in ``views`` views (default: the sidecar's
+        ``input.views``; ranks pass ``rank_views``).
 
         Raises:
             ValueError: not a non-empty (H, W, 3) uint8 numpy array.
@@ -227,11 +237,12 @@ class LandNet:
         ih, iw = self.input_size(h, w)
         interp = cv2.INTER_AREA if ih * iw < h * w else cv2.INTER_LINEAR
         x = cv2.resize(img, (iw, ih), interpolation=interp).astype(np.float32) * np.float32(1.0 / 255.0)
-        blob = view_batch(((x - self.mean) / self.std).transpose(2, 0, 1), self.views)
+        n = self.views if views is None else views
+        blob = view_batch(((x - self.mean) / self.std).transpose(2, 0, 1), n)
         with self._lock:
             self._net.setInput(blob)
             cells, clear = self._net.forward(["cells", "clear"])
-        p, clear_p = average_views(_sigmoid(cells), _sigmoid(np.asarray(clear).reshape(-1)), self.views)
+        p, clear_p = average_views(_sigmoid(cells), _sigmoid(np.asarray(clear).reshape(-1)), n)
         present = p[0] >= self.cell_thresholds[:, None, None]
         return self._reading((h, w), present, float(clear_p[0]))
 

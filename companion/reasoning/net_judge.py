@@ -152,7 +152,6 @@ def _not_open_ground(r: SceneReading, groups: int, vegetation: float) -> tuple[s
     return kind, f"not level open ground with nothing on it: {what}"
 
 
-
 def _not_clear(
     r: SceneReading, threshold: float, groups: int, vegetation: float, max_vegetation: float
 ) -> tuple[str, str]:
@@ -177,7 +176,7 @@ def rank_readings(
     Raises:
         ValueError: a crop that is not a non-empty (H, W, 3) uint8 array.
     """
-    readings = [net.read(c) for c in crops]
+    readings = [net.read(c, net.rank_views) for c in crops]
     largest = max(r.size_px[0] * r.size_px[1] for r in readings)
     scores = [w.crop_size * math.sqrt(r.size_px[0] * r.size_px[1] / largest) - r.hazard for r in readings]
     order = tuple(sorted(range(len(readings)), key=lambda k: (-scores[k], k)))

@@ -229,7 +229,9 @@ class OnboardReasoner:
         # what reads the crops: the net when it is the judge (its reading replaces the cues' hazard terms
         # beside the geometry too), else the image cues; both validate the crops first
         all_cues: list[ImageCues | SceneReading] = (
-            [self.landnet.read(c) for c in cores] if self.landnet is not None else [analyse(c) for c in cores]
+            [self.landnet.read(c, self.landnet.rank_views) for c in cores]
+            if self.landnet is not None
+            else [analyse(c) for c in cores]
         )
         largest = max(c.size_px[0] * c.size_px[1] for c in all_cues)
         sites: list[_Site] = []
