@@ -334,3 +334,49 @@ def test_the_companion_lands_real_arducopter_on_the_clear_roof(
     assert td["safe"] is True
     rig.wait_log("recovery ended: landed", timeout_s=120)
     _wait_event(rig.sim, "disarmed", 60)
+
+
+@pytest.mark.slow
+@pytest.mark.sitl
+def test_a_five_second_link_loss_on_real_arducopter_holds_then_lands_on_the_same_roof(
+    arducopter: Path, start_rig: Callable[..., Rig]
+) -> None:
+    """The MAVLink link between real ArduCopter and the companion goes dead for 5 s during the first
+    descent step. The firmware's GUIDED holds the last target (no failsafe of its own: the companion is
+    no ground station); the companion notices the silence, keeps its target, and once the link is back
+    confirms the same site again and lands on it through LAND."""
+    from tests.relay import LossyUdpRelay
+
+    relays: list[LossyUdpRelay] = []
+
+    def via(port: int) -> int:
+        relays.append(LossyUdpRelay(port, drop=0.0, duplicate=0.0, reorder=0.0, corrupt=0.0))
+        return int(relays[-1].port)
+
+    try:
+        rig = start_rig(
+            ["--autopilot", "ardupilot-sitl", "--sitl", str(arducopter), "--scenario", "scenario2",
+             "--launch", "12,8", "--speed", "4"],
+            mavlink_via=via,
+        )  # fmt: skip
+        _wait_event(rig.sim, "ready", 240)
+        rig.wait_log("sensor stream connected", timeout_s=60)
+        out = rig.alarm_accepted("--reason", "GPS spoofing detected", "--criticality", "high")
+        assert out.returncode == 0, out.stdout + out.stderr
+        rig.wait_log("m, site clear", timeout_s=300)  # "descending 62 m, site clear: ...": the first step
+        relays[0].blackout()
+        time.sleep(5.0)
+        relays[0].restore()
+        td = _wait_event(rig.sim, "touchdown", 400)
+        log = rig.wait_log("recovery ended: landed", timeout_s=120)
+    finally:
+        for r in relays:
+            r.close()
+    assert td["surface"] == "rooftop_clear", (td, rig.log_text()[-3000:])
+    assert td["safe"] is True
+    assert relays[0].counts["blacked_out"] > 0
+    assert "link to the autopilot lost" in log
+    assert "link back after" in log
+    modes = [e.get("mode") for e in rig.sim.events("mode")]
+    assert "LAND" in modes, modes  # the end of the descent is the firmware's LAND
+    assert not {"RTL", "SMART_RTL", "BRAKE"} & set(modes), modes  # no failsafe of the firmware's own
