@@ -271,6 +271,18 @@ class SimBridge:
         s = self.vehicle.state
         rng = self._sensor_rng
         weather = self.config.weather
+        # the true pose each frame is rendered from, for evaluation only (the frame carries it too;
+        # the companion replaces it with the autopilot's estimate): harnesses place a chosen pixel with it
+        self.episode.event(
+            s.t_s,
+            "frame",
+            {
+                "time_boot_ms": self.time_boot_ms(s.t_s),
+                "pos_ned_m": [round(v, 4) for v in s.pos_ned_m],
+                "quat_wxyz": [round(v, 6) for v in s.quat],
+                "parts": sorted(want),
+            },
+        )
 
         def render() -> Any:
             frame = (
