@@ -29,6 +29,7 @@ from landfall_eval.grading import (
     surface_class,
     trapezoid_time_s,
 )
+from landfall_eval.landing import chosen_pixel, landing_distance_m
 from landfall_eval.launches import halton_launches
 from simbridge.scenarios import load_scenario
 
@@ -37,7 +38,7 @@ EPISODE_KEYS = {
     "launch_ned_m", "touchdown_ned_m", "surface", "safe", "reasons", "outcome", "error", "rounds",
     "time_to_touchdown_s", "kinematic_lower_bound_s", "kinematic_ratio", "calls", "rationales",
     "trajectory_ne_m", "companion", "wall_s", "city_seed", "world_digest", "last_state",
-    "touchdown_to_site_m",
+    "touchdown_to_site_m", "landing_distance_m", "landing_target_ned_m", "landing_error",
 }  # fmt: skip
 LAST_STATE_KEYS = {
     "recovery_state", "round", "outcome_state", "outcome_reason", "vehicle_t_s", "vehicle_mode",
@@ -164,6 +165,55 @@ def test_touchdown_to_site_uses_the_last_confirmed_site_in_the_autopilot_frame()
     assert touchdown_to_site_m(None, header, events) is None
     assert touchdown_to_site_m(touchdown, header, events[2:]) is None  # nothing confirmed
     assert touchdown_to_site_m(touchdown, None, events) is None
+
+
+def _rank(rnd: int, chosen: int | None, stamp: int | None, *centres: tuple[float, float]) -> dict[str, Any]:
+    cands = [{"index": k, "centre_px": list(c)} for k, c in enumerate(centres)]
+    return {"kind": "rank", "round": rnd, "chosen": chosen, "candidates": cands, "frame_time_boot_ms": stamp}
+
+
+def test_landing_distance_casts_the_chosen_pixel_from_the_true_pose() -> None:
+    """A nadir frame 60 m over scenario2's clear roof (top 30 m up, centred N 0, E -39), level and
+    facing north: with fx = fy = 480 px (960 px, 90 deg), pixel (cx - 80, cy + 48) looks 1/6 of the way
+    west and 1/10 south, so it truly shows the roof at N -6, E -49. A touchdown at N -3, E -45 is 5 m
+    from it. The companion's own estimate (the confirmed site) plays no part."""
+    cx, cy = 480.0, 270.0
+    events = [
+        _rank(1, 0, 4_000, (10.0, 10.0)),  # an earlier round's site, rejected
+        {"kind": "confirm", "round": 1, "accept": False, "site_ned_m": [50.0, 50.0, -20.0]},
+        _rank(2, 1, 12_345, (900.0, 500.0), (cx - 80, cy + 48)),
+        {"kind": "confirm", "round": 2, "accept": True, "site_ned_m": [99.0, 99.0, -30.0]},
+        {"kind": "confirm", "round": 2, "accept": True, "site_ned_m": [99.0, 99.0, -30.0]},  # a descent step
+    ]
+    pick = chosen_pixel(events)
+    assert pick is not None
+    assert (pick.u, pick.v, pick.time_boot_ms, pick.round) == (cx - 80, cy + 48, 12_345, 2)
+    log = LogWatch()
+    log.take([
+        {"t_s": 0.0, "event": "start", "scenario": "scenario2", "seed": 3, "city_seed": None,
+         "world_digest": None},
+        {"t_s": 4.0, "event": "frame", "time_boot_ms": 4_000, "pos_ned_m": [0.0, 0.0, -115.0],
+         "quat_wxyz": [1.0, 0.0, 0.0, 0.0]},
+        {"t_s": 12.345, "event": "frame", "time_boot_ms": 12_345, "pos_ned_m": [0.0, -39.0, -90.0],
+         "quat_wxyz": [1.0, 0.0, 0.0, 0.0]},
+    ])  # fmt: skip
+    assert sorted(log.frames) == [4_000, 12_345]
+    touchdown = {"pos_ned_m": [-3.0, -45.0, -30.0]}
+    got = landing_distance_m(touchdown, log.header, log.frames, events)
+    assert got is not None
+    distance, target = got
+    assert target == pytest.approx([-6.0, -49.0, -30.0], abs=0.05)
+    assert distance == pytest.approx(5.0, abs=0.05)
+    # nothing to measure: no touchdown, no confirmed site, no frame time (an older record), no frame
+    assert landing_distance_m(None, log.header, log.frames, events) is None
+    assert landing_distance_m(touchdown, log.header, log.frames, events[:2]) is None
+    older = [{k: v for k, v in e.items() if k != "frame_time_boot_ms"} for e in events]
+    assert landing_distance_m(touchdown, log.header, log.frames, older) is None
+    assert landing_distance_m(touchdown, log.header, {4_000: log.frames[4_000]}, events) is None
+    # a world that is not the one flown is an error, not a figure
+    assert log.header is not None
+    with pytest.raises(ValueError, match="not the flown world"):
+        landing_distance_m(touchdown, {**log.header, "world_digest": "0" * 16}, log.frames, events)
 
 
 def test_summary_counts_safe_landings_rounds_and_latency() -> None:
