@@ -81,6 +81,7 @@ class EpisodeSpec:
     city_seed: int | None = None
     criticality: str = "high"
     reason: str = "GPS spoofing detected"
+    ekf_error: str = "off"  # the emulation's estimator errors (simbridge --ekf-error)
 
     @property
     def id(self) -> str:
@@ -90,7 +91,8 @@ class EpisodeSpec:
             if self.kind == "city"
             else f"{self.scenario}-r{self.run}"
         )
-        return f"{where}-{self.reasoner}-{self.context}-{self.weather}-{self.autopilot}"
+        ekf = f"-ekf-{self.ekf_error}" if self.ekf_error != "off" else ""
+        return f"{where}-{self.reasoner}-{self.context}-{self.weather}-{self.autopilot}{ekf}"
 
 
 @dataclass(frozen=True, slots=True)
@@ -232,6 +234,8 @@ def simbridge_command(
         cmd += ["--sitl", str(sitl)]
     if spec.city_seed is not None:
         cmd += ["--city-seed", str(spec.city_seed)]
+    if spec.ekf_error != "off":
+        cmd += ["--ekf-error", spec.ekf_error]
     if spec.launch is not None:
         cmd.append("--launch=" + ",".join(f"{v:.2f}" for v in spec.launch))  # "=": it may start with "-"
     return cmd
@@ -344,6 +348,7 @@ def run_episode(
         "context": spec.context,
         "weather": spec.weather,
         "autopilot": spec.autopilot,
+        "ekf_error": spec.ekf_error,
         "criticality": spec.criticality,
         "launch_height_m": spec.launch[2] if spec.launch is not None else None,
     }

@@ -12,6 +12,7 @@ from typing import Any
 
 import pytest
 
+from landfall_eval.cli import build_parser, episode_specs
 from landfall_eval.episode import (
     EpisodeSpec,
     EpisodeTimes,
@@ -20,6 +21,7 @@ from landfall_eval.episode import (
     _record_events,
     alarm_sim_time_s,
     run_episode,
+    simbridge_command,
     touchdown_to_site_m,
 )
 from landfall_eval.grading import (
@@ -216,6 +218,26 @@ def test_landing_distance_casts_the_chosen_pixel_from_the_true_pose() -> None:
         landing_distance_m(touchdown, {**log.header, "world_digest": "0" * 16}, log.frames, events)
 
 
+def test_curated_with_ekf_error_flies_the_emulation_on_its_estimate(tmp_path: Path) -> None:
+    """``--ekf-error nominal`` reaches simbridge, names its episodes apart (resumption matches by id),
+    and is refused with real firmware, which has its own estimator."""
+    parse = build_parser().parse_args
+    base = ["curated", "--scenario", "scenario2", "--runs", "2", "--out", str(tmp_path)]
+    specs = episode_specs(parse([*base, "--autopilot", "ardupilot", "--ekf-error", "nominal"]))
+    assert [s.id for s in specs] == [
+        "scenario2-r0-onboard-crop-clear-ardupilot-ekf-nominal",
+        "scenario2-r1-onboard-crop-clear-ardupilot-ekf-nominal",
+    ]
+    cmd = simbridge_command(specs[1], udp_port=1, sensors_port=2, episode_log=tmp_path / "e.jsonl", speed=4.0)
+    assert cmd[cmd.index("--ekf-error") + 1] == "nominal"
+    off = episode_specs(parse([*base, "--autopilot", "ardupilot"]))
+    assert off[0].id == "scenario2-r0-onboard-crop-clear-ardupilot"  # the ids runs already hold
+    cmd = simbridge_command(off[0], udp_port=1, sensors_port=2, episode_log=tmp_path / "e.jsonl", speed=4.0)
+    assert "--ekf-error" not in cmd
+    with pytest.raises(ValueError, match="real firmware has its own estimator"):
+        episode_specs(parse([*base, "--autopilot", "ardupilot-sitl", "--ekf-error", "nominal"]))
+
+
 def test_summary_counts_safe_landings_rounds_and_latency() -> None:
     def ep(safe: bool, rounds: int, surface: str, weather: str = "clear") -> dict[str, Any]:
         return {
@@ -307,6 +329,12 @@ def test_curated_run_writes_results_and_report_then_resumes(tmp_path: Path) -> N
         }
         assert e["kinematic_ratio"] >= 1.0  # nothing beats the vehicle's limits
         assert e["time_to_touchdown_s"] > e["kinematic_lower_bound_s"] > 0
+        # the chosen pixel's true point on the roof, and the touchdown near it (0.76 m measured)
+        assert e["landing_error"] is None
+        assert e["landing_distance_m"] < 1.5, e["landing_target_ned_m"]
+        assert math.dist(e["landing_target_ned_m"][:2], e["touchdown_ned_m"][:2]) == pytest.approx(
+            e["landing_distance_m"], abs=0.01
+        )
         assert math.dist(e["trajectory_ne_m"][-1], e["touchdown_ned_m"][:2]) < 1e-6
         assert e["companion"]["peak_rss_mb"] > 20
         assert e["companion"]["cpu_s"] > 0
@@ -315,6 +343,9 @@ def test_curated_run_writes_results_and_report_then_resumes(tmp_path: Path) -> N
     assert s["episodes"] == 2
     assert s["safe_rate"] == 1.0
     assert s["mean_rounds_safe"] == pytest.approx(sum(e["rounds"] for e in episodes) / 2)
+    assert s["mean_landing_distance_m"] == pytest.approx(
+        sum(e["landing_distance_m"] for e in episodes) / 2, abs=1e-3
+    )
     html = (out / "report.html").read_text()
     assert "scenario1" in html
     assert "figures/" in html
@@ -434,3 +465,6 @@ def test_curated_episode_flies_real_arducopter(arducopter: Path, tmp_path: Path)
     assert e["kinematic_ratio"] >= 1.0
     assert math.dist(e["launch_ned_m"], ready["pos_ned_m"]) < 1.0  # control taken at the launch pose
     assert e["touchdown_to_site_m"] < 3.0
+    # from the truth: the touchdown against what the chosen pixel showed from the frame's true pose
+    assert e["landing_error"] is None
+    assert e["landing_distance_m"] < 3.0, e["landing_target_ned_m"]
