@@ -879,6 +879,7 @@ class Recovery:
                 "tier": decision.tier,
                 "latency_s": decision.latency_s,
                 "site_ned_m": list(target),
+                "candidate": choice.to_json(),  # whose pixel the site is (its rank event has its frame)
                 "hazard": hazard.name.lower(),
                 "image": closeup_name,
                 "check": {
