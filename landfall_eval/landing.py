@@ -73,23 +73,39 @@ class TruePose:
 
 def chosen_pixel(events: Sequence[Mapping[str, Any]]) -> ChosenPixel | None:
     """From a flight record's events: the last site confirmed for descent (the one it descended on),
-    the rank of the same round, and its chosen candidate's centre pixel and frame time. None when
-    nothing was confirmed or the round's rank does not say (an older record without
-    ``frame_time_boot_ms``, or no chosen candidate)."""
+    its candidate's centre pixel, and the time of the frame that candidate was found in.
+
+    The confirm event names its candidate (``candidate``: the candidate's record); the pixel's frame
+    is that of the latest rank event up to the confirm's round that lists the same candidate (a site
+    looked at again later, after its round, keeps its first frame). A record without ``candidate`` (an
+    older one) falls back to the chosen candidate of the confirm's own round. None when nothing was
+    confirmed or no rank event says which frame (no ``frame_time_boot_ms``)."""
     confirm = next((e for e in reversed(events) if e.get("kind") == "confirm" and e.get("accept")), None)
     if confirm is None:
         return None
     rnd = confirm.get("round")
-    rank = next((e for e in reversed(events) if e.get("kind") == "rank" and e.get("round") == rnd), None)
-    if rank is None:
-        return None
-    chosen, stamp, candidates = rank.get("chosen"), rank.get("frame_time_boot_ms"), rank.get("candidates")
-    if not isinstance(chosen, int) or not isinstance(stamp, int) or not isinstance(candidates, list):
-        return None
-    if not 0 <= chosen < len(candidates):
-        return None
-    u, v = candidates[chosen]["centre_px"]
-    return ChosenPixel(float(u), float(v), stamp, int(rnd) if isinstance(rnd, int) else 0)
+    rnd = rnd if isinstance(rnd, int) else 0
+    ranks = [e for e in events if e.get("kind") == "rank" and isinstance(e.get("round"), int)]
+    wanted = confirm.get("candidate")
+    for rank in reversed(ranks):
+        candidates = rank.get("candidates")
+        if not isinstance(candidates, list):
+            continue
+        if wanted is not None:
+            if rank["round"] > rnd or wanted not in candidates:
+                continue
+            cand = wanted
+        else:
+            chosen = rank.get("chosen")
+            if rank["round"] != rnd or not isinstance(chosen, int) or not 0 <= chosen < len(candidates):
+                continue
+            cand = candidates[chosen]
+        stamp = rank.get("frame_time_boot_ms")
+        if not isinstance(stamp, int):
+            return None
+        u, v = cand["centre_px"]
+        return ChosenPixel(float(u), float(v), stamp, int(rank["round"]))
+    return None
 
 
 def true_pose(frames: Mapping[int, Mapping[str, Any]], time_boot_ms: int) -> TruePose | None:

@@ -218,6 +218,27 @@ def test_landing_distance_casts_the_chosen_pixel_from_the_true_pose() -> None:
         landing_distance_m(touchdown, {**log.header, "world_digest": "0" * 16}, log.frames, events)
 
 
+def test_chosen_pixel_is_the_confirmed_candidates_in_the_frame_it_was_found_in() -> None:
+    """A site looked at again rounds after it was seen (the budget's closer look) keeps the frame of
+    the round that listed it; the candidate the confirm names decides, not the round's own choice."""
+    a, b, c = (100.0, 100.0), (300.0, 200.0), (500.0, 250.0)
+    events = [
+        _rank(2, 0, 20_000, a, b),
+        {"kind": "confirm", "round": 2, "accept": False, "candidate": _rank(0, 0, 0, a)["candidates"][0]},
+        _rank(4, 0, 40_000, c),  # a later round, its own choice rejected
+        {"kind": "confirm", "round": 4, "accept": False, "candidate": _rank(0, 0, 0, c)["candidates"][0]},
+        {"kind": "confirm", "round": 5, "accept": True, "candidate": _rank(2, 0, 0, a, b)["candidates"][1]},
+    ]
+    pick = chosen_pixel(events)
+    assert pick is not None
+    assert (pick.u, pick.v, pick.time_boot_ms, pick.round) == (*b, 20_000, 2)
+    # a candidate no rank listed: no frame to cast it from
+    stray = {**events[-1], "candidate": {"index": 9, "centre_px": [1.0, 1.0]}}
+    assert chosen_pixel([*events[:-1], stray]) is None
+    # a rank after the confirm's round does not count
+    assert chosen_pixel([*events[:-1], {**events[-1], "round": 1}]) is None
+
+
 def test_curated_with_ekf_error_flies_the_emulation_on_its_estimate(tmp_path: Path) -> None:
     """``--ekf-error nominal`` reaches simbridge, names its episodes apart (resumption matches by id),
     and is refused with real firmware, which has its own estimator."""
