@@ -810,6 +810,9 @@ class Recovery:
                 "context": self.p.context,
                 "images": names,
                 "candidates": [c.to_json() for c in candidates],
+                # the candidates' frame, on the autopilot's clock: where an evaluation finds what the
+                # chosen pixel truly shows (the simulator's episode log holds the pose it was taken from)
+                "frame_time_boot_ms": getattr(frame, "time_boot_ms", None),
             },
         )
         return ranking, chosen
@@ -876,6 +879,7 @@ class Recovery:
                 "tier": decision.tier,
                 "latency_s": decision.latency_s,
                 "site_ned_m": list(target),
+                "candidate": choice.to_json(),  # whose pixel the site is (its rank event has its frame)
                 "hazard": hazard.name.lower(),
                 "image": closeup_name,
                 "check": {

@@ -110,6 +110,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="ArduCopter SITL binary for --autopilot ardupilot-sitl "
         "(default: $LANDFALL_ARDUCOPTER, else ../shared/sitl/ardupilot/arducopter)",
     )  # fmt: skip
+    _ekf_error_option(flying, "episodes (the emulation only)")
     flying.add_argument(
         "--workers", type=_positive(int, "--workers"), default=os.cpu_count() or 1,
         help="episodes at once (default: the number of cores)",
@@ -127,10 +128,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     m.add_argument("--iterations", type=_positive(int, "--iterations"), default=20)
     m.add_argument("--scenario", action="append", choices=("scenario1", "scenario2"), help="default: both")
-    m.add_argument(
-        "--ekf-error", choices=("off", "nominal"), default="off",
-        help="landing flights on the autopilot's estimate with an EKF's errors (simbridge --ekf-error)",
-    )  # fmt: skip
+    _ekf_error_option(m, "landing flights")
     c = sub.add_parser("curated", parents=[common, flying], help="full pipeline in a curated scenario")
     c.add_argument("--scenario", required=True, choices=("scenario1", "scenario2"))
     c.add_argument("--runs", type=_positive(int, "--runs"), default=10)
@@ -152,11 +150,23 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+def _ekf_error_option(parser: argparse.ArgumentParser, what: str) -> None:
+    parser.add_argument(
+        "--ekf-error", choices=("off", "nominal"), default="off",
+        help=f"{what} on the autopilot's estimate with an EKF's errors (simbridge --ekf-error)",
+    )  # fmt: skip
+
+
 def episode_specs(args: argparse.Namespace) -> list[EpisodeSpec]:
     """The episodes a curated or city command asks for, in order."""
     if args.sitl is not None and args.autopilot != "ardupilot-sitl":
         raise ValueError("--sitl goes with --autopilot ardupilot-sitl")
-    base = dict(reasoner=args.reasoner, context=args.context, weather=args.weather, autopilot=args.autopilot)
+    if args.ekf_error != "off" and args.autopilot == "ardupilot-sitl":
+        raise ValueError("--ekf-error: real firmware has its own estimator (leave it off)")
+    base = dict(
+        reasoner=args.reasoner, context=args.context, weather=args.weather, autopilot=args.autopilot,
+        ekf_error=args.ekf_error,
+    )  # fmt: skip
     if args.command == "curated":
         return [EpisodeSpec("curated", args.scenario, k, run=k, **base) for k in range(args.runs)]
     if args.start_index < 0:
@@ -272,6 +282,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "context",
         "weather",
         "autopilot",
+        "ekf_error",
         "speed",
         "workers",
         "city_seed",

@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from landfall_eval.grading import kinematic_lower_bound_s, surface_class
+from landfall_eval.landing import landing_distance_m
 
 __all__ = [
     "EpisodeSpec",
@@ -80,6 +81,7 @@ class EpisodeSpec:
     city_seed: int | None = None
     criticality: str = "high"
     reason: str = "GPS spoofing detected"
+    ekf_error: str = "off"  # the emulation's estimator errors (simbridge --ekf-error)
 
     @property
     def id(self) -> str:
@@ -89,7 +91,8 @@ class EpisodeSpec:
             if self.kind == "city"
             else f"{self.scenario}-r{self.run}"
         )
-        return f"{where}-{self.reasoner}-{self.context}-{self.weather}-{self.autopilot}"
+        ekf = f"-ekf-{self.ekf_error}" if self.ekf_error != "off" else ""
+        return f"{where}-{self.reasoner}-{self.context}-{self.weather}-{self.autopilot}{ekf}"
 
 
 @dataclass(frozen=True, slots=True)
@@ -231,6 +234,8 @@ def simbridge_command(
         cmd += ["--sitl", str(sitl)]
     if spec.city_seed is not None:
         cmd += ["--city-seed", str(spec.city_seed)]
+    if spec.ekf_error != "off":
+        cmd += ["--ekf-error", spec.ekf_error]
     if spec.launch is not None:
         cmd.append("--launch=" + ",".join(f"{v:.2f}" for v in spec.launch))  # "=": it may start with "-"
     return cmd
@@ -239,7 +244,8 @@ def simbridge_command(
 class LogWatch:
     """What an episode keeps of simbridge's episode log as it is written: the state lines, the ``start``
     line (the world flown), ``ready``, the first switch to a control mode after ``ready`` (the
-    companion taking over) and the touchdown."""
+    companion taking over), the touchdown, and the true pose of every sensor frame served (``frames``,
+    by the autopilot's ``time_boot_ms`` at capture)."""
 
     def __init__(self) -> None:
         self.states: list[dict[str, Any]] = []
@@ -248,6 +254,7 @@ class LogWatch:
         self.takeover: dict[str, Any] | None = None
         self.touchdown: dict[str, Any] | None = None
         self.last_vehicle: dict[str, Any] | None = None  # the latest state line, read to the very end
+        self.frames: dict[int, dict[str, Any]] = {}
 
     def take(self, rows: list[dict[str, Any]], *, final: bool = False) -> None:
         """Sort ``rows`` in; ``final``: read after the processes were stopped, so only the last
@@ -260,6 +267,8 @@ class LogWatch:
                     self.states.append(row)
             elif kind == "start" and self.header is None:
                 self.header = row
+            elif kind == "frame" and isinstance(row.get("time_boot_ms"), int):
+                self.frames[row["time_boot_ms"]] = row
             elif final:
                 continue
             elif kind == "ready" and self.ready is None:
@@ -339,6 +348,7 @@ def run_episode(
         "context": spec.context,
         "weather": spec.weather,
         "autopilot": spec.autopilot,
+        "ekf_error": spec.ekf_error,
         "criticality": spec.criticality,
         "launch_height_m": spec.launch[2] if spec.launch is not None else None,
     }
@@ -421,6 +431,7 @@ def run_episode(
     events = _record_events(record_dir)
     entry.update(_grade(log.states, takeover, log.touchdown, events))
     entry["touchdown_to_site_m"] = touchdown_to_site_m(log.touchdown, log.header, events)
+    entry.update(_landing_distance(log, events, spec))
     entry["outcome"] = outcome if log.touchdown is None or outcome != "timeout" else "landed"
     entry["error"] = error if log.touchdown is None else None
     entry["last_state"] = _last_state(events, log.last_vehicle)
@@ -449,6 +460,21 @@ def touchdown_to_site_m(
         return None
     td = touchdown["pos_ned_m"]
     return round(math.hypot(td[0] - home[0] - site[0], td[1] - home[1] - site[1]), 2)
+
+
+def _landing_distance(log: LogWatch, events: list[dict[str, Any]], spec: EpisodeSpec) -> dict[str, Any]:
+    """``landing_distance_m`` and ``landing_target_ned_m`` of an entry (:mod:`landfall_eval.landing`):
+    both None when the episode does not say (no touchdown, nothing confirmed) or the world built to
+    cast the pixel is not the one flown (then ``landing_error`` says so; else it is None)."""
+    launch = tuple(round(v, 2) for v in spec.launch) if spec.launch is not None else None
+    out: dict[str, Any] = {"landing_distance_m": None, "landing_target_ned_m": None, "landing_error": None}
+    try:
+        got = landing_distance_m(log.touchdown, log.header, log.frames, events, launch=launch)
+    except ValueError as exc:
+        return {**out, "landing_error": str(exc)}
+    if got is not None:
+        out["landing_distance_m"], out["landing_target_ned_m"] = got
+    return out
 
 
 class _EpisodeError(Exception):

@@ -90,6 +90,11 @@ def _median(values: Iterable[float | None]) -> float | None:
     return round(statistics.median(got), 3) if got else None
 
 
+def _mean(values: Iterable[float | None]) -> float | None:
+    got = [v for v in values if v is not None]
+    return round(statistics.fmean(got), 3) if got else None
+
+
 def summarise(episodes: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     """``summary`` of results.json: safe rate, rounds, times, surfaces, per group and per weather."""
     n = len(episodes)
@@ -125,6 +130,8 @@ def summarise(episodes: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         "median_time_to_touchdown_s": _median(e.get("time_to_touchdown_s") for e in episodes),
         "median_kinematic_ratio": _median(e.get("kinematic_ratio") for e in episodes),
         "median_touchdown_to_site_m": _median(e.get("touchdown_to_site_m") for e in episodes),
+        "median_landing_distance_m": _median(e.get("landing_distance_m") for e in episodes),
+        "mean_landing_distance_m": _mean(e.get("landing_distance_m") for e in episodes),
         "companion_peak_rss_mb": round(max(rss), 1) if rss else None,
         "latency_s": {
             stage: {

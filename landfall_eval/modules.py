@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 
 from companion.config import load_config
-from companion.guidance.frames import PinholeCamera, quat_to_matrix
+from companion.guidance.frames import PinholeCamera
 from companion.guidance.ipm import IpmError, LidarPixelIndex, pixel_to_ned
 from companion.perception.crops import pad_of, rank_crops
 from companion.perception.depth import LidarDepth
@@ -54,6 +54,7 @@ from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequ
 from companion.reasoning.cascade import Cascade
 from companion.reasoning.tiers import build_cascade
 from companion.recovery import RecoveryParams, site_closeup
+from landfall_eval.landing import pixel_truth_ned
 from landfall_eval.study import STUDY_JACCARD, STUDY_LANDING_DISTANCE_M
 from landfall_eval.surfaces import (
     LaunchFrame,
@@ -127,17 +128,8 @@ def roofs_of(scenario: str) -> Roofs:
 
 def truth_point(lf: LaunchFrame, u: float, v: float) -> np.ndarray | None:
     """World NED point (3,) that pixel (u, v) of the launch frame truly shows, from the rendered depth
-    image (z-depth along the optical axis, which is body +z); ``None`` for sky or outside the image."""
-    col, row = int(u), int(v)
-    h, w = lf.depth_m.shape
-    if not (0 <= col < w and 0 <= row < h):
-        return None
-    z = float(lf.depth_m[row, col])
-    if not math.isfinite(z):
-        return None
-    ray = lf.camera.pixel_ray_frd(u, v)
-    point: np.ndarray = np.asarray(lf.pos_ned_m) + quat_to_matrix(lf.quat_wxyz) @ (ray * (z / ray[2]))
-    return point
+    image (:func:`landfall_eval.landing.pixel_truth_ned`); ``None`` for sky or outside the image."""
+    return pixel_truth_ned(lf.depth_m, lf.camera, lf.pos_ned_m, lf.quat_wxyz, u, v)
 
 
 def in_safe_zone(zones: Sequence[SafeZone], north_m: float, east_m: float) -> bool:

@@ -90,6 +90,7 @@ class _Episode:
     rounds: int | None
     time_to_touchdown_s: float | None
     kinematic_ratio: float | None
+    landing_distance_m: float | None  # true touchdown to what the chosen pixel truly shows
     peak_rss_mb: float | None
     calls: tuple[tuple[str, str, float | None], ...]  # (stage, tier, latency_s)
     rationales: tuple[tuple[str, str], ...]  # (stage, text)
@@ -228,6 +229,7 @@ def _episode(number: int, raw: Mapping[str, Any], config: Mapping[str, Any]) -> 
         rounds=None if rounds is None else int(rounds),
         time_to_touchdown_s=_num(raw.get("time_to_touchdown_s")),
         kinematic_ratio=_num(raw.get("kinematic_ratio")),
+        landing_distance_m=_num(raw.get("landing_distance_m")),
         peak_rss_mb=_num(companion.get("peak_rss_mb")),
         calls=tuple(
             (str(c.get("stage", "?")), str(c.get("tier", "?")), _num(c.get("latency_s")))
@@ -363,6 +365,12 @@ def _summary(results: Mapping[str, Any], eps: list[_Episode]) -> str:
         ("mean reasoning rounds per safe landing", _f(rounds_safe), f"{STUDY_ROUNDS_PER_SAFE}"),
         ("median time to touchdown", _f(_median(e.time_to_touchdown_s for e in eps), 1, " s"), _NA),
         ("median time / kinematic lower bound", _f(_median(e.kinematic_ratio for e in eps), 2, " x"), _NA),
+        (
+            "landing distance to the chosen pixel's true point (median, mean)",
+            f"{_f(_median(e.landing_distance_m for e in eps), 2, ' m')}, "
+            f"{_f(_mean(e.landing_distance_m for e in eps), 2, ' m')}",
+            " / ".join(f"{sc} {m:.2f} m" for sc, m in sorted(STUDY_LANDING_DISTANCE_M.items())),
+        ),
         (
             "companion peak RSS (max, median)",
             f"{max(rss):.0f} MB, {np.median(rss):.0f} MB" if rss else _NA,
@@ -532,12 +540,13 @@ def _episode_table(eps: list[_Episode]) -> str:
     rows = [
         (e.number, e.id, e.scenario, *e.group, e.weather, e.outcome, e.surface,
          "yes" if e.verdict == "safe" else "no", _f(None if e.rounds is None else float(e.rounds), 0),
-         _f(e.time_to_touchdown_s, 1, " s"), "; ".join(e.reasons) + (f" (error: {e.error})" * bool(e.error))
+         _f(e.time_to_touchdown_s, 1, " s"), _f(e.landing_distance_m, 2, " m"),
+         "; ".join(e.reasons) + (f" (error: {e.error})" * bool(e.error))
          + (f" (last: {e.last_state})" * bool(e.verdict == "none" and e.last_state)))
         for e in eps
     ]  # fmt: skip
     head = ("#", "id", "scenario", "reasoner", "context", "weather", "outcome", "surface", "safe", "rounds",
-            "time", "reasons")  # fmt: skip
+            "time", "landing distance", "reasons")  # fmt: skip
     return (
         f"<h2>Episodes</h2><details open><summary>{len(eps)} episodes (# is the number on the maps)</summary>"
         f"{_table(head, rows)}</details>"

@@ -6,7 +6,9 @@ name the event: ``armed``, ``disarmed``, ``mode`` (``mode``: the new mode's name
 ``autopilot``, ``start``, ``time_boot_ms``: the vehicle holds at its launch pose, or on the ground can
 arm; harnesses raise their alarm after it: real firmware takes tens of simulated seconds to get there;
 ``time_boot_ms`` is the autopilot's boot clock at that ``t_s``, so a time the companion stamped with the
-autopilot's clock can be placed on the log's), ``start`` and ``stop``.
+autopilot's clock can be placed on the log's), ``frame`` (``time_boot_ms``, ``pos_ned_m``, ``quat_wxyz``,
+``parts``: a sensor frame served, with the true pose it was rendered from, for evaluation only),
+``start`` and ``stop``.
 
 The first line, ``start``, says what was flown: ``scenario``, ``autopilot``, ``seed`` (the episode's),
 ``city_seed`` (the procedural city's; null for other scenarios), ``world_digest`` (16 hex digits

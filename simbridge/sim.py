@@ -271,6 +271,19 @@ class SimBridge:
         s = self.vehicle.state
         rng = self._sensor_rng
         weather = self.config.weather
+        stamp = self.time_boot_ms(s.t_s)  # once: real firmware's clock offset may move meanwhile
+        # the true pose each frame is rendered from, for evaluation only (the frame carries it too;
+        # the companion replaces it with the autopilot's estimate): harnesses place a chosen pixel with it
+        self.episode.event(
+            s.t_s,
+            "frame",
+            {
+                "time_boot_ms": stamp,
+                "pos_ned_m": [round(v, 4) for v in s.pos_ned_m],
+                "quat_wxyz": [round(v, 6) for v in s.quat],
+                "parts": sorted(want),
+            },
+        )
 
         def render() -> Any:
             frame = (
@@ -282,7 +295,7 @@ class SimBridge:
             cam = world.camera
             cx, cy = cam.principal_px
             return SensorFrame(
-                t_s=s.t_s, time_boot_ms=self.time_boot_ms(s.t_s), pos_ned_m=s.pos_ned_m, quat_wxyz=s.quat,
+                t_s=s.t_s, time_boot_ms=stamp, pos_ned_m=s.pos_ned_m, quat_wxyz=s.quat,
                 rangefinder_m=world.rangefinder_m(s.pos_ned_m, s.quat),
                 image_rgb=frame.rgb if frame is not None and "image" in want else None,
                 depth_m=frame.depth_m if frame is not None and "depth" in want else None,

@@ -12,6 +12,7 @@ from typing import Any
 
 import pytest
 
+from landfall_eval.cli import build_parser, episode_specs
 from landfall_eval.episode import (
     EpisodeSpec,
     EpisodeTimes,
@@ -20,6 +21,7 @@ from landfall_eval.episode import (
     _record_events,
     alarm_sim_time_s,
     run_episode,
+    simbridge_command,
     touchdown_to_site_m,
 )
 from landfall_eval.grading import (
@@ -29,6 +31,7 @@ from landfall_eval.grading import (
     surface_class,
     trapezoid_time_s,
 )
+from landfall_eval.landing import chosen_pixel, landing_distance_m
 from landfall_eval.launches import halton_launches
 from simbridge.scenarios import load_scenario
 
@@ -37,7 +40,7 @@ EPISODE_KEYS = {
     "launch_ned_m", "touchdown_ned_m", "surface", "safe", "reasons", "outcome", "error", "rounds",
     "time_to_touchdown_s", "kinematic_lower_bound_s", "kinematic_ratio", "calls", "rationales",
     "trajectory_ne_m", "companion", "wall_s", "city_seed", "world_digest", "last_state",
-    "touchdown_to_site_m",
+    "touchdown_to_site_m", "landing_distance_m", "landing_target_ned_m", "landing_error",
 }  # fmt: skip
 LAST_STATE_KEYS = {
     "recovery_state", "round", "outcome_state", "outcome_reason", "vehicle_t_s", "vehicle_mode",
@@ -166,6 +169,96 @@ def test_touchdown_to_site_uses_the_last_confirmed_site_in_the_autopilot_frame()
     assert touchdown_to_site_m(touchdown, None, events) is None
 
 
+def _rank(rnd: int, chosen: int | None, stamp: int | None, *centres: tuple[float, float]) -> dict[str, Any]:
+    cands = [{"index": k, "centre_px": list(c)} for k, c in enumerate(centres)]
+    return {"kind": "rank", "round": rnd, "chosen": chosen, "candidates": cands, "frame_time_boot_ms": stamp}
+
+
+def test_landing_distance_casts_the_chosen_pixel_from_the_true_pose() -> None:
+    """A nadir frame 60 m over scenario2's clear roof (top 30 m up, centred N 0, E -39), level and
+    facing north: with fx = fy = 480 px (960 px, 90 deg), pixel (cx - 80, cy + 48) looks 1/6 of the way
+    west and 1/10 south, so it truly shows the roof at N -6, E -49. A touchdown at N -3, E -45 is 5 m
+    from it. The companion's own estimate (the confirmed site) plays no part."""
+    cx, cy = 480.0, 270.0
+    events = [
+        _rank(1, 0, 4_000, (10.0, 10.0)),  # an earlier round's site, rejected
+        {"kind": "confirm", "round": 1, "accept": False, "site_ned_m": [50.0, 50.0, -20.0]},
+        _rank(2, 1, 12_345, (900.0, 500.0), (cx - 80, cy + 48)),
+        {"kind": "confirm", "round": 2, "accept": True, "site_ned_m": [99.0, 99.0, -30.0]},
+        {"kind": "confirm", "round": 2, "accept": True, "site_ned_m": [99.0, 99.0, -30.0]},  # a descent step
+    ]
+    pick = chosen_pixel(events)
+    assert pick is not None
+    assert (pick.u, pick.v, pick.time_boot_ms, pick.round) == (cx - 80, cy + 48, 12_345, 2)
+    log = LogWatch()
+    log.take([
+        {"t_s": 0.0, "event": "start", "scenario": "scenario2", "seed": 3, "city_seed": None,
+         "world_digest": None},
+        {"t_s": 4.0, "event": "frame", "time_boot_ms": 4_000, "pos_ned_m": [0.0, 0.0, -115.0],
+         "quat_wxyz": [1.0, 0.0, 0.0, 0.0]},
+        {"t_s": 12.345, "event": "frame", "time_boot_ms": 12_345, "pos_ned_m": [0.0, -39.0, -90.0],
+         "quat_wxyz": [1.0, 0.0, 0.0, 0.0]},
+    ])  # fmt: skip
+    assert sorted(log.frames) == [4_000, 12_345]
+    touchdown = {"pos_ned_m": [-3.0, -45.0, -30.0]}
+    got = landing_distance_m(touchdown, log.header, log.frames, events)
+    assert got is not None
+    distance, target = got
+    assert target == pytest.approx([-6.0, -49.0, -30.0], abs=0.05)
+    assert distance == pytest.approx(5.0, abs=0.05)
+    # nothing to measure: no touchdown, no confirmed site, no frame time (an older record), no frame
+    assert landing_distance_m(None, log.header, log.frames, events) is None
+    assert landing_distance_m(touchdown, log.header, log.frames, events[:2]) is None
+    older = [{k: v for k, v in e.items() if k != "frame_time_boot_ms"} for e in events]
+    assert landing_distance_m(touchdown, log.header, log.frames, older) is None
+    assert landing_distance_m(touchdown, log.header, {4_000: log.frames[4_000]}, events) is None
+    # a world that is not the one flown is an error, not a figure
+    assert log.header is not None
+    with pytest.raises(ValueError, match="not the flown world"):
+        landing_distance_m(touchdown, {**log.header, "world_digest": "0" * 16}, log.frames, events)
+
+
+def test_chosen_pixel_is_the_confirmed_candidates_in_the_frame_it_was_found_in() -> None:
+    """A site looked at again rounds after it was seen (the budget's closer look) keeps the frame of
+    the round that listed it; the candidate the confirm names decides, not the round's own choice."""
+    a, b, c = (100.0, 100.0), (300.0, 200.0), (500.0, 250.0)
+    events = [
+        _rank(2, 0, 20_000, a, b),
+        {"kind": "confirm", "round": 2, "accept": False, "candidate": _rank(0, 0, 0, a)["candidates"][0]},
+        _rank(4, 0, 40_000, c),  # a later round, its own choice rejected
+        {"kind": "confirm", "round": 4, "accept": False, "candidate": _rank(0, 0, 0, c)["candidates"][0]},
+        {"kind": "confirm", "round": 5, "accept": True, "candidate": _rank(2, 0, 0, a, b)["candidates"][1]},
+    ]
+    pick = chosen_pixel(events)
+    assert pick is not None
+    assert (pick.u, pick.v, pick.time_boot_ms, pick.round) == (*b, 20_000, 2)
+    # a candidate no rank listed: no frame to cast it from
+    stray = {**events[-1], "candidate": {"index": 9, "centre_px": [1.0, 1.0]}}
+    assert chosen_pixel([*events[:-1], stray]) is None
+    # a rank after the confirm's round does not count
+    assert chosen_pixel([*events[:-1], {**events[-1], "round": 1}]) is None
+
+
+def test_curated_with_ekf_error_flies_the_emulation_on_its_estimate(tmp_path: Path) -> None:
+    """``--ekf-error nominal`` reaches simbridge, names its episodes apart (resumption matches by id),
+    and is refused with real firmware, which has its own estimator."""
+    parse = build_parser().parse_args
+    base = ["curated", "--scenario", "scenario2", "--runs", "2", "--out", str(tmp_path)]
+    specs = episode_specs(parse([*base, "--autopilot", "ardupilot", "--ekf-error", "nominal"]))
+    assert [s.id for s in specs] == [
+        "scenario2-r0-onboard-crop-clear-ardupilot-ekf-nominal",
+        "scenario2-r1-onboard-crop-clear-ardupilot-ekf-nominal",
+    ]
+    cmd = simbridge_command(specs[1], udp_port=1, sensors_port=2, episode_log=tmp_path / "e.jsonl", speed=4.0)
+    assert cmd[cmd.index("--ekf-error") + 1] == "nominal"
+    off = episode_specs(parse([*base, "--autopilot", "ardupilot"]))
+    assert off[0].id == "scenario2-r0-onboard-crop-clear-ardupilot"  # the ids runs already hold
+    cmd = simbridge_command(off[0], udp_port=1, sensors_port=2, episode_log=tmp_path / "e.jsonl", speed=4.0)
+    assert "--ekf-error" not in cmd
+    with pytest.raises(ValueError, match="real firmware has its own estimator"):
+        episode_specs(parse([*base, "--autopilot", "ardupilot-sitl", "--ekf-error", "nominal"]))
+
+
 def test_summary_counts_safe_landings_rounds_and_latency() -> None:
     def ep(safe: bool, rounds: int, surface: str, weather: str = "clear") -> dict[str, Any]:
         return {
@@ -257,6 +350,12 @@ def test_curated_run_writes_results_and_report_then_resumes(tmp_path: Path) -> N
         }
         assert e["kinematic_ratio"] >= 1.0  # nothing beats the vehicle's limits
         assert e["time_to_touchdown_s"] > e["kinematic_lower_bound_s"] > 0
+        # the chosen pixel's true point on the roof, and the touchdown near it (0.76 m measured)
+        assert e["landing_error"] is None
+        assert e["landing_distance_m"] < 1.5, e["landing_target_ned_m"]
+        assert math.dist(e["landing_target_ned_m"][:2], e["touchdown_ned_m"][:2]) == pytest.approx(
+            e["landing_distance_m"], abs=0.01
+        )
         assert math.dist(e["trajectory_ne_m"][-1], e["touchdown_ned_m"][:2]) < 1e-6
         assert e["companion"]["peak_rss_mb"] > 20
         assert e["companion"]["cpu_s"] > 0
@@ -265,6 +364,9 @@ def test_curated_run_writes_results_and_report_then_resumes(tmp_path: Path) -> N
     assert s["episodes"] == 2
     assert s["safe_rate"] == 1.0
     assert s["mean_rounds_safe"] == pytest.approx(sum(e["rounds"] for e in episodes) / 2)
+    assert s["mean_landing_distance_m"] == pytest.approx(
+        sum(e["landing_distance_m"] for e in episodes) / 2, abs=1e-3
+    )
     html = (out / "report.html").read_text()
     assert "scenario1" in html
     assert "figures/" in html
@@ -384,3 +486,6 @@ def test_curated_episode_flies_real_arducopter(arducopter: Path, tmp_path: Path)
     assert e["kinematic_ratio"] >= 1.0
     assert math.dist(e["launch_ned_m"], ready["pos_ned_m"]) < 1.0  # control taken at the launch pose
     assert e["touchdown_to_site_m"] < 3.0
+    # from the truth: the touchdown against what the chosen pixel showed from the frame's true pose
+    assert e["landing_error"] is None
+    assert e["landing_distance_m"] < 3.0, e["landing_target_ned_m"]

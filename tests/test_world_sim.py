@@ -41,6 +41,12 @@ async def test_sensor_frames_served_from_scenario1(
     assert frame.rangefinder_m == pytest.approx(110.0, abs=1.0)
     assert float(np.nanmedian(frame.depth_m[260:280, 470:490])) == pytest.approx(110.0, abs=2.0)
     assert len(np.unique(frame.image_rgb.reshape(-1, 3), axis=0)) > 1000  # a textured city, not a flat fill
+    # the episode log keeps the true pose each frame was rendered from, by the autopilot's clock
+    (logged,) = [e for e in sim.events("frame") if e["time_boot_ms"] == frame.time_boot_ms]
+    assert logged["t_s"] == pytest.approx(frame.t_s, abs=1e-4)
+    assert logged["pos_ned_m"] == pytest.approx(list(frame.pos_ned_m), abs=1e-4)
+    assert logged["quat_wxyz"] == pytest.approx(list(frame.quat_wxyz), abs=1e-6)
+    assert logged["parts"] == ["depth", "image", "lidar"]
 
 
 def _land_at(c: MavClient, north: float, east: float) -> None:
