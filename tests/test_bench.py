@@ -353,8 +353,10 @@ def test_curated_run_writes_results_and_report_then_resumes(tmp_path: Path) -> N
         # the chosen pixel's true point on the roof, and the touchdown near it (0.76 m measured)
         assert e["landing_error"] is None
         assert e["landing_distance_m"] < 1.5, e["landing_target_ned_m"]
+        # the distance, the target and the touchdown are each rounded to the centimetre: up to 0.005 m
+        # on the distance and 0.007 m on each point's horizontal position (the CI run met 0.011)
         assert math.dist(e["landing_target_ned_m"][:2], e["touchdown_ned_m"][:2]) == pytest.approx(
-            e["landing_distance_m"], abs=0.01
+            e["landing_distance_m"], abs=0.02
         )
         assert math.dist(e["trajectory_ne_m"][-1], e["touchdown_ned_m"][:2]) < 1e-6
         assert e["companion"]["peak_rss_mb"] > 20
