@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 from pymavlink.dialects.v20 import common as mavlink2
 
-from simbridge.autopilot.flavours import Nav
+from simbridge.autopilot.flavours import PILOT_NAVS, Nav
 from simbridge.control import THRUST_COEFF_N
 from simbridge.geo import GeoOrigin
 from simbridge.physics import MOTOR_COUNT
@@ -181,7 +181,7 @@ class Telemetry:
     def heartbeat(self) -> Any:
         ap = self.ap
         base = MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | MAV_MODE_FLAG_STABILIZE_ENABLED
-        if ap.mode.nav is not Nav.HOLD:
+        if ap.mode.nav is not Nav.HOLD and ap.mode.nav not in PILOT_NAVS:
             base |= MAV_MODE_FLAG_GUIDED_ENABLED | MAV_MODE_FLAG_AUTO_ENABLED
         if ap.armed:
             base |= MAV_MODE_FLAG_SAFETY_ARMED

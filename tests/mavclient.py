@@ -14,7 +14,8 @@ from pymavlink import mavutil
 MAV_RESULT_ACCEPTED = 0
 PX4_MAIN = {"POSCTL": (3, 0), "AUTO.TAKEOFF": (4, 2), "AUTO.LOITER": (4, 3), "AUTO.RTL": (4, 5),
             "AUTO.LAND": (4, 6), "OFFBOARD": (6, 0)}  # fmt: skip
-AP_MODES = {"GUIDED": 4, "LOITER": 5, "RTL": 6, "LAND": 9, "BRAKE": 17}
+AP_MODES = {"STABILIZE": 0, "ACRO": 1, "ALT_HOLD": 2, "GUIDED": 4, "LOITER": 5, "RTL": 6, "LAND": 9,
+            "POSHOLD": 16, "BRAKE": 17}  # fmt: skip
 
 
 class MavClient:

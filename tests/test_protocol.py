@@ -68,7 +68,8 @@ def test_ardupilot_mode_change_results(
     sim = start_sim("--autopilot", "ardupilot", "--speed", "2")
     c = client_for(sim.port)
     c.wait_heartbeat()
-    assert c.command(MAV.MAV_CMD_DO_SET_MODE, 1, 0) == DENIED  # STABILIZE needs a pilot
+    assert c.command(MAV.MAV_CMD_DO_SET_MODE, 1, 3) == DENIED  # AUTO: no mission
+    assert c.command(MAV.MAV_CMD_DO_SET_MODE, 1, 13) == MAV.MAV_RESULT_FAILED  # SPORT: not in 4.7
     assert c.command(MAV.MAV_CMD_DO_SET_MODE, 1, 99) == UNSUPPORTED
     assert c.set_mode_ap("BRAKE") == MAV_RESULT_ACCEPTED
     assert c.heartbeat().custom_mode == 17

@@ -18,6 +18,7 @@ from simbridge.autopilot.flavours import (
     MAV_RESULT_DENIED,
     MAV_RESULT_FAILED,
     MAV_RESULT_TEMPORARILY_REJECTED,
+    PILOT_NAVS,
     Flavour,
     ModeSpec,
     Nav,
@@ -87,7 +88,6 @@ class Autopilot:
         self._emit_text = emit_text
         self.params: dict[str, float] = {p.name: float(p.default) for p in flavour.params}
         self.tun: Tunables = flavour.tunables(self.params)
-        vehicle.set_limits(self.tun.limits)
         self.armed = False
         self.mode: ModeSpec = flavour.mode(flavour.ground_start_mode)
         self.failsafe = False
@@ -104,6 +104,7 @@ class Autopilot:
         self._external_is_velocity = False
         self._external_at_s = -math.inf
         self._last_reject = ("", -math.inf)
+        self._apply_limits()
 
     # ------------------------------------------------------------------ spawn
     def spawn_in_air(self, state: VehicleState) -> None:
@@ -128,8 +129,20 @@ class Autopilot:
             self._emit_text(SEV_WARNING, f"Param {name} rejected: {exc}")
             return False
         self.tun = tun
-        self.vehicle.set_limits(tun.limits)
+        self._apply_limits()
         return True
+
+    def _apply_limits(self) -> None:
+        """The controller's envelope: the navigation limits, or in the pilot's altitude-holding
+        modes the pilot's climb and descent speeds (ArduCopter's PILOT_SPEED_UP / _DN)."""
+        limits = self.tun.limits
+        if self.mode.nav in PILOT_NAVS:
+            limits = dataclasses.replace(
+                limits,
+                max_speed_up_m_s=self.tun.pilot_speed_up_m_s,
+                max_speed_down_m_s=self.tun.pilot_speed_down_m_s,
+            )
+        self.vehicle.set_limits(limits)
 
     # ------------------------------------------------------------------ commands
     def arm(self, arm: bool, force: bool = False) -> CommandOutcome:
@@ -287,12 +300,33 @@ class Autopilot:
             return self._fly_land(s, self._hold)
         if nav is Nav.RTL:
             return self._fly_rtl(s)
+        if nav in PILOT_NAVS:
+            return self._fly_pilot_at_rest(s)
         return self._hold
+
+    def _fly_pilot_at_rest(self, s: VehicleState) -> Setpoint | None:
+        """The pilot's modes with the sticks centred and the throttle at its minimum: STABILIZE and
+        ACRO run the motors at their minimum and fall; ALT_HOLD and POSHOLD descend at the pilot's
+        full down speed, ALT_HOLD level (drifting with what speed it had), POSHOLD holding position."""
+        nav = self.mode.nav
+        if nav is Nav.PILOT_THRUST:
+            return None  # motors at idle thrust
+        yaw = self._hold.yaw_rad if self._hold is not None else None
+        down = self.tun.pilot_speed_down_m_s
+        if nav is Nav.PILOT_POS:
+            return Setpoint(pos_ne_m=self._hold_ne(s), vel_ned_m_s=(0.0, 0.0, down), yaw_rad=yaw)
+        vn, ve, _ = s.vel_ned_m_s
+        return Setpoint(vel_ned_m_s=(vn, ve, down), yaw_rad=yaw)
 
     def _on_ground(self, s: VehicleState) -> Setpoint | None:
         t = self.tun
         since = self._landed_since if self._landed_since is not None else s.t_s
         wants_up = self._wants_climb(s)
+        if self.mode.nav in PILOT_NAVS:
+            # the throttle at its minimum keeps it down, motors at idle; real ArduCopter SITL
+            # (RC3 = 1000) armed in STABILIZE or ALT_HOLD on the ground, or landed there in ALT_HOLD,
+            # never auto-disarmed (160 s simulated; tests/test_firmware_parity.py)
+            return None
         if not wants_up:
             limit = t.disarm_after_land_s if self._has_flown else t.disarm_preflight_s
             if s.t_s - since >= limit:
@@ -429,6 +463,7 @@ class Autopilot:
     def _set_mode(self, spec: ModeSpec, s: VehicleState, announce: bool = True) -> None:
         changed = spec != self.mode
         self.mode = spec
+        self._apply_limits()
         self._hold = Setpoint.hold(self._stopping_point(s), s.euler_rad[2])
         if spec.nav is not Nav.TAKEOFF:
             self._takeoff_target_d = None

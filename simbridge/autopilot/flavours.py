@@ -31,6 +31,14 @@ class Nav(enum.Enum):
     LAND = "land"
     RTL = "rtl"
     EXTERNAL = "external"  # follow setpoints from a companion/GCS (OFFBOARD, GUIDED)
+    # flown by a pilot's sticks; simulated with no transmitter they rest centred, the throttle at its
+    # minimum (ArduCopter SITL's RC3 = 1000):
+    PILOT_THRUST = "pilot_thrust"  # STABILIZE, ACRO: attitude level, the motors at minimum thrust
+    PILOT_ALT = "pilot_alt"  # ALT_HOLD: attitude level, descending at the pilot's full down speed
+    PILOT_POS = "pilot_pos"  # POSHOLD: the same descent, holding its position
+
+
+PILOT_NAVS = frozenset({Nav.PILOT_THRUST, Nav.PILOT_ALT, Nav.PILOT_POS})
 
 
 @dataclass(frozen=True, slots=True)
@@ -64,6 +72,9 @@ class Tunables:
     velocity_target_timeout_s: float | None
     fence_radius_m: float
     fence_alt_m: float
+    # climb and descent rates at full stick in the pilot's altitude-holding modes (ArduPilot)
+    pilot_speed_up_m_s: float = 0.0
+    pilot_speed_down_m_s: float = 0.0
 
 
 class Flavour:
@@ -197,6 +208,10 @@ class ArduPilotFlavour(Flavour):
         ModeSpec("RTL", Nav.RTL, 6, armable=False),
         ModeSpec("LAND", Nav.LAND, 9, armable=False),
         ModeSpec("BRAKE", Nav.HOLD, 17, armable=False),
+        ModeSpec("STABILIZE", Nav.PILOT_THRUST, 0),
+        ModeSpec("ACRO", Nav.PILOT_THRUST, 1),
+        ModeSpec("ALT_HOLD", Nav.PILOT_ALT, 2),
+        ModeSpec("POSHOLD", Nav.PILOT_POS, 16),
     )
     params = (
         Param("WPNAV_SPEED", 500.0, MAV_PARAM_TYPE_REAL32),
@@ -211,6 +226,8 @@ class ArduPilotFlavour(Flavour):
         Param("GUID_TIMEOUT", 3.0, MAV_PARAM_TYPE_REAL32),
         Param("FENCE_RADIUS", 2000.0, MAV_PARAM_TYPE_REAL32),
         Param("FENCE_ALT_MAX", 500.0, MAV_PARAM_TYPE_REAL32),
+        Param("PILOT_SPEED_UP", 250.0, MAV_PARAM_TYPE_INT32),
+        Param("PILOT_SPEED_DN", 0.0, MAV_PARAM_TYPE_INT32),  # 0: PILOT_SPEED_UP
     )
     air_start_mode = "LOITER"
     ground_start_mode = "LOITER"
@@ -219,19 +236,17 @@ class ArduPilotFlavour(Flavour):
     param_bytewise = False
     streams_unasked = False
 
-    _NEEDS_RC: ClassVar[dict[int, str]] = {
-        0: "STABILIZE",
-        1: "ACRO",
-        2: "ALT_HOLD",
-        3: "AUTO",
-        13: "SPORT",
-        16: "POSHOLD",
-    }
+    # ArduCopter 4.7 as built for SITL has no SPORT: "No such mode 13", FAILED
+    # (tests/test_firmware_parity.py); AUTO without a mission is refused
+    _NOT_BUILT: ClassVar[frozenset[int]] = frozenset({13})
+    _NO_MISSION: ClassVar[dict[int, str]] = {3: "AUTO"}
 
     def decode_set_mode(self, base_mode: float, main: float, sub: float) -> ModeSpec | int:
         mode_number = int(main)
-        if mode_number in self._NEEDS_RC:
-            return MAV_RESULT_DENIED  # pilot-input modes (and AUTO without a mission)
+        if mode_number in self._NOT_BUILT:
+            return MAV_RESULT_FAILED
+        if mode_number in self._NO_MISSION:
+            return MAV_RESULT_DENIED
         spec = self.mode_for_custom(mode_number)
         return spec if spec is not None else MAV_RESULT_UNSUPPORTED
 
@@ -255,6 +270,9 @@ class ArduPilotFlavour(Flavour):
             velocity_target_timeout_s=p["GUID_TIMEOUT"],
             fence_radius_m=p["FENCE_RADIUS"],
             fence_alt_m=p["FENCE_ALT_MAX"],
+            pilot_speed_up_m_s=abs(p["PILOT_SPEED_UP"]) / 100,
+            # ArduCopter: PILOT_SPEED_DN 0 means "as PILOT_SPEED_UP"
+            pilot_speed_down_m_s=abs(p["PILOT_SPEED_DN"] or p["PILOT_SPEED_UP"]) / 100,
         )
 
 
