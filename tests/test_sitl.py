@@ -18,6 +18,7 @@ import sys
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -345,14 +346,10 @@ def test_a_five_second_link_loss_on_real_arducopter_holds_then_lands_on_the_same
     descent step. The firmware's GUIDED holds the last target (no failsafe of its own: the companion is
     no ground station); the companion notices the silence, keeps its target, and once the link is back
     confirms the same site again and lands on it through LAND."""
-    from tests.relay import LossyUdpRelay
+    from tests.test_companion_e2e import _clean_relay, _via
 
-    relays: list[LossyUdpRelay] = []
-
-    def via(port: int) -> int:
-        relays.append(LossyUdpRelay(port, drop=0.0, duplicate=0.0, reorder=0.0, corrupt=0.0))
-        return int(relays[-1].port)
-
+    relays: list[Any] = []
+    via = _via(relays, _clean_relay)
     try:
         rig = start_rig(
             ["--autopilot", "ardupilot-sitl", "--sitl", str(arducopter), "--scenario", "scenario2",
