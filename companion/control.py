@@ -92,6 +92,8 @@ class VehicleController:
         self._streamer: asyncio.Task[None] | None = None
         self._engaged_mode: int | None = None
         self._mode_set_at = 0.0
+        self._own_mode_heard = False  # a heartbeat in our mode since we set it
+        self._foreign_heartbeat: int | None = None  # ``tm.heartbeats`` when someone else's mode was first seen
         self.takeover: OperatorTakeover | None = None
         self.failsafe: AutopilotFailsafe | None = None
         self.longest_stream_gap_s = 0.0  # wall seconds between two setpoints: the event loop's health
@@ -139,6 +141,8 @@ class VehicleController:
             if result == MAV_RESULT_ACCEPTED:
                 self._engaged_mode = self.flavour.modes[mode]
                 self._mode_set_at = time.monotonic()
+                self._own_mode_heard = False
+                self._foreign_heartbeat = None
                 return
             if result != MAV_RESULT_TEMPORARILY_REJECTED:
                 break
@@ -186,8 +190,20 @@ class VehicleController:
         if self._engaged_mode is None or self.takeover is not None or self.failsafe is not None:
             return
         heard = self.tm.state.stamps.get("heartbeat", 0.0)
-        if heard <= self._mode_set_at or self.tm.state.custom_mode == self._engaged_mode:
-            return  # the heartbeat predates our own mode change, or the mode is ours
+        if heard <= self._mode_set_at:
+            return  # the heartbeat predates our own mode change
+        if self.tm.state.custom_mode == self._engaged_mode:
+            self._own_mode_heard = True
+            self._foreign_heartbeat = None
+            return
+        # Until a heartbeat has shown our mode, one in someone else's may be an old one the link
+        # delivered late (a reordered datagram overtaken by our mode change's COMMAND_ACK): then a
+        # takeover is two heartbeats in a row. Once ours has been heard, one is enough.
+        if not self._own_mode_heard:
+            if self._foreign_heartbeat is None:
+                self._foreign_heartbeat = self.tm.heartbeats
+            if self.tm.heartbeats == self._foreign_heartbeat:
+                return
         if self.tm.state.system_status == MAV_STATE_CRITICAL:
             self.failsafe = AutopilotFailsafe(self.tm.state.custom_mode)
             self._log.warning("%s", self.failsafe)

@@ -170,6 +170,8 @@ class TelemetryCache:
         self._update = asyncio.Event()
         self.texts: list[tuple[float, int, str]] = []  # (monotonic, severity, text): the last 50
         self.texts_received = 0  # every STATUSTEXT from the autopilot so far (``texts`` keeps the last 50)
+        self.heartbeats = 0  # distinct autopilot heartbeats so far (a duplicated datagram counts once)
+        self._heartbeat_seq = -1
 
     def _stamp(self, part: str) -> None:
         self.state.stamps[part] = time.monotonic()
@@ -196,6 +198,10 @@ class TelemetryCache:
         s = self.state
         kind = msg.get_type()
         if kind == "HEARTBEAT":
+            if msg.get_seq() == self._heartbeat_seq:
+                return  # the same heartbeat twice: a link that duplicates datagrams
+            self._heartbeat_seq = msg.get_seq()
+            self.heartbeats += 1
             if s.system_id == 0:
                 s.system_id = msg.get_srcSystem()
             s.autopilot, s.custom_mode, s.base_mode = (

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import math
+import time
 
 import pytest
-from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.control import OperatorTakeover, TouchedDown
 from companion.daemon import Companion
+from tests.autopilot_frames import ADDR, AUTOPILOT, feed, frames
 from companion.guidance.descent import height_above_site
 
 LEVEL = (1.0, 0.0, 0.0, 0.0)
@@ -56,19 +57,15 @@ def test_without_a_lidar_surface_the_ipm_site_and_the_rangefinder_are_used() -> 
     )
 
 
-AUTOPILOT = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
 OFFBOARD = 6 << 16
 LOITER = 4 << 16 | 3 << 24
 
-
-def _feed(c: Companion, *msgs: object) -> None:
-    c.link.datagram_received(b"".join(m.pack(AUTOPILOT) for m in msgs), ("127.0.0.1", 14580))  # type: ignore[attr-defined]
 
 
 def _engaged_px4() -> Companion:
     """A companion whose controller holds OFFBOARD (acknowledged) over an airborne PX4."""
     c = Companion(mavlink_url="udp:14550", sensors=None, watch_battery_pct=None)
-    _feed(
+    feed(
         c, AUTOPILOT.heartbeat_encode(2, 12, 128 | 29, OFFBOARD, 4), AUTOPILOT.extended_sys_state_encode(0, 2)
     )
     c.ctl._engaged_mode = OFFBOARD  # what set_mode records once the autopilot acknowledges
@@ -80,20 +77,67 @@ def _engaged_px4() -> Companion:
 def test_a_disarm_with_a_mode_change_is_a_touchdown_not_a_takeover() -> None:
     """PX4 auto-disarms on landing and leaves OFFBOARD in the same heartbeat: the vehicle is down."""
     c = _engaged_px4()
-    _feed(c, AUTOPILOT.heartbeat_encode(2, 12, 29, LOITER, 3))
+    feed(c, AUTOPILOT.heartbeat_encode(2, 12, 29, LOITER, 3))
     with pytest.raises(TouchedDown, match="disarmed"):
         c.ctl.check_interruption()
 
 
 def test_landed_state_on_the_ground_is_a_touchdown() -> None:
     c = _engaged_px4()
-    _feed(c, AUTOPILOT.extended_sys_state_encode(0, 1))
+    feed(c, AUTOPILOT.extended_sys_state_encode(0, 1))
     with pytest.raises(TouchedDown, match="landed"):
         c.ctl.check_interruption()
 
 
 def test_an_armed_vehicle_in_someone_elses_mode_is_still_a_takeover() -> None:
     c = _engaged_px4()
-    _feed(c, AUTOPILOT.heartbeat_encode(2, 12, 128 | 29, LOITER, 4))
+    c.ctl.set_target(0.0, 0.0, -50.0, 0.0)
+    feed(c, AUTOPILOT.heartbeat_encode(2, 12, 128 | 29, LOITER, 4))
     with pytest.raises(OperatorTakeover):
         c.ctl.check_interruption()
+    assert c.ctl._target is None  # the companion stops commanding at once
+
+
+def _just_engaged_px4() -> Companion:
+    """OFFBOARD acknowledged a moment ago; no heartbeat since has shown it."""
+    c = _engaged_px4()
+    c.ctl._mode_set_at = time.monotonic()
+    c.ctl._own_mode_heard = False
+    c.ctl.set_target(0.0, 0.0, -50.0, 0.0)
+    return c
+
+
+def test_a_late_heartbeat_from_before_our_mode_change_is_not_a_takeover() -> None:
+    """What a CI run over a lossy relay caught: the heartbeat sent just before the autopilot took
+    OFFBOARD was held back and arrived after the COMMAND_ACK. Read as a takeover, the companion stopped
+    commanding and the vehicle hovered in its offboard-loss hold until the test timed out."""
+    c = _just_engaged_px4()
+    feed(c, AUTOPILOT.heartbeat_encode(2, 12, 128 | 29, LOITER, 4))  # late: the mode before ours
+    c.ctl.check_interruption()
+    feed(c, AUTOPILOT.heartbeat_encode(2, 12, 128 | 29, OFFBOARD, 4))  # the next one: ours
+    c.ctl.check_interruption()
+    assert c.ctl.takeover is None
+    assert c.ctl._target is not None
+    feed(c, AUTOPILOT.heartbeat_encode(2, 12, 128 | 29, LOITER, 4))  # ours was heard: now one is enough
+    with pytest.raises(OperatorTakeover):
+        c.ctl.check_interruption()
+
+
+def test_a_takeover_right_after_our_mode_change_takes_two_heartbeats() -> None:
+    c = _just_engaged_px4()
+    feed(c, AUTOPILOT.heartbeat_encode(2, 12, 128 | 29, LOITER, 4))
+    c.ctl.check_interruption()
+    feed(c, AUTOPILOT.heartbeat_encode(2, 12, 128 | 29, LOITER, 4))
+    with pytest.raises(OperatorTakeover):
+        c.ctl.check_interruption()
+
+
+def test_a_duplicated_heartbeat_counts_once() -> None:
+    """A link that duplicates datagrams delivers one heartbeat twice (the same sequence number): it is
+    one heartbeat, not the two in a row a takeover right after our mode change needs."""
+    c = _just_engaged_px4()
+    frame = frames(AUTOPILOT.heartbeat_encode(2, 12, 128 | 29, LOITER, 4))
+    c.link.datagram_received(frame + frame, ADDR)  # type: ignore[attr-defined]
+    c.ctl.check_interruption()
+    assert c.ctl.takeover is None
+    assert c.tm.heartbeats == 2  # the engaged heartbeat and this one

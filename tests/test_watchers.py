@@ -10,18 +10,14 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.daemon import Companion
-
-AUTOPILOT = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
-ADDR = ("127.0.0.1", 14580)
+from tests.autopilot_frames import AUTOPILOT, feed
 
 
-def _feed(c: Companion, *msgs: object) -> None:
-    c.link.datagram_received(b"".join(m.pack(AUTOPILOT) for m in msgs), ADDR)  # type: ignore[attr-defined]
 
 
 def _flying() -> Companion:
     c = Companion(mavlink_url="udp:14550", sensors=None, watch_battery_pct=None)
-    _feed(
+    feed(
         c,
         AUTOPILOT.heartbeat_encode(2, 12, 128 | 29, 6 << 16 | 4 << 24, 4),  # PX4, armed
         AUTOPILOT.extended_sys_state_encode(0, 2),  # in the air
@@ -35,12 +31,12 @@ def test_a_failsafe_text_after_fifty_others_still_raises_an_alarm(caplog: pytest
     c = _flying()
     caplog.set_level(logging.INFO)
     for k in range(120):
-        _feed(c, AUTOPILOT.statustext_encode(6, f"Mode change {k}".encode()))
+        feed(c, AUTOPILOT.statustext_encode(6, f"Mode change {k}".encode()))
         if k % 7 == 0:
             c.watch_once()
     c.watch_once()
     assert "watcher alarm" not in caplog.text
-    _feed(c, AUTOPILOT.statustext_encode(2, b"Failsafe: offboard lost, AUTO.LOITER"))
+    feed(c, AUTOPILOT.statustext_encode(2, b"Failsafe: offboard lost, AUTO.LOITER"))
     c.watch_once()
     assert "watcher alarm 'Failsafe: offboard lost, AUTO.LOITER'" in caplog.text
     caplog.clear()
@@ -51,10 +47,10 @@ def test_a_failsafe_text_after_fifty_others_still_raises_an_alarm(caplog: pytest
 def test_texts_that_came_on_the_ground_are_passed_over(caplog: pytest.LogCaptureFixture) -> None:
     c = _flying()
     caplog.set_level(logging.INFO)
-    _feed(c, AUTOPILOT.extended_sys_state_encode(0, 1))  # landed
-    _feed(c, AUTOPILOT.statustext_encode(2, b"Failsafe: battery low"))
+    feed(c, AUTOPILOT.extended_sys_state_encode(0, 1))  # landed
+    feed(c, AUTOPILOT.statustext_encode(2, b"Failsafe: battery low"))
     c.watch_once()
-    _feed(c, AUTOPILOT.extended_sys_state_encode(0, 2))  # airborne again
+    feed(c, AUTOPILOT.extended_sys_state_encode(0, 2))  # airborne again
     c.watch_once()
     assert "watcher alarm" not in caplog.text
 
@@ -67,12 +63,12 @@ def test_a_rangefinder_at_its_maximum_is_no_reading() -> None:
     down = 25  # MAV_SENSOR_ROTATION_PITCH_270
 
     def reading(cm: int) -> float:
-        _feed(c, AUTOPILOT.distance_sensor_encode(1000, 20, 4000, cm, 0, 0, down, 0))
+        feed(c, AUTOPILOT.distance_sensor_encode(1000, 20, 4000, cm, 0, 0, down, 0))
         return c.tm.state.rangefinder_m
 
     assert reading(2091) == 20.91
     assert math.isnan(reading(4000))
     assert math.isnan(reading(4001))
     assert reading(15) == 0.15  # too close still says the ground is right there
-    _feed(c, AUTOPILOT.distance_sensor_encode(1000, 20, 0, 3000, 0, 0, down, 0))  # no maximum given
+    feed(c, AUTOPILOT.distance_sensor_encode(1000, 20, 0, 3000, 0, 0, down, 0))  # no maximum given
     assert c.tm.state.rangefinder_m == 30.0
