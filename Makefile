@@ -13,12 +13,13 @@ $(STAMP): pyproject.toml
 	$(VENV)/bin/pip install --quiet -e '.[dev,sim]'
 	touch $(STAMP)
 
-# Tests also exercise the optional monocular-depth and bench (report figures, rationale clusters) extras.
+# Tests also exercise the optional monocular-depth, bench (report figures, rationale clusters) and campaign
+# (Ray) extras.
 # torch 2.13.0 is pinned first so pip takes the CPU build (a plain "torch" would pull a multi-GB CUDA
 # build); the demo does not need it.
 $(DEPTH_STAMP): $(STAMP)
 	$(VENV)/bin/pip install --quiet 'torch==2.13.0'
-	$(VENV)/bin/pip install --quiet -e '.[dev,sim,depth,bench,train]'
+	$(VENV)/bin/pip install --quiet -e '.[dev,sim,depth,bench,train,campaign]'
 	touch $(DEPTH_STAMP)
 
 demo: $(STAMP)

@@ -93,7 +93,7 @@ class VehicleController:
         self._engaged_mode: int | None = None
         self._mode_set_at = 0.0
         self._own_mode_heard = False  # a heartbeat in our mode since we set it
-        self._foreign_heartbeat: int | None = None  # ``tm.heartbeats`` when someone else's mode was first seen
+        self._foreign_heartbeat: int | None = None  # ``tm.heartbeats`` at the first in another mode
         self.takeover: OperatorTakeover | None = None
         self.failsafe: AutopilotFailsafe | None = None
         self.longest_stream_gap_s = 0.0  # wall seconds between two setpoints: the event loop's health

@@ -1,20 +1,22 @@
 """``companion-bench``: the study's experiments on simbridge, graded from ground truth, with a report.
 
     companion-bench modules [--iterations 20] [--reasoner NAME] --out DIR
-    companion-bench curated --scenario scenario1|scenario2 --runs N [--weather W] [--context C]
+    companion-bench curated --scenario scenario1|scenario2 --runs N [--weather W[,W...]] [--context C]
                             [--reasoner NAME] --out DIR
-    companion-bench city --seeds N [--start-index K] [--city-seed S] [--weather W] [--context C]
-                         [--reasoner NAME] --out DIR
+    companion-bench city --seeds N [--start-index K] [--city-seeds S[,S...]] [--weather W[,W...]]
+                         [--context C] [--reasoner NAME] --out DIR
+    ... [--executor local|ray [--ray-address ADDR] [--cpus-per-episode C]] [--resume]
     companion-bench images DIR [--context crop|full] [--reasoner NAME] --out OUT
 
 Every command writes DIR/results.json (schema: docs/bench.md) and DIR/report.html with its figures.
 ``images`` judges a labelled photograph folder instead (landfall_eval/images.py: no simulator, its
 own results schema; exit status 2 for a bad folder, naming the entry).
-Episodes run in parallel (``--workers``, default: the number of cores), each as its own simbridge and
-companion processes; results.json is rewritten after every episode, and a rerun into the same DIR
-skips the episodes already in it (resumption). Exit status: 0 done; 1 some episode could not be run
-(``outcome`` ``error``: a process failed, not a landing that went wrong); 2 bad arguments; 4 the
-report could not be written (results.json is).
+Episodes run in parallel (``--workers``, default: the number of cores; or as Ray tasks with
+``--executor ray``: landfall_eval/campaign.py), each as its own simbridge and companion processes;
+results.json is rewritten after every episode, and ``--resume`` skips the episodes DIR already holds.
+Exit status: 0 done; 1 some episode could not be run (``outcome`` ``error``: a process failed, not a
+landing that went wrong); 2 bad arguments; 4 the report could not be written (results.json is);
+130 interrupted (what ended is in results.json: ``--resume`` goes on).
 """
 
 from __future__ import annotations
@@ -22,17 +24,17 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import sys
-import threading
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
 from tqdm import tqdm
 
-from landfall_eval.episode import EpisodeSpec, EpisodeTimes, describe_last_state, run_episode
+from landfall_eval.campaign import EXECUTORS, EpisodeJob, RayUnavailable, make_executor
+from landfall_eval.episode import EpisodeSpec, EpisodeTimes, describe_last_state
 from landfall_eval.grading import summarise
 from landfall_eval.launches import halton_launches
 from simbridge.cli import non_negative_seed
@@ -83,6 +85,40 @@ def _positive(kind: type, what: str) -> Callable[[str], Any]:
     return parse
 
 
+def _choices(what: str, known: Sequence[str]) -> Callable[[str], tuple[str, ...]]:
+    """A comma-separated list of ``known`` names, each once (``clear,fog,rain``)."""
+
+    def parse(text: str) -> tuple[str, ...]:
+        got = tuple(x.strip() for x in text.split(",") if x.strip())
+        bad = [x for x in got if x not in known]
+        if not got or bad:
+            raise argparse.ArgumentTypeError(
+                f"{what}: {', '.join(bad) or 'nothing given'}: choose from {', '.join(known)}"
+            )
+        if len(set(got)) != len(got):
+            raise argparse.ArgumentTypeError(f"{what}: {text!r} names one twice")
+        return got
+
+    return parse
+
+
+def _seeds(text: str) -> tuple[int, ...]:
+    """``0,1,2`` or ``0-4`` (inclusive), city seeds each once."""
+    out: list[int] = []
+    try:
+        for part in (p.strip() for p in text.split(",") if p.strip()):
+            lo, _, hi = part.partition("-")
+            first, last = non_negative_seed(lo), non_negative_seed(hi or lo)
+            out += range(first, last + 1)
+    except (argparse.ArgumentTypeError, ValueError) as exc:
+        raise argparse.ArgumentTypeError(f"--city-seeds: {exc}") from None
+    if not out or len(set(out)) != len(out):
+        raise argparse.ArgumentTypeError(
+            f"--city-seeds: {text!r} gives {'no seed' if not out else 'a seed twice'}"
+        )
+    return tuple(out)
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="companion-bench",
@@ -97,7 +133,10 @@ def build_parser() -> argparse.ArgumentParser:
     common.add_argument("--config", type=Path, help="companion TOML config (LVLM profiles, fallbacks)")
     common.add_argument("--quiet", action="store_true", help="no progress display")
     flying = argparse.ArgumentParser(add_help=False)
-    flying.add_argument("--weather", choices=WEATHERS, default="clear")
+    flying.add_argument(
+        "--weather", type=_choices("--weather", WEATHERS), default=("clear",), metavar="W[,W...]",
+        help=f"one or several of {', '.join(WEATHERS)} (default clear): every episode in each",
+    )  # fmt: skip
     flying.add_argument(
         "--context", choices=CONTEXTS, default="crop", help="what the reasoner sees per candidate"
     )
@@ -123,6 +162,34 @@ def build_parser() -> argparse.ArgumentParser:
         "--time-limit", type=_positive(float, "--time-limit"), default=600.0, metavar="SIM_S",
         help="simulated seconds after the alarm before an episode is a timeout (no landing)",
     )  # fmt: skip
+    flying.add_argument(
+        "--wall-limit", type=_positive(float, "--wall-limit"), metavar="WALL_S",
+        help="wall seconds after the alarm before an episode is stopped as a timeout, whatever the "
+        "simulation did (default: 60 + 3 x SIM_S / speed)",
+    )  # fmt: skip
+    flying.add_argument(
+        "--resume", action="store_true",
+        help="go on with the campaign in DIR: skip the episodes its results.json already holds",
+    )  # fmt: skip
+    flying.add_argument(
+        "--retries", type=int, default=2, metavar="N",
+        help="tries more for an episode that failed before its alarm (a port clash, a process that did "
+        "not start); never for an outcome (default 2)",
+    )  # fmt: skip
+    flying.add_argument(
+        "--executor", choices=EXECUTORS, default="local",
+        help="local: --workers episodes at once here (default); ray: each episode a Ray task "
+        "(landfall[campaign])",
+    )  # fmt: skip
+    flying.add_argument(
+        "--ray-address", metavar="ADDR",
+        help="a running Ray cluster (auto, HOST:6379, ray://HOST:10001); default: a local Ray "
+        "instance with --workers CPUs",
+    )  # fmt: skip
+    flying.add_argument(
+        "--cpus-per-episode", type=_positive(float, "--cpus-per-episode"), default=1.0, metavar="C",
+        help="CPUs a Ray task reserves for one episode (default 1)",
+    )  # fmt: skip
     m = sub.add_parser(
         "modules", parents=[common], help="Surface ID Jaccard, IPM landing distance, stage success"
     )
@@ -135,10 +202,13 @@ def build_parser() -> argparse.ArgumentParser:
     y = sub.add_parser("city", parents=[common, flying], help="full pipeline from Halton launch points")
     y.add_argument("--seeds", type=_positive(int, "--seeds"), default=20, help="number of launch points")
     y.add_argument("--start-index", type=int, default=0, metavar="K", help="first Halton index (default 0)")
-    y.add_argument(
-        "--city-seed", type=non_negative_seed, default=0, metavar="S",
-        help="seed of the procedural city: every episode flies this city (simbridge --city-seed)",
+    cities = y.add_mutually_exclusive_group()
+    cities.add_argument(
+        "--city-seeds", type=_seeds, metavar="S[,S...]",
+        help="seeds of the procedural cities (0,1,2 or 0-2): every launch point in each city "
+        "(simbridge --city-seed); default 0",
     )  # fmt: skip
+    cities.add_argument("--city-seed", type=non_negative_seed, metavar="S", help="one city: --city-seeds S")
     g = sub.add_parser(
         "images", parents=[common], help="the image judgement on a labelled folder of photographs"
     )
@@ -164,13 +234,17 @@ def episode_specs(args: argparse.Namespace) -> list[EpisodeSpec]:
     if args.ekf_error != "off" and args.autopilot == "ardupilot-sitl":
         raise ValueError("--ekf-error: real firmware has its own estimator (leave it off)")
     base = dict(
-        reasoner=args.reasoner, context=args.context, weather=args.weather, autopilot=args.autopilot,
-        ekf_error=args.ekf_error,
+        reasoner=args.reasoner, context=args.context, autopilot=args.autopilot, ekf_error=args.ekf_error,
     )  # fmt: skip
     if args.command == "curated":
-        return [EpisodeSpec("curated", args.scenario, k, run=k, **base) for k in range(args.runs)]
+        return [
+            EpisodeSpec("curated", args.scenario, k, run=k, weather=w, **base)
+            for k in range(args.runs)
+            for w in args.weather
+        ]
     if args.start_index < 0:
         raise ValueError(f"--start-index must be >= 0, got {args.start_index}")
+    # launch by launch, each in every city and weather: a campaign cut short covers every group
     return [
         EpisodeSpec(
             "city",
@@ -178,11 +252,20 @@ def episode_specs(args: argparse.Namespace) -> list[EpisodeSpec]:
             launch.index,
             launch=launch.as_tuple(),
             launch_index=launch.index,
-            city_seed=args.city_seed,
+            city_seed=city,
+            weather=w,
             **base,
         )
         for launch in halton_launches(args.seeds, args.start_index)
+        for city in city_seeds(args)
+        for w in args.weather
     ]
+
+
+def city_seeds(args: argparse.Namespace) -> tuple[int, ...]:
+    if getattr(args, "city_seeds", None):
+        return tuple(args.city_seeds)
+    return (args.city_seed if getattr(args, "city_seed", None) is not None else 0,)
 
 
 def _line(entry: dict[str, Any]) -> str:
@@ -221,39 +304,45 @@ def run_episodes(
     out: Path,
     sitl: Path | None = None,
 ) -> int:
+    """Fly what ``results`` does not hold yet on the chosen executor, writing results.json as each
+    episode ends; returns how many could not be run (``outcome`` ``error``)."""
     done = {e["id"] for e in results["episodes"]}
     todo = [s for s in specs if s.id not in done]
     skipped = len(specs) - len(todo)
     if skipped:
         print(f"resuming: {skipped} of {len(specs)} episodes already in {out / RESULTS}", file=sys.stderr)
-    times = EpisodeTimes(speed=args.speed, sim_s=args.time_limit)
-    lock = threading.Lock()
+    times = EpisodeTimes(speed=args.speed, sim_s=args.time_limit, wall_limit_s=args.wall_limit)
+    jobs = [
+        EpisodeJob(s, out / "episodes" / s.id, times, args.config, sitl, tries=1 + max(args.retries, 0))
+        for s in todo
+    ]
+    executor = make_executor(
+        args.executor, workers=args.workers, address=args.ray_address, cpus_per_episode=args.cpus_per_episode
+    )
     errors = 0
     bar = tqdm(
         total=len(todo), unit="episode", disable=args.quiet or not todo, file=sys.stderr, dynamic_ncols=True
     )
-    with ThreadPoolExecutor(max_workers=args.workers) as pool:
-        futures = {
-            pool.submit(
-                run_episode, s, out / "episodes" / s.id, times=times, config_path=args.config, sitl=sitl
-            ): s
-            for s in todo
-        }
-        for fut in as_completed(futures):
-            entry = fut.result()
-            with lock:
-                results["episodes"].append(entry)
-                results["episodes"].sort(key=lambda e: str(e["id"]))
-                save_results(out, results)
+    try:
+        for entry in executor.run(jobs):
+            results["episodes"].append(entry)
+            results["episodes"].sort(key=lambda e: str(e["id"]))
+            save_results(out, results)
             errors += entry.get("outcome") == "error"
-            safe = sum(bool(e.get("safe")) for e in results["episodes"])
-            bar.set_postfix_str(f"safe {safe}/{len(results['episodes'])}")
-            if args.quiet:
-                continue
-            bar.write(_line(entry), file=sys.stderr)
+            eps = results["episodes"]
+            safe = sum(bool(e.get("safe")) for e in eps)
+            bar.set_postfix_str(f"safe {safe}/{len(eps)}, errors {errors}")
+            if not args.quiet:
+                bar.write(_line(entry), file=sys.stderr)
             bar.update(1)
-    bar.close()
+    finally:
+        bar.close()
+        executor.close()
     return errors
+
+
+def _interrupt(signum: int, _frame: object) -> None:
+    raise KeyboardInterrupt(signal.Signals(signum).name)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -272,6 +361,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         sitl = resolve_sitl(args)
         out.mkdir(parents=True, exist_ok=True)
         results = load_results(out)
+        held = len(results["episodes"])
+        if held and args.command != "modules" and not args.resume:
+            raise ValueError(
+                f"{out / RESULTS} already holds {held} episodes: --resume to go on with that campaign, "
+                "or another --out"
+            )
     except (OSError, ValueError) as exc:
         ap.error(str(exc))
     config = {
@@ -285,7 +380,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         "ekf_error",
         "speed",
         "workers",
-        "city_seed",
         "scenario",
         "runs",
         "seeds",
@@ -294,6 +388,17 @@ def main(argv: Sequence[str] | None = None) -> int:
             config[key] = getattr(args, key)
     if args.command == "city":
         config["start_index"] = args.start_index
+        seeds = city_seeds(args)
+        config["city_seeds"] = list(seeds)
+        if len(seeds) == 1:
+            config["city_seed"] = seeds[0]
+    if hasattr(args, "weather"):
+        config["weather"] = args.weather[0] if len(args.weather) == 1 else ",".join(args.weather)
+        config["weathers"] = list(args.weather)
+    if hasattr(args, "executor"):
+        config["executor"] = args.executor
+        config["ray_address"] = args.ray_address
+        config["cpus_per_episode"] = args.cpus_per_episode
     if sitl is not None:
         config["sitl"] = str(sitl)
     results["command"] = args.command
@@ -319,7 +424,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         bar.close()
         save_results(out, results)
     else:
-        errors = run_episodes(args, results, specs, out, sitl)
+        signal.signal(signal.SIGTERM, _interrupt)  # a scheduler's stop: the same as Ctrl-C
+        try:
+            errors = run_episodes(args, results, specs, out, sitl)
+        except RayUnavailable as exc:
+            ap.error(str(exc))
+        except KeyboardInterrupt:
+            n = len(results["episodes"])
+            print(
+                f"interrupted: {n} of {len(specs)} episodes in {out / RESULTS}; the same command with "
+                "--resume goes on",
+                file=sys.stderr,
+            )
+            return 130
         save_results(out, results)
     s = results["summary"]
     if s["episodes"]:

@@ -21,9 +21,11 @@ The companion's peak RSS and CPU time are sampled from ``/proc`` every poll (Lin
 
 from __future__ import annotations
 
+import ctypes
 import json
 import math
 import os
+import signal
 import socket
 import subprocess
 import sys
@@ -54,6 +56,8 @@ __all__ = [
 ]
 
 ROOT = Path(__file__).resolve().parent.parent
+# resolved once here: the child of a fork runs ``_die_with_parent`` with nothing to import or look up
+_PRCTL = ctypes.CDLL(None, use_errno=True).prctl if sys.platform == "linux" else None
 TRAJECTORY_STEP_S = 1.0  # one trajectory point per simulated second
 CONTROL_MODES = ("OFFBOARD", "GUIDED")
 
@@ -104,9 +108,13 @@ class EpisodeTimes:
     start_wall_s: float = 90.0  # simbridge and the companion must be up and talking by then
     settle_wall_s: float = 10.0  # after the touchdown, for the companion to close its record
     ready_sim_s: float = 240.0  # for the autopilot to hold at the launch pose (real firmware: 83-87 s)
+    wall_limit_s: float | None = None  # wall seconds after the alarm (None: from sim_s and speed)
 
     @property
     def wall_s(self) -> float:
+        """Wall seconds after the alarm before the episode is stopped as a timeout."""
+        if self.wall_limit_s is not None:
+            return self.wall_limit_s
         return self.start_wall_s + 3.0 * self.sim_s / self.speed + 60.0
 
     @property
@@ -171,6 +179,14 @@ def sped_up_env(speed: float) -> dict[str, str]:
     """The companion's environment for a simulation at ``speed`` x: a frame's age is counted in
     simulated seconds, so the default 2 s tolerance becomes 2 s of wall clock at any speed."""
     return {"LANDFALL_SENSORS_MAX_FRAME_AGE_S": str(2.0 * speed)}
+
+
+def _die_with_parent() -> None:
+    """In the child, before exec: SIGTERM when the thread that started it ends (Linux
+    ``PR_SET_PDEATHSIG``), so a campaign killed outright (``kill -9``, a Ray task cancelled) leaves no
+    simbridge or companion behind. Elsewhere, nothing."""
+    if _PRCTL is not None:
+        _PRCTL(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
 
 
 def free_port(kind: int) -> int:
@@ -354,26 +370,34 @@ def run_episode(
     }
     t_wall = time.monotonic()
     sim_err = (workdir / "simbridge.log").open("wb")
-    sim = subprocess.Popen(sim_cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=sim_err)
+    sim = subprocess.Popen(
+        sim_cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=sim_err, preexec_fn=_die_with_parent
+    )
     with comp_log.open("wb") as fh:
-        comp = subprocess.Popen(comp_cmd, cwd=ROOT, env=env, stdout=fh, stderr=subprocess.STDOUT)
+        comp = subprocess.Popen(
+            comp_cmd, cwd=ROOT, env=env, stdout=fh, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent
+        )
     usage = ProcessSample(comp.pid)
     tail = JsonlTail(episode_log)
     log = LogWatch()
     alarm_t_s: float | None = None  # the takeover where the vehicle already holds in GUIDED
-    outcome, error = "landed", None
+    outcome, error, infrastructure = "landed", None, False
     shown = 0
     try:
         while log.ready is None or "sensor stream connected" not in comp_log.read_text(errors="replace"):
             log.take(tail.lines())
             if comp.poll() is not None or sim.poll() is not None:
                 who = "simbridge" if sim.poll() is not None else "the companion"
-                raise _EpisodeError(f"{who} exited before the vehicle was ready and the sensor stream up")
+                raise _EpisodeError(
+                    f"{who} exited before the vehicle was ready and the sensor stream up", infrastructure=True
+                )
             waited = time.monotonic() - t_wall
             if log.ready is None and waited > times.ready_wall_s:
-                raise _EpisodeError(f"simbridge's autopilot not ready after {times.ready_wall_s:.0f} s")
+                raise _EpisodeError(
+                    f"simbridge's autopilot not ready after {times.ready_wall_s:.0f} s", infrastructure=True
+                )
             if log.ready is not None and waited > times.ready_wall_s + times.start_wall_s:
-                raise _EpisodeError(f"no sensor stream after {waited:.0f} s")
+                raise _EpisodeError(f"no sensor stream after {waited:.0f} s", infrastructure=True)
             time.sleep(0.2)
         res = send_alarm(udp, spec.reason, spec.criticality, time.monotonic() + 30.0)
         if on_line is not None:
@@ -411,7 +435,7 @@ def run_episode(
                 break
             time.sleep(0.25)
     except _EpisodeError as exc:
-        outcome, error = "error", str(exc)
+        outcome, error, infrastructure = "error", str(exc), exc.infrastructure
     finally:
         usage.sample()
         for proc in (comp, sim):
@@ -434,6 +458,8 @@ def run_episode(
     entry.update(_landing_distance(log, events, spec))
     entry["outcome"] = outcome if log.touchdown is None or outcome != "timeout" else "landed"
     entry["error"] = error if log.touchdown is None else None
+    entry["error_kind"] = "infrastructure" if infrastructure and log.touchdown is None else None
+    entry["defects"] = sum(e.get("kind") == "defect" for e in events)
     entry["last_state"] = _last_state(events, log.last_vehicle)
     entry["companion"] = {"peak_rss_mb": round(usage.peak_rss_mb, 1), "cpu_s": round(usage.cpu_s, 2)}
     entry["wall_s"] = round(time.monotonic() - t_wall, 2)
@@ -478,7 +504,13 @@ def _landing_distance(log: LogWatch, events: list[dict[str, Any]], spec: Episode
 
 
 class _EpisodeError(Exception):
-    pass
+    """An episode that could not be flown; ``infrastructure``: its processes never got as far as the
+    alarm (a port taken meanwhile, a process that did not start): worth another try, unlike anything
+    that happens once the alarm is in."""
+
+    def __init__(self, text: str, *, infrastructure: bool = False) -> None:
+        super().__init__(text)
+        self.infrastructure = infrastructure
 
 
 def _grade(

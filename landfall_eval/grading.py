@@ -28,6 +28,7 @@ from simbridge.control import ControlLimits
 
 __all__ = [
     "SURFACES",
+    "failure_class",
     "kinematic_lower_bound_s",
     "summarise",
     "surface_class",
@@ -61,6 +62,28 @@ def surface_class(touchdown: Mapping[str, Any] | None) -> str:
     if surface == "rooftop_clear" and any(w in r for r in reasons for w in _OBSTRUCTION_WORDS):
         return "rooftop_obstructed"
     return surface
+
+
+def failure_class(entry: Mapping[str, Any]) -> str | None:
+    """What went wrong in one results.json entry, as a class to count campaigns by (None: a safe
+    landing): ``error (infrastructure)`` (never got to the alarm), ``error`` (a process died during the
+    episode), ``no touchdown`` (a timeout), ``unsafe: SURFACE`` for a landing graded unsafe (on a
+    surface that may be safe, such as a clear roof or open ground, with what made it unsafe:
+    ``unsafe: rooftop_clear (slope)``)."""
+    if entry.get("safe") is True:
+        return None
+    outcome = entry.get("outcome")
+    if outcome == "error":
+        return "error (infrastructure)" if entry.get("error_kind") == "infrastructure" else "error"
+    surface = str(entry.get("surface") or "no_landing")
+    if outcome != "landed" or surface == "no_landing":
+        return "no touchdown"
+    if surface in ("rooftop_clear", "ground", "park", "parking"):
+        reasons = " ".join(str(r) for r in entry.get("reasons") or ())
+        why = next((w for w in ("edge", "slope", "rough", "outside") if w in reasons), None)
+        if why is not None:
+            return f"unsafe: {surface} ({why})"
+    return f"unsafe: {surface}"
 
 
 def trapezoid_time_s(dist_m: float, v_max: float, a_max: float) -> float:
@@ -104,10 +127,20 @@ def summarise(episodes: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     for e in episodes:
         for c in e.get("calls", ()):
             calls.setdefault(str(c["stage"]), {}).setdefault(str(c["tier"]), []).append(float(c["latency_s"]))
-    groups: dict[tuple[str, str, str], list[Mapping[str, Any]]] = {}
+    groups: dict[tuple[str, str, str, int], list[Mapping[str, Any]]] = {}
     for e in episodes:
-        key = (str(e.get("reasoner")), str(e.get("context")), str(e.get("weather")))
+        city = e.get("city_seed")
+        key = (
+            str(e.get("reasoner")),
+            str(e.get("context")),
+            str(e.get("weather")),
+            -1 if city is None else int(city),
+        )
         groups.setdefault(key, []).append(e)
+    failures: dict[str, list[str]] = {}
+    for e in episodes:
+        if (cls := failure_class(e)) is not None:
+            failures.setdefault(cls, []).append(str(e.get("id")))
 
     def rate(items: Sequence[Mapping[str, Any]]) -> float | None:
         return round(sum(bool(e.get("safe")) for e in items) / len(items), 4) if items else None
@@ -144,15 +177,20 @@ def summarise(episodes: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
             }
             for stage, tiers in sorted(calls.items())
         },
+        "recoveries_with_defect": sum(int(e.get("defects") or 0) > 0 for e in episodes),
+        "failures": {cls: sorted(ids) for cls, ids in sorted(failures.items())},
         "groups": [
             {
                 "reasoner": r,
                 "context": c,
                 "weather": w,
+                "city_seed": None if city < 0 else city,
                 "episodes": len(items),
+                "safe": sum(bool(e.get("safe")) for e in items),
                 "safe_rate": rate(items),
                 "mean_rounds_safe": mean_rounds(items),
+                "median_kinematic_ratio": _median(e.get("kinematic_ratio") for e in items),
             }
-            for (r, c, w), items in sorted(groups.items())
+            for (r, c, w, city), items in sorted(groups.items())
         ],
     }

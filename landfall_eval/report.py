@@ -30,7 +30,7 @@ import numpy as np
 
 from landfall_eval.basemap import CLASS_LABEL, CLASS_RGB, BaseMap, basemap
 from landfall_eval.episode import describe_last_state
-from landfall_eval.grading import SURFACES
+from landfall_eval.grading import SURFACES, failure_class
 from landfall_eval.rationales import Clusters, EmbeddingsUnavailable, cluster_rationales
 from landfall_eval.study import (
     STUDY_JACCARD,
@@ -52,6 +52,8 @@ VERDICT_LABEL = {"safe": "safe landing", "unsafe": "unsafe landing", "none": "no
 _MAP_MARGIN_M = 60.0
 _MAP_MIN_SIDE_M = 200.0
 _MAP_MAX_PX = 1400
+_THUMB_HALF_M = 30.0  # a failure's thumbnail: the 60 m square around its touchdown
+_MAX_FAILURES_SHOWN = 12  # per class; the episode table has them all
 _MAP_MAX_LABELS = 40  # number the touchdowns (as in the episode table) up to this many episodes
 _DPI = 110
 _INSTALL_HINT = "pip install 'landfall[bench]'"
@@ -95,6 +97,7 @@ class _Episode:
     calls: tuple[tuple[str, str, float | None], ...]  # (stage, tier, latency_s)
     rationales: tuple[tuple[str, str], ...]  # (stage, text)
     last_state: str  # where an episode that never landed stood at its end ('' when unknown)
+    failure: str | None  # grading.failure_class: None for a safe landing
 
     @property
     def verdict(self) -> str:
@@ -148,6 +151,7 @@ def write_report(
         parts += [
             _latency(episodes),
             _weather(episodes),
+            _failures(episodes, config, fig_dir),
             _clusters(episodes, fig_dir),
             _episode_table(episodes),
         ]
@@ -242,6 +246,7 @@ def _episode(number: int, raw: Mapping[str, Any], config: Mapping[str, Any]) -> 
             if isinstance(r, Mapping) and str(r.get("text") or "").strip()
         ),
         last_state=describe_last_state(raw.get("last_state")),
+        failure=failure_class(raw),
     )
 
 
@@ -453,14 +458,17 @@ def _landings(
     out = ["<h2>Landings</h2>"]
     if not eps:
         return out[0] + '<p class="note">No episodes in this run.</p>'
-    by_scenario: dict[str, list[_Episode]] = defaultdict(list)
-    for e in eps:
-        by_scenario[e.scenario].append(e)
+    by_world: dict[tuple[str, int], list[_Episode]] = defaultdict(list)
+    for e in eps:  # a map per world: a city per city seed
+        by_world[(e.scenario, e.city_seed if e.city_seed is not None else -1)].append(e)
+    several = len({s for s, _ in by_world}) < len(by_world)
     used: set[str] = set()
-    for scenario, group in sorted(by_scenario.items()):
-        name = _unique(f"map_{_slug(scenario)}.png", used)
-        notes = _map_figure(scenario, group, config, basemaps.get(scenario), fig_dir / name)
-        out += [f"<h3>{_e(scenario)}</h3>", _img(name, f"bird's-eye map of {scenario}"), *notes]
+    for (scenario, city), group in sorted(by_world.items()):
+        title = f"{scenario}, city seed {city}" if city >= 0 and several else scenario
+        name = _unique(f"map_{_slug(title)}.png", used)
+        bm = None if several else basemaps.get(scenario)
+        notes = _map_figure(scenario, group, config if not several else {}, bm, fig_dir / name)
+        out += [f"<h3>{_e(title)}</h3>", _img(name, f"bird's-eye map of {title}"), *notes]
     _surface_figure(eps, fig_dir / "surfaces.png")
     _rounds_figure(eps, fig_dir / "rounds.png")
     out += [
@@ -470,6 +478,63 @@ def _landings(
         _img("rounds.png", "histogram of reasoning rounds"),
     ]
     return "\n".join(out)
+
+
+def _failures(eps: list[_Episode], config: Mapping[str, Any], fig_dir: Path) -> str:
+    """Every episode that did not end in a safe landing, by failure class (grading.failure_class),
+    each with what it did and a thumbnail of its touchdown site over the world's ground truth."""
+    by: dict[str, list[_Episode]] = defaultdict(list)
+    for e in eps:
+        if e.failure is not None:
+            by[e.failure].append(e)
+    out = ["<h2>Failures by class</h2>"]
+    if not by:
+        return out[0] + f'<p class="note">None: {len(eps)} of {len(eps)} episodes landed safely.</p>'
+    out.append(_table(("class", "episodes", "share"), [
+        (cls, len(g), _pct(len(g) / len(eps))) for cls, g in sorted(by.items(), key=lambda kv: -len(kv[1]))
+    ]))  # fmt: skip
+    used: set[str] = set()
+    for cls, group in sorted(by.items(), key=lambda kv: -len(kv[1])):
+        out.append(f'<h3>{_e(cls)} ({len(group)})</h3><ul class="failures">')
+        for e in group[:_MAX_FAILURES_SHOWN]:
+            thumb = ""
+            if e.touchdown_ne is not None:
+                name = _unique(f"touchdown_{_slug(e.id)}.png", used)
+                if _thumbnail(e, config, fig_dir / name):
+                    thumb = _img(name, f"touchdown site of {e.id}")
+            what = "; ".join(e.reasons) if e.verdict == "unsafe" else (e.error or "")
+            last = f" Last: {e.last_state}." if e.last_state and e.verdict == "none" else ""
+            out.append(
+                f"<li>{thumb}<b>#{e.number} {_e(e.id)}</b>: {_e(e.outcome)} on {_e(e.surface)} after "
+                f"{e.rounds if e.rounds is not None else '?'} round(s). {_e(what)}{_e(last)}</li>"
+            )
+        if len(group) > _MAX_FAILURES_SHOWN:
+            out.append(f"<li>... and {len(group) - _MAX_FAILURES_SHOWN} more (the episode table)</li>")
+        out.append("</ul>")
+    return "\n".join(out)
+
+
+def _thumbnail(e: _Episode, config: Mapping[str, Any], path: Path) -> bool:
+    """The 60 m around ``e``'s touchdown over its world's ground truth, the touchdown marked; False
+    when the world cannot be drawn (the figure is then left out)."""
+    assert e.touchdown_ne is not None
+    n, east = e.touchdown_ne
+    half = _THUMB_HALF_M
+    seed = e.city_seed if e.city_seed is not None else _world_seed(e.scenario, [e], config)
+    try:
+        bm = basemap(e.scenario, seed, (n - half, n + half, east - half, east + half), max_px=240)
+    except ValueError as exc:
+        log.warning("no thumbnail for %s: %s", e.id, exc)
+        return False
+    fig = _figure(2.6, 2.6, layout=None)
+    ax = fig.add_axes((0.0, 0.0, 1.0, 1.0))
+    ax.imshow(bm.rgb, extent=bm.imshow_extent, origin="upper", interpolation="nearest")
+    if len(e.track_ne):
+        ax.plot(e.track_ne[:, 1], e.track_ne[:, 0], "-", color="white", lw=1.2)
+    ax.plot([east], [n], marker="X", ms=11, color=VERDICT_COLOUR[e.verdict], mec="black")
+    ax.set(xlim=(east - half, east + half), ylim=(n - half, n + half), aspect="equal", xticks=[], yticks=[])
+    _save(fig, path)
+    return True
 
 
 def _latency(eps: list[_Episode]) -> str:
@@ -489,11 +554,15 @@ def _latency(eps: list[_Episode]) -> str:
 
 
 def _weather(eps: list[_Episode]) -> str:
+    """Per weather; per city seed and weather as well when the run flew several cities."""
+    cities = sorted({e.city_seed for e in eps if e.city_seed is not None})
     by: dict[str, list[_Episode]] = defaultdict(list)
     for e in eps:
         by[e.weather].append(e)
+        if len(cities) > 1:
+            by[f"city {e.city_seed}, {e.weather}"].append(e)
     rows = []
-    for w, g in sorted(by.items()):
+    for w, g in sorted(by.items(), key=lambda kv: (kv[0].startswith("city"), kv[0])):
         safe = [e for e in g if e.verdict == "safe"]
         rows.append(
             (

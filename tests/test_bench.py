@@ -374,8 +374,12 @@ def test_curated_run_writes_results_and_report_then_resumes(tmp_path: Path) -> N
     assert "figures/" in html
     assert all((out / src).exists() for src in _images(html))
 
-    # the same command again: nothing to fly, the file keeps its episodes
-    again = bench("curated", "--scenario", "scenario1", "--runs", "2", "--out", str(out))
+    # the same command again: refused without --resume (a campaign is not mixed into another by
+    # mistake); with it, nothing to fly and the file keeps its episodes
+    refused = bench("curated", "--scenario", "scenario1", "--runs", "2", "--out", str(out))
+    assert refused.returncode == 2
+    assert "already holds 2 episodes: --resume" in refused.stderr
+    again = bench("curated", "--scenario", "scenario1", "--runs", "2", "--out", str(out), "--resume")
     assert again.returncode == 0, again.stderr[-2000:]
     assert "resuming: 2 of 2 episodes" in again.stderr
     assert json.loads((out / "results.json").read_text())["episodes"] == episodes

@@ -9,8 +9,8 @@ import pytest
 
 from companion.control import OperatorTakeover, TouchedDown
 from companion.daemon import Companion
-from tests.autopilot_frames import ADDR, AUTOPILOT, feed, frames
 from companion.guidance.descent import height_above_site
+from tests.autopilot_frames import ADDR, AUTOPILOT, feed, frames
 
 LEVEL = (1.0, 0.0, 0.0, 0.0)
 
@@ -59,7 +59,6 @@ def test_without_a_lidar_surface_the_ipm_site_and_the_rangefinder_are_used() -> 
 
 OFFBOARD = 6 << 16
 LOITER = 4 << 16 | 3 << 24
-
 
 
 def _engaged_px4() -> Companion:

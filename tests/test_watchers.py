@@ -7,12 +7,9 @@ import logging
 import math
 
 import pytest
-from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.daemon import Companion
 from tests.autopilot_frames import AUTOPILOT, feed
-
-
 
 
 def _flying() -> Companion:
