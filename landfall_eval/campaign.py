@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
-from landfall_eval.episode import EpisodeSpec, EpisodeTimes, run_episode
+from landfall_eval.episode import STOPPING, EpisodeSpec, EpisodeTimes, run_episode, stop_running_episodes
 
 __all__ = [
     "EXECUTORS",
@@ -120,17 +120,25 @@ class LocalExecutor:
     def __init__(self, workers: int) -> None:
         self.workers = workers
         self._pool: ThreadPoolExecutor | None = None
+        self._pending: set[Future[dict[str, Any]]] = set()
 
     def run(self, jobs: Sequence[EpisodeJob]) -> Iterator[dict[str, Any]]:
+        STOPPING.clear()
         self._pool = ThreadPoolExecutor(max_workers=self.workers, thread_name_prefix="episode")
-        pending: set[Future[dict[str, Any]]] = {self._pool.submit(fly, j) for j in jobs}
-        while pending:
-            done, pending = wait(pending, return_when=FIRST_COMPLETED)
+        self._pending = {self._pool.submit(fly, j) for j in jobs}
+        while self._pending:
+            done, self._pending = wait(self._pending, return_when=FIRST_COMPLETED)
             for fut in done:
                 yield fut.result()
 
     def close(self) -> None:
+        """After the last entry: nothing to do. Before it (an interrupted campaign): the episodes not
+        started are dropped and those in flight stopped, their processes terminated."""
         if self._pool is not None:
+            if any(not f.done() for f in self._pending):
+                for fut in self._pending:
+                    fut.cancel()
+                stop_running_episodes()
             self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
 

@@ -21,6 +21,7 @@ The companion's peak RSS and CPU time are sampled from ``/proc`` every poll (Lin
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import json
 import math
@@ -29,6 +30,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -181,6 +183,25 @@ def sped_up_env(speed: float) -> dict[str, str]:
     return {"LANDFALL_SENSORS_MAX_FRAME_AGE_S": str(2.0 * speed)}
 
 
+_RUNNING: set[subprocess.Popen[bytes]] = set()  # every episode process of this harness still running
+_RUNNING_LOCK = threading.Lock()
+STOPPING = threading.Event()  # set by stop_running_episodes: episodes starting or in flight end at once
+
+
+def stop_running_episodes() -> int:
+    """SIGTERM to the simbridge and companion processes of every episode in flight (a campaign being
+    interrupted): each episode then ends at once as an error, which the caller does not record.
+    Returns how many were signalled. Episodes that start later end as soon as they do, until
+    ``STOPPING`` is cleared."""
+    STOPPING.set()
+    with _RUNNING_LOCK:
+        procs = [p for p in _RUNNING if p.poll() is None]
+    for proc in procs:
+        with contextlib.suppress(ProcessLookupError):
+            proc.terminate()
+    return len(procs)
+
+
 def _die_with_parent() -> None:
     """In the child, before exec: SIGTERM when the thread that started it ends (Linux
     ``PR_SET_PDEATHSIG``), so a campaign killed outright (``kill -9``, a Ray task cancelled) leaves no
@@ -223,7 +244,7 @@ def send_alarm(
     ]  # fmt: skip
     while True:  # the first telemetry may still be on its way: "refused for now" until it is in
         res = subprocess.run(cmd, capture_output=True, text=True, timeout=30, cwd=ROOT)
-        if res.returncode == 0 or time.monotonic() > deadline:
+        if res.returncode == 0 or time.monotonic() > deadline or STOPPING.is_set():
             return res
         time.sleep(0.5)
 
@@ -377,6 +398,11 @@ def run_episode(
         comp = subprocess.Popen(
             comp_cmd, cwd=ROOT, env=env, stdout=fh, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent
         )
+    with _RUNNING_LOCK:
+        _RUNNING.update((sim, comp))
+        if STOPPING.is_set():  # the campaign was stopped while these started
+            for proc in (sim, comp):
+                proc.terminate()
     usage = ProcessSample(comp.pid)
     tail = JsonlTail(episode_log)
     log = LogWatch()
@@ -398,6 +424,8 @@ def run_episode(
                 )
             if log.ready is not None and waited > times.ready_wall_s + times.start_wall_s:
                 raise _EpisodeError(f"no sensor stream after {waited:.0f} s", infrastructure=True)
+            if STOPPING.is_set():
+                raise _EpisodeError("stopped: the campaign was interrupted")
             time.sleep(0.2)
         res = send_alarm(udp, spec.reason, spec.criticality, time.monotonic() + 30.0)
         if on_line is not None:
@@ -429,6 +457,9 @@ def run_episode(
             if time.monotonic() - t_alarm > times.wall_s:
                 outcome, error = "timeout", f"no touchdown within {times.wall_s:.0f} wall seconds"
                 break
+            if STOPPING.is_set():
+                outcome, error = "error", "stopped: the campaign was interrupted"
+                break
             if sim.poll() is not None or comp.poll() is not None:
                 who = "simbridge" if sim.poll() is not None else "the companion"
                 outcome, error = "error", f"{who} exited during the episode"
@@ -440,6 +471,8 @@ def run_episode(
         usage.sample()
         for proc in (comp, sim):
             stop_process(proc)
+        with _RUNNING_LOCK:
+            _RUNNING.difference_update((sim, comp))
         if on_line is not None:
             for line in comp_log.read_text(errors="replace").splitlines()[shown:]:
                 on_line("companion", line)

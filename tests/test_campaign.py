@@ -298,3 +298,34 @@ def test_a_campaign_killed_outright_loses_nothing_and_resumes(tmp_path: Path) ->
     assert [e["id"] for e in episodes] == [f"scenario1-r{k}-onboard-crop-clear-px4" for k in range(3)]
     assert [e for e in episodes if e["id"] == first[0]["id"]] == first  # kept as it was
     assert all(e["safe"] for e in episodes), [e["reasons"] for e in episodes]
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads child processes from /proc (Linux)")
+def test_a_stopped_campaign_stops_its_episodes_and_says_how_to_go_on(tmp_path: Path) -> None:
+    """SIGTERM (a scheduler's stop; Ctrl-C is handled the same) while the first episode flies: the
+    campaign terminates that episode's processes, records nothing half-done, says how to go on and
+    exits 130."""
+    out = tmp_path / "campaign"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "landfall_eval.cli", "curated", "--scenario", "scenario1", "--runs", "2",
+         "--workers", "1", "--quiet", "--out", str(out)],
+        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    deadline = time.monotonic() + 120
+    while len(_ours(proc.pid)) < 2:  # simbridge and the companion of episode 0
+        assert proc.poll() is None, "the campaign ended before its first episode started"
+        assert time.monotonic() < deadline, "the first episode did not start"
+        time.sleep(0.2)
+    children = _ours(proc.pid)
+    proc.terminate()
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err[-2000:]
+    assert "interrupted: 0 of 2 episodes" in err
+    assert "--resume goes on" in err
+    assert not any(_alive(p) for p in children)
+    log = out / "episodes" / "scenario1-r0-onboard-crop-clear-px4" / "companion.log"
+    assert "recovery ended" not in log.read_text()  # stopped in flight, not waited for
+    results = out / "results.json"
+    assert not results.exists() or json.loads(results.read_text())["episodes"] == []
