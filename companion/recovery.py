@@ -723,7 +723,11 @@ class Recovery:
         far (beyond ``blind_descent_agl_m``), everything below is out of the LiDAR's range: climbing
         or moving would not help, so descend to ``blind_descent_agl_m`` first. The LiDAR's silence
         says nothing stands within its range below, so the descent has nothing to hit. A silent
-        LiDAR with the ground near is a failed LiDAR: no blind descent then."""
+        LiDAR with the ground near is a failed LiDAR: no blind descent then.
+
+        Whenever the rangefinder puts the ground more than ``explore_max_alt_m`` below (the spiral
+        flies level, and the ground falls away under it once it leaves a roof behind), the step is a
+        descent to ``explore_max_alt_m`` above it: from higher up the LiDAR reaches nothing flat."""
         self._set(State.EXPLORE)
         n, e, d = self.tm.state.pos_ned_m
         alt = self.tm.state.rangefinder_m
@@ -735,12 +739,20 @@ class Recovery:
                     n, e, d - climb, tolerance_m=1.0, speed_m_s=0.5, timeout_s=self.p.move_timeout_s
                 )
             n, e, d = self.tm.state.pos_ned_m
-        if outward:
+        # The spiral flies level: where the ground falls away under it (a roof left behind, a valley)
+        # it ends up higher above the ground than the LiDAR reaches, and every look finds nothing.
+        beyond = math.isfinite(alt) and alt > self.p.explore_max_alt_m + 5.0
+        if outward and not beyond:
             alt = math.inf  # straight to the spiral's next step
         if blind and math.isfinite(alt) and alt > self.p.blind_descent_agl_m + 5.0:
             drop = alt - self.p.blind_descent_agl_m
             target = (n, e, d + drop)
             self._say(6, f"LiDAR sees nothing, ground {alt:.0f} m below: descending {drop:.0f} m")
+        elif beyond:
+            # the rangefinder measured the column below clear all the way down: descend within reach
+            drop = alt - self.p.explore_max_alt_m
+            target = (n, e, d + drop)
+            self._say(6, f"ground {alt:.0f} m below, beyond the LiDAR's reach: descending {drop:.0f} m")
         elif math.isfinite(alt) and alt + self.p.explore_climb_m <= self.p.explore_max_alt_m:
             target = (n, e, d - self.p.explore_climb_m)
             self._say(6, f"no flat site in view: climbing {self.p.explore_climb_m:.0f} m")

@@ -270,6 +270,36 @@ def test_out_of_lidar_range_descends_into_it_instead_of_climbing(
     assert td["safe"] is True, td
 
 
+TOWER = """
+[[buildings]]
+id = "tower"
+centre = [0.0, 40.0]
+size = [20.0, 20.0]
+height_m = 55.0
+roof = "tiles"
+pitched = { ridge_m = 59.7 }
+"""
+
+
+def test_high_above_the_ground_with_nothing_flat_in_reach_it_descends_before_it_moves(
+    start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """125 m above a bare field, a tower with a pitched roof 40 m east: the LiDAR (100 m) reaches only the
+    tower's roof, nothing flat. Moving on level (as the exploring spiral did) would keep the field out
+    of reach; the rangefinder measured the column below clear, so the companion descends to 90 m above
+    the field, finds it flat and lands on it. (Issue 20's campaign: city 2 launch 18 spent four extra
+    rounds 130 m up, seeing nothing flat.)"""
+    scenario = tmp_path / "tower_field.toml"
+    scenario.write_text(open_field_toml(250.0, 125.0) + TOWER)
+    rig = start_rig(["--scenario", str(scenario), "--autopilot", "px4", "--speed", "8"])
+    _raise_alarm(rig, "GPS spoofing", "high")
+    td = _wait_touchdown(rig, timeout_s=200)
+    log = rig.log_text()
+    assert "beyond the LiDAR's reach: descending 35 m" in log, log[-3000:]
+    assert "moving" not in log.split("beyond the LiDAR's reach")[0]  # no level step out of reach first
+    assert td["safe"] is True, td
+
+
 def test_an_lvlm_tier_flies_the_loop_and_a_lone_no_is_overridden(
     start_rig: Callable[..., Rig], tmp_path: Path
 ) -> None:
