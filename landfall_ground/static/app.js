@@ -111,7 +111,7 @@ function renderHeader() {
   $("source").textContent = page.source === "replay" ? "replay" : "live";
   const link = $("link");
   const state = page.link.state || "connecting";
-  link.textContent = `broker ${state}`;
+  link.textContent = page.source === "replay" ? page.link.detail : `broker ${state}`;
   link.className = "badge " + (state === "connected" ? "ok" : state === "down" ? "bad" : "warn");
   link.title = page.link.detail || "";
   const banner = $("banner");
@@ -320,14 +320,14 @@ $("slider").addEventListener("change", () => { sliding = false; });
 $("alarm-form").addEventListener("submit", async (ev) => {
   ev.preventDefault();
   const body = { vehicle: page.selected, reason: $("alarm-reason").value, criticality: $("alarm-criticality").value };
-  const li = el("li", {}, "sending...");
-  $("alarm-answers").prepend(li);
+  const said = $("alarm-sent");
+  said.textContent = "sending...";
   try {
     const r = await fetch("api/alarm", { method: "POST", headers: { "content-type": "application/json" }, body: JSON.stringify(body) });
     const answer = await r.json();
-    li.textContent = r.ok ? `sent '${body.reason}' (${body.criticality}): waiting for the vehicle's answer` : `not sent: ${answer.error}`;
+    said.textContent = r.ok ? `sent '${body.reason}' (${body.criticality}): the vehicle's answer comes below` : `not sent: ${answer.error}`;
   } catch (err) {
-    li.textContent = `not sent: ${err}`;
+    said.textContent = `not sent: ${err}`;
   }
 });
 setInterval(() => { if (page.source === "live") schedule(); }, 1000); // "no telemetry for N s" keeps counting
