@@ -50,6 +50,7 @@ __all__ = ["NotARecord", "RecordedFlight", "Replay", "find_session", "load_recor
 
 THUMBNAIL_WIDTH_PX = 320  # as the companion's feed sends them
 CLOCK_PERIOD_S = 0.25  # wall seconds between the slider's updates while playing
+SEEK_TOLERANCE_S = 1e-5  # ten times the rounding of a unix time in a double
 
 
 class NotARecord(ValueError):
@@ -223,7 +224,8 @@ class Replay:
             raise ValueError(f"seek time must be a finite number, got {t}")
         t = min(max(t, self.flight.t0), self.flight.t1)
         self.station.reset()
-        self._next = bisect.bisect_right(self._times, t)
+        # the page's slider counts seconds from the start: t0 + (t1 - t0) may miss t1 by a rounding
+        self._next = bisect.bisect_right(self._times, t + SEEK_TOLERANCE_S)
         for m in self.flight.messages[: self._next]:
             self.station.add(m, tell=False)
         self._pos_t = t

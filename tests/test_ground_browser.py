@@ -110,7 +110,7 @@ def flight(chromium: str, tmp_path_factory: pytest.TempPathFactory) -> Iterator[
     }
     ground = Ground(
         tmp / "ground.log",
-        *("--mqtt", f"127.0.0.1:{broker.port}", "--mqtt-user", "operator"),
+        *("--mqtt", f"127.0.0.1:{broker.port}", "--mqtt-user", "operator", "--basemap", "scenario1"),
         env={PASSWORD_ENV: "not-checked-by-this-broker"},
     )
     with (
@@ -181,6 +181,9 @@ def test_live_page_shows_the_landing_as_it_happens(flight: Flight) -> None:
     expect(page.locator("#outcome")).to_have_text("landed: landed")
     expect(page.locator("#touchdown")).to_have_count(1)
     assert len(page.locator("#track polyline").get_attribute("points").split()) > 10
+    expect(page.locator("#track image")).to_have_count(1)  # over simbridge's top view of the world
+    assert page.locator("#track image").evaluate("i => i.getBBox().width") > 400  # metres: the world
+    expect(page.locator("#track-scale")).to_contain_text("over scenario1")
     shot(page, flight.tmp, "ground-live.png")
 
 
@@ -235,14 +238,12 @@ def test_the_record_replays_with_a_time_slider(flight: Flight) -> None:
         expect(page.locator("#play")).to_have_text("play")  # played to its end
         shot(page, flight.tmp, "ground-replay.png")
         # back to the start with the slider: the alarm only, no round yet
-        t0 = float(page.locator("#slider").get_attribute("min") or "nan")
-        page.locator("#slider").fill(str(t0))
+        page.locator("#slider").fill("0")
         expect(page.locator("#rounds-empty")).to_be_visible()
         expect(page.locator("#outcome")).to_have_text("no outcome yet")
         expect(page.locator("#timeline li")).to_have_count(1)
         # and to the end again: the landing
-        t1 = page.locator("#slider").get_attribute("max")
-        page.locator("#slider").fill(str(t1))
+        page.locator("#slider").fill(str(page.locator("#slider").get_attribute("max")))
         expect(page.locator("#outcome")).to_contain_text("landed")
         expect(page.locator(".round")).to_have_count(len({r["round"] for r in ranks}))
     finally:

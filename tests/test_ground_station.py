@@ -9,6 +9,7 @@ import asyncio
 import base64
 import contextlib
 import json
+import re
 import subprocess
 import sys
 from collections.abc import AsyncIterator, Callable
@@ -336,3 +337,15 @@ def test_page_bundle_is_shipped_whole_and_needs_no_network() -> None:
         text = p.read_text()
         assert "http://" not in text.replace("http://www.w3.org/2000/svg", "")
         assert "https://" not in text
+
+
+def test_the_companion_imports_nothing_of_the_ground_station() -> None:
+    """The web server stays on the ground: no companion module imports it or its web stack, even lazily."""
+    root = Path(__file__).resolve().parents[1]
+    pattern = re.compile(
+        r"^\s*(from|import)\s+(landfall_ground|starlette|uvicorn|websockets)\b", re.MULTILINE
+    )
+    offenders = [
+        str(p.relative_to(root)) for p in (root / "companion").rglob("*.py") if pattern.search(p.read_text())
+    ]
+    assert offenders == []

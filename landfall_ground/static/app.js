@@ -285,8 +285,8 @@ function renderReplay() {
   if (!replaying) return;
   const c = page.clock;
   const slider = $("slider");
-  slider.min = c.t0; slider.max = c.t1;
-  if (!sliding) slider.value = c.t;
+  slider.min = 0; slider.max = c.t1 - c.t0; // seconds into the record: small numbers keep their precision
+  if (!sliding) slider.value = c.t - c.t0;
   $("clock").textContent = `${(c.t - c.t0).toFixed(1)} / ${(c.t1 - c.t0).toFixed(1)} s`;
   $("play").textContent = c.playing ? "pause" : "play";
   $("speed").value = String(c.speed);
@@ -315,7 +315,10 @@ function send(msg) { if (socket && socketUp) socket.send(JSON.stringify(msg)); }
 $("vehicles").addEventListener("change", (ev) => { page.selected = ev.target.value; drawn.clear(); schedule(); });
 $("play").addEventListener("click", () => send({ type: page.clock && page.clock.playing ? "pause" : "play" }));
 $("speed").addEventListener("change", (ev) => send({ type: "speed", speed: Number(ev.target.value) }));
-$("slider").addEventListener("input", (ev) => { sliding = true; send({ type: "seek", t: Number(ev.target.value) }); });
+$("slider").addEventListener("input", (ev) => {
+  sliding = true;
+  if (page.clock) send({ type: "seek", t: page.clock.t0 + Number(ev.target.value) });
+});
 $("slider").addEventListener("change", () => { sliding = false; });
 $("alarm-form").addEventListener("submit", async (ev) => {
   ev.preventDefault();
