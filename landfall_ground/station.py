@@ -4,17 +4,18 @@ malformed-payload count, and the pages to tell of each change.
 Every change becomes one event, a JSON object with a ``type``, serialised once and queued to every
 watching page (a WebSocket each):
 
-===========  ==================================================================================
-type         fields
-===========  ==================================================================================
-``hello``    the whole picture, sent first to each page and after a replay seek: ``source``
-             (``live``/``replay``), ``link``, ``malformed``, ``alarms``, ``clock``, ``vehicles``
-             (id -> the messages kept, oldest first)
-``msg``      one checked feed message: ``vehicle``, ``leaf``, ``body``, ``t``
-``link``     the broker link: ``state`` (``connecting``, ``connected``, ``down``), ``detail``
-``malformed`` the count so far and the newest few (``topic``, ``problem``, ``t``)
-``clock``    a replay's position: ``t``, ``t0``, ``t1``, ``playing``, ``speed``
-===========  ==================================================================================
+=============  ================================================================================
+type           fields
+=============  ================================================================================
+``hello``      the whole picture, sent first to each page and after a replay seek: ``source``
+               (``live``/``replay``), ``link``, ``malformed``, ``recent``, ``alarms``,
+               ``basemap``, ``clock``, ``vehicles`` (id -> the messages kept, oldest first)
+``msg``        one checked feed message: ``vehicle``, ``leaf``, ``body``, ``t``
+``link``       the broker link: ``state`` (``connecting``, ``connected``, ``down``), ``detail``
+``malformed``  the count so far (``malformed``) and the newest few (``recent``: ``topic``,
+               ``problem``, ``t``)
+``clock``      a replay's position: ``t``, ``t0``, ``t1``, ``playing``, ``speed``
+=============  ================================================================================
 
 A page too slow to take its events (its queue is full) is dropped; it reconnects and starts again
 from a ``hello``. Histories are bounded: the newest ``TELEMETRY_KEPT`` telemetry samples and

@@ -256,6 +256,22 @@ async def test_live_feed_takes_vehicles_counts_garbage_and_survives_the_broker(
         await asyncio.gather(task, return_exceptions=True)
 
 
+async def test_a_broker_down_at_start_is_shown_until_it_comes(broker: Callable[..., Broker]) -> None:
+    port = free_tcp_port()  # nobody listens here yet
+    station = Station("live")
+    feed = LiveFeed(BrokerParams("127.0.0.1", port), station)
+    task = asyncio.create_task(feed.run())
+    try:
+        await until(lambda: station.link["state"] == "down", 10)
+        assert "refused" in station.link["detail"].lower()
+        assert feed.connections == 0
+        broker(port)
+        await until(lambda: station.link["state"] == "connected", 30)
+    finally:
+        task.cancel()
+        await asyncio.gather(task, return_exceptions=True)
+
+
 @contextlib.asynccontextmanager
 async def serving(station: Station, source: LiveFeed | Replay) -> AsyncIterator[str]:
     """The app on a real uvicorn on loopback; its base URL."""
