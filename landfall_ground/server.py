@@ -10,7 +10,8 @@ route                  what
 ``GET /api/state``     the ``hello`` as JSON (what a page would start from)
 ``POST /api/alarm``    ``{"vehicle", "reason", "criticality"}``: an alarm to the vehicle's ``alarm/in``;
                        202 once published (the companion answers on ``alarm/result``), 403 when alarms
-                       are off (the reason says why), 400 for a bad form, 503 with the broker away
+                       are off (the reason says why) or the request comes from another site's page,
+                       415 unless JSON, 400 for a bad form, 503 with the broker away
 ``GET /basemap.png``   the simulated world's top view under the trajectory (``--basemap``), else 404
 =====================  ==================================================================================
 """
@@ -23,6 +24,7 @@ import json
 import logging
 from collections.abc import AsyncIterator
 from typing import Any
+from urllib.parse import urlsplit
 
 from starlette.applications import Starlette
 from starlette.requests import Request
@@ -65,6 +67,15 @@ def create_app(station: Station, source: LiveFeed | Replay, basemap_png: bytes |
     async def alarm(request: Request) -> Response:
         if not isinstance(source, LiveFeed) or not station.alarms.get("enabled"):
             return _refused(403, str(station.alarms.get("why", "alarms are off")))
+        # another site's page in the operator's browser must not start a landing: JSON only (a
+        # cross-site JSON POST needs a CORS preflight, which this server never grants) and same origin
+        if request.headers.get("content-type", "").split(";")[0].strip() != "application/json":
+            return _refused(415, "the form must be sent as application/json")
+        origin = request.headers.get("origin")
+        if origin is not None and urlsplit(origin).netloc != request.headers.get("host"):
+            return _refused(
+                403, f"alarms are taken from this ground station's own page only (origin {origin})"
+            )
         try:
             form = json.loads(await request.body())
         except ValueError:

@@ -328,6 +328,14 @@ async def test_alarms_from_the_page_go_only_where_allowed(broker: Callable[..., 
             assert bad.status_code == 400
             assert "criticality must be one of low, high, critical" in bad.json()["error"]
             await until(lambda: len(received) == 1, 10)
+            form = json.dumps({"vehicle": "open", "reason": "storm", "criticality": "high"})
+            plain = await http.post("/api/alarm", content=form, headers={"content-type": "text/plain"})
+            assert plain.status_code == 415  # what another site's page could send without a preflight
+            foreign = await http.post(
+                "/api/alarm", json=json.loads(form), headers={"origin": "http://evil.test"}
+            )
+            assert foreign.status_code == 403
+            assert "own page only" in foreign.json()["error"]
             station.alarms = {"enabled": False, "why": "alarms are off: no broker credentials"}
             off = await http.post(
                 "/api/alarm", json={"vehicle": "open", "reason": "storm", "criticality": "high"}

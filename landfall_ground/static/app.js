@@ -139,7 +139,7 @@ function renderStatus(v) {
   s.textContent = page.source === "replay" ? "recorded" : status || "unknown";
   s.className = status === "online" ? "online" : status === "offline" ? "offline" : "";
   const t = v && v.telemetry;
-  $("st-mode").textContent = t ? `${t.mode || "custom " + t.custom_mode}${t.armed ? ", armed" : t.armed === false ? ", disarmed" : ""}` : "-";
+  $("st-mode").textContent = t ? `${t.mode || (t.custom_mode === undefined ? "?" : "custom " + t.custom_mode)}${t.armed ? ", armed" : t.armed === false ? ", disarmed" : ""}` : "-";
   let alt = t ? t.agl_m : null;
   if (alt === null && v && v.track.length) alt = -v.track[v.track.length - 1][2];
   $("st-alt").textContent = t && typeof t.agl_m === "number" ? `${t.agl_m.toFixed(1)} m above ground` : fmt(alt, "m up (local frame)");
@@ -213,7 +213,7 @@ function frame(rank) {
 function confirmation(c) {
   const k = c.check || {};
   const lidar = typeof k.points === "number"
-    ? `LiDAR ${k.points} returns, ${fmt(k.roughness_m === null ? null : k.roughness_m * 100, "cm rough", 0)}, obstacle ${fmt(k.obstacle_m, "m")}, edge ${k.edge_distance_m === null ? "none in view" : fmt(k.edge_distance_m, "m")}`
+    ? `LiDAR ${k.points} returns, ${fmt(typeof k.roughness_m === "number" ? k.roughness_m * 100 : null, "cm rough", 0)}, obstacle ${fmt(k.obstacle_m, "m")}, edge ${typeof k.edge_distance_m === "number" ? fmt(k.edge_distance_m, "m") : "none in view"}`
     : "no LiDAR check";
   return el("div", { class: "confirm " + (c.accept ? "accept" : "reject") },
     el("b", {}, c.accept ? "confirmed" : "rejected"), ` by ${c.tier || "?"} in ${fmt(c.latency_s, "s", 2)}: `,
