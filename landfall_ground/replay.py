@@ -23,7 +23,7 @@ malformed (and shown), never fatal. A directory that holds no record is a :class
 
 :class:`Replay` plays the messages into a :class:`~landfall_ground.station.Station` at ``speed`` times
 the recorded pace; the page's slider seeks (the station is rebuilt up to that instant and every
-page gets the whole picture again), pauses and resumes.
+page gets the whole picture again), its buttons pause, resume and step one event back or forward.
 """
 
 from __future__ import annotations
@@ -193,7 +193,7 @@ def _thumbnail(body: dict[str, Any], session_dir: Path) -> dict[str, Any]:
 
 class Replay:
     """Plays a :class:`RecordedFlight` into ``station``: :meth:`run` until cancelled; :meth:`seek`,
-    :meth:`play`, :meth:`pause` and :meth:`set_speed` steer it (the page's controls)."""
+    :meth:`play`, :meth:`pause`, :meth:`step` and :meth:`set_speed` steer it (the page's controls)."""
 
     def __init__(
         self,
@@ -240,6 +240,12 @@ class Replay:
     def pause(self) -> None:
         self.playing = False
         self._tell_clock()
+
+    def step(self, by: int) -> None:
+        """Pause and show ``by`` more messages (fewer when negative): event by event review."""
+        self.playing = False
+        shown = min(max(self._next + by, 1), len(self._times))
+        self.seek(self._times[shown - 1] if self._times else self.flight.t0)
 
     def set_speed(self, speed: float) -> None:
         if not speed > 0:

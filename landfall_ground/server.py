@@ -5,8 +5,8 @@ route                  what
 =====================  ==================================================================================
 ``GET /``              the page (``landfall_ground/static/``, shipped in the package: no CDN)
 ``WS /ws``             the station's events (:mod:`landfall_ground.station`), first a ``hello``; a replay
-                       also takes ``{"type": "seek", "t"}``, ``play``, ``pause``, ``{"type": "speed",
-                       "speed"}`` from the page
+                       also takes ``{"type": "seek", "t"}``, ``play``, ``pause``, ``{"type": "step",
+                       "by": N}``, ``{"type": "speed", "speed"}`` from the page
 ``GET /api/state``     the ``hello`` as JSON (what a page would start from)
 ``POST /api/alarm``    ``{"vehicle", "reason", "criticality"}``: an alarm to the vehicle's ``alarm/in``;
                        202 once published (the companion answers on ``alarm/result``), 403 when alarms
@@ -157,10 +157,12 @@ def _control(text: str, source: LiveFeed | Replay) -> str | None:
             source.play()
         elif kind == "pause":
             source.pause()
+        elif kind == "step":
+            source.step(int(msg["by"]))
         elif kind == "speed":
             source.set_speed(float(msg["speed"]))
         else:
-            return f"unknown control {kind!r} (seek, play, pause, speed)"
+            return f"unknown control {kind!r} (seek, play, pause, step, speed)"
     except (KeyError, TypeError, ValueError) as exc:
         return f"bad {kind} control: {exc}"
     return None

@@ -242,6 +242,10 @@ def test_the_record_replays_with_a_time_slider(flight: Flight) -> None:
         expect(page.locator("#rounds-empty")).to_be_visible()
         expect(page.locator("#outcome")).to_have_text("no outcome yet")
         expect(page.locator("#timeline li")).to_have_count(1)
+        page.click("#forward")  # event by event
+        expect(page.locator("#timeline li")).to_have_count(2)
+        page.click("#back")
+        expect(page.locator("#timeline li")).to_have_count(1)
         # and to the end again: the landing
         page.locator("#slider").fill(str(page.locator("#slider").get_attribute("max")))
         expect(page.locator("#outcome")).to_contain_text("landed")

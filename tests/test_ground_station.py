@@ -183,6 +183,12 @@ async def test_replay_plays_seeks_and_pauses(tmp_path: Path) -> None:
         assert [m.leaf for m in station.vehicles[flight.session].messages()] == ["alarm"]
         with pytest.raises(ValueError, match="finite"):
             replay.seek(float("nan"))
+        replay.step(2)  # event by event: the alarm, then its first state, then the ranking
+        assert [m.leaf for m in station.vehicles[flight.session].messages()] == ["alarm", "state", "decision"]
+        replay.step(-1)
+        assert [m.leaf for m in station.vehicles[flight.session].messages()] == ["alarm", "state"]
+        replay.step(-10)  # never before the first event
+        assert [m.leaf for m in station.vehicles[flight.session].messages()] == ["alarm"]
         replay.play()
         await until(lambda: not replay.playing, 10)
         assert len(station.vehicles[flight.session].messages()) == len(flight.messages)

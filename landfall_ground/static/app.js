@@ -314,6 +314,8 @@ function send(msg) { if (socket && socketUp) socket.send(JSON.stringify(msg)); }
 
 $("vehicles").addEventListener("change", (ev) => { page.selected = ev.target.value; drawn.clear(); schedule(); });
 $("play").addEventListener("click", () => send({ type: page.clock && page.clock.playing ? "pause" : "play" }));
+$("back").addEventListener("click", () => send({ type: "step", by: -1 }));
+$("forward").addEventListener("click", () => send({ type: "step", by: 1 }));
 $("speed").addEventListener("change", (ev) => send({ type: "speed", speed: Number(ev.target.value) }));
 $("slider").addEventListener("input", (ev) => {
   sliding = true;
