@@ -74,6 +74,8 @@ def parse(topic: str, payload: bytes | bytearray | str, prefix: str, now: float)
         body = json.loads(payload, parse_constant=_no_constants)
     except (UnicodeDecodeError, ValueError) as exc:  # JSONDecodeError is a ValueError
         raise MalformedPayload(topic, f"not JSON ({exc})") from None
+    except RecursionError:
+        raise MalformedPayload(topic, "not JSON this ground station reads: nested too deep") from None
     return parse_body(topic, vehicle, leaf, body, now)
 
 

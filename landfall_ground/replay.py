@@ -110,6 +110,8 @@ def load_record(path: Path) -> RecordedFlight:
                 row = json.loads(line, parse_constant=_refuse_constant)
             except ValueError as exc:  # JSONDecodeError and UnicodeDecodeError among them
                 raise ValueError(f"not JSON ({exc})") from None
+            except RecursionError:
+                raise ValueError("not JSON this ground station reads: nested too deep") from None
             if not isinstance(row, dict):
                 raise ValueError(f"expected a JSON object, got {type(row).__name__}")
             t = row.get("time_unix_s")

@@ -78,7 +78,7 @@ def create_app(station: Station, source: LiveFeed | Replay, basemap_png: bytes |
             )
         try:
             form = json.loads(await request.body())
-        except ValueError:
+        except (ValueError, RecursionError):
             return _refused(400, "the form must be JSON")
         if not isinstance(form, dict) or not isinstance(form.get("vehicle"), str):
             return _refused(400, "the form must be a JSON object naming the vehicle")
@@ -145,7 +145,7 @@ def _control(text: str, source: LiveFeed | Replay) -> str | None:
     """Apply a page's control message; what was wrong with it, or None."""
     try:
         msg: Any = json.loads(text)
-    except ValueError:
+    except (ValueError, RecursionError):
         return "a control message must be JSON"
     kind = msg.get("type") if isinstance(msg, dict) else None
     if not isinstance(source, Replay):

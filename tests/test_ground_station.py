@@ -67,6 +67,7 @@ def test_parse_accepts_the_feed_and_ignores_other_topics() -> None:
         ("status", b"{not json", "not JSON"),
         ("status", b"\xff\xfe", "not JSON"),
         ("status", b"[1, 2]", "expected a JSON object, got list"),
+        ("status", b"[" * 100_000 + b"]" * 100_000, "nested too deep"),
         ("status", b'{"state": "sleepy"}', 'state must be "online" or "offline"'),
         ("telemetry", b'{"agl_m": NaN}', "NaN is not JSON"),
         ("telemetry", b'{"agl_m": "high"}', "agl_m must be a number"),
@@ -142,6 +143,7 @@ def write_record(root: Path) -> Path:
         rec.record_event("outcome", {"state": "landed", "rounds": 1, "reason": "landed"})
         rec.record_event("rank", {"round": 2, "candidates": "not a list"})
     with (rec.session_dir / "events.jsonl").open("ab") as fh:
+        fh.write(b'{"a":' * 50_000 + b"\n")  # nested beyond any parser's patience
         fh.write(b'{"time_unix_s": 1, "kind": "sta')
     return rec.session_dir
 
@@ -160,8 +162,9 @@ def test_replay_turns_a_record_into_the_feed(tmp_path: Path) -> None:
     _, g, r = (int(v) for v in thumb[150 // 3, 600 // 3])  # the chosen box's top edge: green
     assert g > 150 > r
     assert flight.messages[-1].body["kind"] == "outcome"
-    problems = sorted(e.problem for e in flight.rejected)  # the bad rank and the torn line, counted
-    assert len(problems) == 2
+    problems = sorted(e.problem for e in flight.rejected)  # the bad rank, the deep and the torn line
+    assert len(problems) == 3
+    assert any("nested too deep" in p for p in problems)
     assert any("candidates must be a list of boxes" in p for p in problems)
     assert any("not JSON" in p for p in problems)
 
@@ -171,7 +174,7 @@ async def test_replay_plays_seeks_and_pauses(tmp_path: Path) -> None:
     flight = load_record(tmp_path / "rec")
     station = Station("replay")
     replay = Replay(flight, station, speed=1000.0)
-    assert station.malformed == 2
+    assert station.malformed == 3
     player = asyncio.create_task(replay.run())
     try:
         await until(lambda: not replay.playing, 10)  # played to the end, then stopped
