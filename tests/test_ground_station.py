@@ -382,3 +382,34 @@ def test_the_companion_imports_nothing_of_the_ground_station() -> None:
         str(p.relative_to(root)) for p in (root / "companion").rglob("*.py") if pattern.search(p.read_text())
     ]
     assert offenders == []
+
+
+async def test_the_websocket_starts_with_the_picture_and_answers_bad_controls(tmp_path: Path) -> None:
+    from websockets.asyncio.client import connect
+
+    write_record(tmp_path / "rec")
+    flight = load_record(tmp_path / "rec")
+    station = Station("replay")
+    replay = Replay(flight, station, speed=1000.0)
+    async with serving(station, replay) as url, connect(url.replace("http", "ws") + "/ws") as ws:
+        hello = json.loads(await ws.recv())
+        assert hello["type"] == "hello"
+        assert hello["malformed"] == 3
+        await until(lambda: not replay.playing, 10)
+        for bad, says in [
+            ("not json", "must be JSON"),
+            ('{"type": "rewind"}', "unknown control 'rewind'"),
+            ('{"type": "seek"}', "bad seek control"),
+            ('{"type": "speed", "speed": -1}', "speed must be > 0"),
+            ("[" * 100_000, "must be JSON"),
+        ]:
+            await ws.send(bad)
+            while (event := json.loads(await ws.recv()))["type"] != "error":
+                pass  # the clock and messages of the replay's play-through
+            assert says in event["detail"]
+        await ws.send(json.dumps({"type": "seek", "t": flight.t0}))
+        while (event := json.loads(await ws.recv()))["type"] != "hello":
+            pass
+        (messages,) = event["vehicles"].values()
+        assert [m["leaf"] for m in messages] == ["alarm"]
+        assert event["clock"]["t"] == flight.t0
