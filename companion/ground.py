@@ -361,7 +361,9 @@ def telemetry_snapshot(state: Any) -> dict[str, Any]:
         "custom_mode": state.custom_mode,
         "mode": mode_name(state.autopilot, state.base_mode, state.custom_mode),
         # seconds since the autopilot's last heartbeat: the companion's link to it (null: never heard)
-        "link_age_s": num(time.monotonic() - beat, 1) if (beat := state.stamps.get("heartbeat")) else None,
+        "link_age_s": num(time.monotonic() - beat, 1)
+        if (beat := state.stamps.get("heartbeat")) is not None
+        else None,
         "armed": state.armed,
         "landed": state.landed_state == 1,
         "battery_pct": num(state.battery_pct, 1),
