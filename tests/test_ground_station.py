@@ -413,3 +413,23 @@ async def test_the_websocket_starts_with_the_picture_and_answers_bad_controls(tm
         (messages,) = event["vehicles"].values()
         assert [m["leaf"] for m in messages] == ["alarm"]
         assert event["clock"]["t"] == flight.t0
+
+
+def test_alarms_are_off_without_credentials_and_say_how() -> None:
+    from landfall_ground.cli import PASSWORD_ENV, _alarm_policy, _parser, parse_hostport
+
+    live = _parser().parse_args(["--mqtt", "broker.local"])
+    off = _alarm_policy(live, None)
+    assert off["enabled"] is False
+    assert f"--mqtt-user USER and the password in ${PASSWORD_ENV}" in str(off["why"])
+    with_user = _parser().parse_args(["--mqtt", "broker.local", "--mqtt-user", "op"])
+    assert _alarm_policy(with_user, None)["enabled"] is False  # a user without its password
+    assert _alarm_policy(with_user, "pw") == {"enabled": True, "why": ""}
+    replay = _parser().parse_args(["--replay", "somewhere"])
+    assert _alarm_policy(replay, "pw")["enabled"] is False
+    assert parse_hostport("broker.local", 1883) == ("broker.local", 1883)
+    assert parse_hostport("10.0.0.2:8883", 1883) == ("10.0.0.2", 8883)
+    assert parse_hostport("[::1]:1884", 1883) == ("::1", 1884)
+    for bad in ("host:port", ":1883", "h:70000", "[::1]x"):
+        with pytest.raises(ValueError, match=re.escape(repr(bad))):
+            parse_hostport(bad, 1883)
