@@ -5,7 +5,7 @@ PYTHON ?= python3
 STAMP := $(VENV)/.installed
 DEPTH_STAMP := $(VENV)/.installed-depth
 
-.PHONY: demo test lint bench clean mosquitto model
+.PHONY: demo test lint bench clean mosquitto chromium model
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -13,13 +13,13 @@ $(STAMP): pyproject.toml
 	$(VENV)/bin/pip install --quiet -e '.[dev,sim]'
 	touch $(STAMP)
 
-# Tests also exercise the optional monocular-depth, bench (report figures, rationale clusters) and campaign
-# (Ray) extras.
+# Tests also exercise the optional monocular-depth, bench (report figures, rationale clusters), campaign
+# (Ray) and ground (landfall-ground's web page, Playwright) extras.
 # torch 2.13.0 is pinned first so pip takes the CPU build (a plain "torch" would pull a multi-GB CUDA
 # build); the demo does not need it.
 $(DEPTH_STAMP): $(STAMP)
 	$(VENV)/bin/pip install --quiet 'torch==2.13.0'
-	$(VENV)/bin/pip install --quiet -e '.[dev,sim,depth,bench,train,campaign]'
+	$(VENV)/bin/pip install --quiet -e '.[dev,sim,depth,bench,train,campaign,ground]'
 	touch $(DEPTH_STAMP)
 
 demo: $(STAMP)
@@ -34,7 +34,16 @@ mosquitto:
 	     (apt-get update -q >/dev/null && apt-get install -y -q mosquitto >/dev/null)); \
 	  else echo "the MQTT tests need mosquitto: sudo apt-get install mosquitto" >&2; exit 1; fi
 
-test: $(DEPTH_STAMP) mosquitto
+# landfall-ground's browser tests drive Debian's chromium through Playwright (Playwright's own browser
+# download is not used): installed when missing and we are root; otherwise those tests skip and say how.
+chromium:
+	@command -v chromium >/dev/null || \
+	  if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	    (apt-get install -y -q chromium >/dev/null 2>&1 || \
+	     (apt-get update -q >/dev/null && apt-get install -y -q chromium >/dev/null)); \
+	  else echo "the browser tests need chromium: sudo apt-get install chromium (they skip without it)" >&2; fi
+
+test: $(DEPTH_STAMP) mosquitto chromium
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/mypy
 	$(VENV)/bin/pytest

@@ -5,18 +5,22 @@ Topics, under ``<topic_prefix>/<vehicle_id>/``:
 =================  ==========================================================================  =======
 topic              payload (JSON)                                                              retained
 =================  ==========================================================================  =======
-``status``         ``{"state": "online"|"offline", "t": unix time}``; ``offline`` is also the  yes
-                   broker's last will, sent when the daemon vanishes without saying goodbye
+``status``         ``{"state": "online"|"offline", "t": unix time, "alarm_intake": bool}``;    yes
+                   ``offline`` is also the broker's last will, sent when the daemon vanishes
+                   without saying goodbye
 ``alarm``          every alarm: reason, code, criticality, source, ``result`` (what the
                    daemon did with it: accepted, in_progress, denied, temporarily_rejected)    no
-``state``          each recovery state change (``state``, ``round``), and ``outcome``           no
+``state``          each recovery state change (``state``, ``round``, the vehicle's             no
+                   ``pos_ned_m``), and ``outcome``
 ``decision``       each round's ranking (candidates with boxes and geometry, ``chosen``,       no
                    ``rationale``, ``tier``, ``latency_s``, ``thumbnail_jpeg_b64``: the frame
-                   with the candidates boxed and the chosen one in green) and each
+                   with the candidates boxed and the chosen one in green, ``frame_px``: the
+                   frame's [width, height], the boxes' pixels) and each
                    confirmation (``accept``, ``rationale``, the LiDAR check)
 ``fault``          sensor faults the recovery met (``sensor_fault``)                           no
-``telemetry``      position NED, velocity, altitude above ground, mode, armed, battery, GPS     no
-                   fix, at ``telemetry_hz``
+``telemetry``      position NED, velocity, altitude above ground, mode (``custom_mode`` and    no
+                   its name), armed, battery, GPS fix, seconds since the autopilot's last
+                   heartbeat (``link_age_s``), at ``telemetry_hz``
 ``alarm/in``       (subscribed, only with ``alarm_intake = true``) ``{"reason": text,
                    "criticality": "low"|"high"|"critical", "code": optional int}``; the
                    answer goes to ``alarm/result``
@@ -147,6 +151,7 @@ class GroundFeed:
         head = {"stage": "rank", **body}
         if frame is None or not candidates:
             return head
+        head["frame_px"] = [int(frame.shape[1]), int(frame.shape[0])]  # what the boxes' pixels are of
         boxes = [c["box"] for c in candidates]
         width = self.p.thumbnail_width_px
 
@@ -158,7 +163,8 @@ class GroundFeed:
 
     # ------------------------------------------------------------------ the connection
     def _status(self, state: str) -> bytes:
-        return json.dumps({"state": state, "t": time.time()}).encode()
+        # alarm_intake: whether a ground station may offer alarms to this vehicle over ``alarm/in``
+        return json.dumps({"state": state, "t": time.time(), "alarm_intake": self.p.alarm_intake}).encode()
 
     def _client(self) -> Any:
         import aiomqtt
@@ -329,6 +335,19 @@ class TeeRecord:
         return next((p for p in paths if p is not None), None)
 
 
+def mode_name(autopilot: int, base_mode: int, custom_mode: int) -> str | None:
+    """The autopilot's flight mode as its ground stations name it (PX4 ``OFFBOARD``, ArduCopter
+    ``GUIDED``), from pymavlink's tables; None before the first heartbeat or for an unknown mode."""
+    from pymavlink import mavutil
+
+    if autopilot == mavutil.mavlink.MAV_AUTOPILOT_PX4:
+        return str(mavutil.interpret_px4_mode(base_mode, custom_mode))
+    if autopilot == mavutil.mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA:
+        name = mavutil.mode_mapping_acm.get(custom_mode)
+        return None if name is None else str(name)
+    return None
+
+
 def telemetry_snapshot(state: Any) -> dict[str, Any]:
     """The ``telemetry`` payload from a ``VehicleState``."""
 
@@ -340,6 +359,11 @@ def telemetry_snapshot(state: Any) -> dict[str, Any]:
         "vel_ned_m_s": [num(v) for v in state.vel_ned_m_s],
         "agl_m": num(state.rangefinder_m),
         "custom_mode": state.custom_mode,
+        "mode": mode_name(state.autopilot, state.base_mode, state.custom_mode),
+        # seconds since the autopilot's last heartbeat: the companion's link to it (null: never heard)
+        "link_age_s": num(time.monotonic() - beat, 1)
+        if (beat := state.stamps.get("heartbeat")) is not None
+        else None,
         "armed": state.armed,
         "landed": state.landed_state == 1,
         "battery_pct": num(state.battery_pct, 1),

@@ -194,7 +194,9 @@ class Recovery:
 
     def _set(self, state: State) -> None:
         self.state = state
-        self.record.record_event("state", {"state": state.value, "round": self.round})
+        # where the vehicle was: a flight record's trajectory for a replay (the record keeps no telemetry)
+        where = [round(v, 2) for v in self.tm.state.pos_ned_m]
+        self.record.record_event("state", {"state": state.value, "round": self.round, "pos_ned_m": where})
 
     def _say(self, severity: int, text: str) -> None:
         self.log.info("%s", text)

@@ -76,6 +76,13 @@ class SimProcess:
 @pytest.fixture
 def start_sim(tmp_path: Path) -> Iterator[Callable[..., SimProcess]]:
     """Start simbridge sending to a fresh loopback port; stopped (SIGTERM) after the test."""
+    with sim_starter(tmp_path) as start:
+        yield start
+
+
+@contextlib.contextmanager
+def sim_starter(tmp_path: Path) -> Iterator[Callable[..., SimProcess]]:
+    """What ``start_sim`` gives, for any scope: every simbridge started is stopped on leaving."""
     started: list[SimProcess] = []
 
     def start(*args: str, port: int | None = None) -> SimProcess:
@@ -94,9 +101,11 @@ def start_sim(tmp_path: Path) -> Iterator[Callable[..., SimProcess]]:
         started.append(sim)
         return sim
 
-    yield start
-    for sim in started:
-        sim.stop()
+    try:
+        yield start
+    finally:
+        for sim in started:
+            sim.stop()
 
 
 @pytest.fixture
@@ -177,6 +186,13 @@ class Rig:
 @pytest.fixture
 def start_rig(start_sim: Callable[..., SimProcess], tmp_path: Path) -> Iterator[Callable[..., Rig]]:
     """simbridge (``sim_args``) sending to a companion (``companion_args``) on a fresh port."""
+    with rig_starter(start_sim, tmp_path) as start:
+        yield start
+
+
+@contextlib.contextmanager
+def rig_starter(start_sim: Callable[..., SimProcess], tmp_path: Path) -> Iterator[Callable[..., Rig]]:
+    """What ``start_rig`` gives, for any scope: every companion started is stopped on leaving."""
     procs: list[subprocess.Popen[bytes]] = []
 
     def start(
@@ -209,15 +225,17 @@ def start_rig(start_sim: Callable[..., SimProcess], tmp_path: Path) -> Iterator[
         proc, log = launch()
         return Rig(sim, proc, port, log, launch)
 
-    yield start
-    for p in procs:
-        if p.poll() is None:
-            p.terminate()
-            try:
-                p.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
+    try:
+        yield start
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.terminate()
+                try:
+                    p.wait(timeout=10)
+                except subprocess.TimeoutExpired:
+                    p.kill()
+                    p.wait()
 
 
 # Scenes for the onboard-reasoner tests (tests/views.py).

@@ -23,7 +23,15 @@ import numpy as np
 import pytest
 
 from companion.alarms import Alarm, Criticality, ReasonCode
-from companion.ground import GroundFeed, GroundParams, alarm_from_mqtt, annotated_thumbnail
+from companion.ground import (
+    GroundFeed,
+    GroundParams,
+    alarm_from_mqtt,
+    annotated_thumbnail,
+    mode_name,
+    telemetry_snapshot,
+)
+from companion.telemetry import VehicleState
 from tests.conftest import Broker, free_tcp_port, free_udp_port
 
 
@@ -111,6 +119,7 @@ async def test_a_round_reaches_the_ground_station(broker: Callable[..., Broker])
     assert rank["stage"] == "rank"
     assert rank["chosen"] == 1
     assert rank["rationale"] == "site 1 is clear"
+    assert rank["frame_px"] == [960, 540]  # the boxes' pixels are of this frame
     jpeg = base64.b64decode(rank["thumbnail_jpeg_b64"])
     thumb = cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR)
     assert thumb.shape == (180, 320, 3)
@@ -123,6 +132,7 @@ async def test_a_round_reaches_the_ground_station(broker: Callable[..., Broker])
     assert confirm["accept"] is True
     assert confirm["check"] == {"edge_distance_m": None, "roughness_m": 0.02}
     assert inbox.of("telemetry")[0]["pos_ned_m"] == [1.0, 2.0, -50.0]
+    assert inbox.of("status")[0]["alarm_intake"] is False  # a ground station offers no alarm form
     assert feed.dropped == 0
     assert feed.published >= 6
 
@@ -189,6 +199,17 @@ async def test_alarm_intake_takes_good_alarms_and_answers_bad_ones(broker: Calla
     assert [r["result"] for r in results[1:]] == ["malformed", "malformed"]
     assert "not JSON" in results[1]["error"]
     assert "criticality must be one of low, high, critical" in results[2]["error"]
+
+
+def test_telemetry_names_the_mode_and_the_autopilot_link_age() -> None:
+    state = VehicleState(autopilot=12, custom_mode=6 << 16, stamps={"heartbeat": time.monotonic() - 2.0})
+    snap = telemetry_snapshot(state)
+    assert snap["mode"] == "OFFBOARD"
+    assert 1.9 <= snap["link_age_s"] <= 3.0
+    assert telemetry_snapshot(VehicleState())["link_age_s"] is None  # never heard
+    assert mode_name(3, 0, 9) == "LAND"  # ArduCopter
+    assert mode_name(3, 0, 999) is None
+    assert mode_name(0, 0, 0) is None  # before the first heartbeat
 
 
 def test_alarm_payload_validation() -> None:

@@ -1,0 +1,5 @@
+import sys
+
+from landfall_ground.cli import main
+
+sys.exit(main())
