@@ -134,10 +134,38 @@ class VehicleController:
                 self._acks.pop(command, None)
         raise ControlError(f"no COMMAND_ACK for command {command} after {tries} tries")
 
+    async def _heard_in_mode(self, custom_mode: int, heartbeats: int = 2) -> int:
+        """Return MAV_RESULT_ACCEPTED once ``heartbeats`` heartbeats in a row, all received from now
+        on, show ``custom_mode``: the autopilot took the mode even if every COMMAND_ACK was lost."""
+        seen = self.tm.heartbeats
+        in_mode = 0
+        while in_mode < heartbeats:
+            with contextlib.suppress(TimeoutError):
+                await self.tm.wait_update(0.5)
+            if self.tm.heartbeats == seen:
+                continue
+            seen = self.tm.heartbeats
+            in_mode = in_mode + 1 if self.tm.state.custom_mode == custom_mode else 0
+        return MAV_RESULT_ACCEPTED
+
+    async def _mode_command(self, params: tuple[float, ...], custom_mode: int) -> int:
+        """DO_SET_MODE, answered by its COMMAND_ACK or, when a lossy link ate the ACKs, by the
+        heartbeats that show the mode taken; whichever comes first."""
+        ack = asyncio.ensure_future(self.command(mavlink2.MAV_CMD_DO_SET_MODE, *params, tries=5))
+        heard = asyncio.ensure_future(self._heard_in_mode(custom_mode))
+        try:
+            done, _ = await asyncio.wait({ack, heard}, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            for task in (ack, heard):
+                task.cancel()
+        if heard in done:
+            self._log.info("mode change seen in the heartbeats (its COMMAND_ACK was lost)")
+        return done.pop().result()
+
     async def set_mode(self, mode: Mode) -> None:
         params = self.flavour.set_mode[mode]
         for _ in range(5):
-            result = await self.command(mavlink2.MAV_CMD_DO_SET_MODE, *params)
+            result = await self._mode_command(params, self.flavour.modes[mode])
             if result == MAV_RESULT_ACCEPTED:
                 self._engaged_mode = self.flavour.modes[mode]
                 self._mode_set_at = time.monotonic()

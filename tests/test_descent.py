@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import math
 import time
+from typing import Any
 
 import pytest
 
 from companion.control import OperatorTakeover, TouchedDown
 from companion.daemon import Companion
+from companion.flavour import Mode
 from companion.guidance.descent import height_above_site
 from tests.autopilot_frames import ADDR, AUTOPILOT, feed, frames
 
@@ -140,3 +142,32 @@ def test_a_duplicated_heartbeat_counts_once() -> None:
     c.ctl.check_interruption()
     assert c.ctl.takeover is None
     assert c.tm.heartbeats == 2  # the engaged heartbeat and this one
+
+
+def test_a_mode_change_whose_acks_were_all_lost_is_seen_in_the_heartbeats() -> None:
+    """What a CI run over a lossy relay caught: every COMMAND_ACK of DO_SET_MODE dropped, the companion
+    aborted the recovery ("no COMMAND_ACK for command 176") though the autopilot had taken the mode.
+    Two heartbeats in the requested mode, received after the request, are the autopilot's answer too."""
+    import asyncio
+
+    c = Companion(mavlink_url="udp:14550", sensors=None, watch_battery_pct=None)
+    feed(c, AUTOPILOT.heartbeat_encode(2, 12, 128 | 29, LOITER, 4), AUTOPILOT.extended_sys_state_encode(0, 2))
+    sent: list[Any] = []
+    c.ctl._send_to = lambda msg, s, comp: sent.append(msg)  # the link eats every answer
+
+    async def fly() -> None:
+        task = asyncio.ensure_future(c.ctl.set_mode(Mode.GUIDED))
+        await asyncio.sleep(0.1)
+        assert sent
+        assert sent[0].command == 176  # DO_SET_MODE went out
+        feed(c, AUTOPILOT.heartbeat_encode(2, 12, 128 | 29, LOITER, 4))  # late: the mode before
+        await asyncio.sleep(0.6)
+        feed(c, AUTOPILOT.heartbeat_encode(2, 12, 128 | 29, OFFBOARD, 4))
+        await asyncio.sleep(0.6)
+        assert not task.done()  # one heartbeat is not yet an answer
+        feed(c, AUTOPILOT.heartbeat_encode(2, 12, 128 | 29, OFFBOARD, 4))
+        async with asyncio.timeout(2.0):
+            await task
+
+    asyncio.run(fly())
+    assert c.ctl._engaged_mode == OFFBOARD
