@@ -76,7 +76,7 @@ def _widths(text: str) -> tuple[int, int, int, int]:
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m landfall_train", description=__doc__.split("\n\n")[0])
     p.add_argument("--out", type=Path, default=MODEL, help="model path without suffix (.onnx and .json)")
-    p.add_argument("--cache", type=Path, default=Path("runs/train-cache"), help="rendered patches")
+    add_validation_args(p)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--steps", type=int, default=6000)
     p.add_argument("--batch", type=int, default=64)
@@ -84,14 +84,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-minutes", type=float, default=60.0, help="stop training after this long")
     p.add_argument("--train-cities", type=int, default=len(TRAIN_SEEDS), help="how many of TRAIN_SEEDS")
     p.add_argument("--per-city", type=int, default=PER_CITY)
-    p.add_argument("--val-cities", type=int, default=len(VAL_SEEDS))
-    p.add_argument("--val-per-city", type=int, default=VAL_PER_CITY)
     p.add_argument(
         "--vignettes", type=int, default=VIGNETTES, help="training vignettes (fine-grained scenes)"
     )
-    p.add_argument("--per-vignette", type=int, default=PER_VIGNETTE)
-    p.add_argument("--val-vignettes", type=int, default=VAL_VIGNETTES)
-    p.add_argument("--workers", type=int, default=2, help="processes rendering patches")
     p.add_argument("--threads", type=int, default=1, help="torch threads")
     p.add_argument(
         "--views", type=int, choices=VIEWS, default=4,
@@ -115,23 +110,45 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def cache_dir(root: Path, seed: int) -> Path:
+    """Where the patches of training seed ``seed`` are cached under ``root`` (by generator settings)."""
+    gen = f"{patches.GENERATOR}-{patches.PATCH_PX}-{patches.CITY_SIZE_M}-{patches.CITY_RES_M}-{seed}"
+    return root / hashlib.sha256(gen.encode()).hexdigest()[:12]
+
+
+def validation_paths(args: argparse.Namespace, seed: int) -> list[Path]:
+    """The validation renders' shards of training seed ``seed`` (rendered when not cached): the first
+    ``args.val_cities`` of ``VAL_SEEDS`` and ``args.val_vignettes`` vignettes from ``VAL_FIRST_VIGNETTE``."""
+    cache = cache_dir(args.cache, seed)
+    cities = VAL_SEEDS[: args.val_cities]
+    return patches.generate(
+        cache / f"val-{args.val_per_city}", cities, args.val_per_city, seed, args.workers
+    ) + patches.generate_vignettes(
+        cache / f"val-vignettes-{args.per_vignette}", VAL_FIRST_VIGNETTE, args.val_vignettes,
+        args.per_vignette, seed, args.workers,
+    )  # fmt: skip
+
+
+def add_validation_args(p: argparse.ArgumentParser) -> None:
+    """The options :func:`validation_paths` reads (shared with ``landfall_train.compare``)."""
+    p.add_argument("--cache", type=Path, default=Path("runs/train-cache"), help="rendered patches")
+    p.add_argument("--val-cities", type=int, default=len(VAL_SEEDS))
+    p.add_argument("--val-per-city", type=int, default=VAL_PER_CITY)
+    p.add_argument("--per-vignette", type=int, default=PER_VIGNETTE)
+    p.add_argument("--val-vignettes", type=int, default=VAL_VIGNETTES)
+    p.add_argument("--workers", type=int, default=2, help="processes rendering patches")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s", stream=sys.stderr)
     args = build_parser().parse_args(argv)
     command = "python -m landfall_train " + " ".join(sys.argv[1:] if argv is None else argv)
     t0 = time.monotonic()
-    gen = f"{patches.GENERATOR}-{patches.PATCH_PX}-{patches.CITY_SIZE_M}-{patches.CITY_RES_M}-{args.seed}"
-    cache = args.cache / hashlib.sha256(gen.encode()).hexdigest()[:12]
+    cache = cache_dir(args.cache, args.seed)
     train_seeds = TRAIN_SEEDS[: args.train_cities]
     val_seeds = VAL_SEEDS[: args.val_cities]
     _log.info("rendering %d + %d cities into %s", len(train_seeds), len(val_seeds), cache)
-    val_paths = patches.generate(
-        cache / f"val-{args.val_per_city}", val_seeds, args.val_per_city, args.seed, args.workers
-    ) + patches.generate_vignettes(
-        cache / f"val-vignettes-{args.per_vignette}", VAL_FIRST_VIGNETTE, args.val_vignettes,
-        args.per_vignette, args.seed, args.workers,
-    )  # fmt: skip
-    x_val, y_val, val_digest = patches.load_shards(val_paths)
+    x_val, y_val, val_digest = patches.load_shards(validation_paths(args, args.seed))
     if args.recalibrate:  # the validation renders only
         val = validation_views(x_val, y_val, args.seed)
         return recalibrate(args.out, val, (args.views, args.rank_views), command, val_digest)

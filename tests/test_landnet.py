@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import shutil
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -337,6 +338,37 @@ def test_landfall_train_smoke_renders_trains_and_exports(tmp_path: Path) -> None
 
     with pytest.raises(ValueError, match="reserved for evaluation"):
         generate(tmp_path / "x", [0], 1, 0)
+
+    # a second seed, merged with the first: one ONNX model whose logits are the members' mean
+    from landfall_train import compare, ensemble
+
+    other = tmp_path / "tiny1"
+    assert main([*argv, "--out", str(other), "--seed", "1"]) == 0
+    merged = tmp_path / "both"
+    assert (
+        ensemble.main([str(out.with_suffix(".onnx")), str(other.with_suffix(".onnx")), "--out", str(merged)])
+        == 0
+    )
+    both = LandNet.load(merged.with_suffix(".onnx"))
+    side = json.loads(merged.with_suffix(".json").read_text())
+    assert [m["seed"] for m in side["members"]] == [0, 1]
+    assert side["parity_max_abs_diff"] < 1e-4
+    img = _image(96, 128)
+    logit = [
+        math.log(r.clear_p / (1 - r.clear_p))
+        for r in (tiny.read(img), LandNet.load(other.with_suffix(".onnx")).read(img))
+    ]
+    got = both.read(img).clear_p
+    assert math.log(got / (1 - got)) == pytest.approx(sum(logit) / 2, abs=1e-4)
+    assert main([*argv, "--out", str(merged), "--recalibrate"]) == 0
+    assert json.loads(merged.with_suffix(".json").read_text())["calibration"]["views"] == 4
+    tiny_val = [
+        "--cache", str(tmp_path / "cache"), "--val-cities", "1", "--val-per-city", "4", "--per-vignette", "3",
+        "--val-vignettes", "1", "--workers", "1",
+    ]  # fmt: skip
+    assert compare.main([str(merged.with_suffix(".onnx")), *tiny_val, "--views", "1,4"]) == 0
+    with pytest.raises(SystemExit):
+        ensemble.main([str(out.with_suffix(".onnx")), "--out", str(tmp_path / "alone")])  # one member: no
 
 
 def test_vignette_patches_are_labelled_varied_and_the_same_for_the_same_seed() -> None:
