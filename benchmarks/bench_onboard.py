@@ -17,7 +17,7 @@ decision.
 
 Goals: rank of 5 crops <= 50 ms, confirm <= 20 ms (medians).
 
-Usage: python benchmarks/bench_onboard.py [--reps 30] [--judge cues|landnet]
+Usage: python benchmarks/bench_onboard.py [--reps 30] [--judge cues|landnet] [--model X.onnx]
 """
 
 from __future__ import annotations
@@ -63,6 +63,9 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     ap.add_argument("--reps", type=int, default=30)
     ap.add_argument("--judge", choices=JUDGES, default="cues", help="what reads the images (default cues)")
+    ap.add_argument(
+        "--model", default=None, help="--judge landnet: this ONNX model (default: the packaged one)"
+    )
     args = ap.parse_args(argv)
     if args.reps < 1:
         ap.error("--reps must be at least 1")
@@ -85,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
     close = world.camera_frame(CLOSE_UP, LEVEL, 0.0, "clear", rng)
     check = check_site(world.lidar_sweep(CLOSE_UP, LEVEL, 0.0, rng), CLOSE_UP, LEVEL, CLOSE_UP[:2])
 
-    onboard = OnboardReasoner(judge=args.judge)
+    onboard = OnboardReasoner(judge=args.judge, landnet=LandNet.load(args.model) if args.model else None)
     with_geometry = RankRequest(crops, tuple(cands))
     images_only = RankRequest(crops)
     confirm = ConfirmRequest(close.rgb, check)
@@ -102,7 +105,7 @@ def main(argv: list[str] | None = None) -> int:
 
     ours = measure(onboard)
     if onboard.landnet is not None:  # baseline: one reading of each image
-        single = LandNet.load()
+        single = LandNet.load(args.model)
         single.views = single.rank_views = 1
         base = measure(OnboardReasoner(judge="landnet", landnet=single))
         views = f"{onboard.landnet.rank_views} to rank, {onboard.landnet.views} to confirm"

@@ -3,9 +3,9 @@
 ``python -m landfall_train.ensemble --out OUT MEMBER.onnx MEMBER.onnx [...]`` writes ``OUT.onnx`` (one
 graph: every member reads the same image, the ``cells`` and ``clear`` logits are averaged) and a sidecar
 ``OUT.json`` taken from the first member's, with ``members`` naming each member's file, sha256, seed and
-training data. OpenCV's DNN module must give the members' mean on random inputs or nothing is written.
-The thresholds are the first member's until ``python -m landfall_train --recalibrate --out OUT``
-calibrates the merged model on the held-out renders (``make model`` does both).
+training data. ONNX Runtime and OpenCV's DNN module must both give the members' mean on random inputs,
+or nothing is written. The thresholds are the first member's until ``python -m landfall_train
+--recalibrate --out OUT`` calibrates the merged model on the held-out renders (``make model`` does both).
 
 Members trained from other seeds see other patches and other randomisations: where one member is unsure
 on imagery unlike the renders, the other often is not, and their mean ranks more steadily. The merged
@@ -75,24 +75,22 @@ def merge(members: Sequence[Path]) -> Any:
 
 
 def parity(members: Sequence[Path], merged: Path) -> float:
-    """Largest absolute difference between the merged model and the mean of its members (OpenCV DNN)."""
-    import cv2
+    """Largest absolute difference between the merged model and the mean of its members, through each
+    runtime the companion may use (ONNX Runtime and OpenCV's DNN module)."""
+    from companion.reasoning.landnet import onnx_runner
 
-    nets = [cv2.dnn.readNetFromONNX(str(p)) for p in members]
-    whole = cv2.dnn.readNetFromONNX(str(merged))
     rng = np.random.default_rng(0)
     worst = 0.0
-    for shape in ((1, 3, 128, 128), (4, 3, 96, 160), (2, 3, 256, 128)):
-        x = rng.normal(0.0, 1.0, shape).astype(np.float32)
-        outs = []
-        for net in nets:
-            net.setInput(x)
-            outs.append([np.asarray(o) for o in net.forward(list(OUTPUTS))])
-        whole.setInput(x)
-        got = whole.forward(list(OUTPUTS))
-        for i in range(len(OUTPUTS)):
-            ref = np.mean([o[i] for o in outs], axis=0)
-            worst = max(worst, float(np.abs(np.asarray(got[i]).reshape(ref.shape) - ref).max()))
+    for backend in ("onnxruntime", "opencv"):
+        nets = [onnx_runner(p, backend)[0] for p in members]
+        whole = onnx_runner(merged, backend)[0]
+        for shape in ((1, 3, 128, 128), (4, 3, 96, 160), (2, 3, 256, 128)):
+            x = rng.normal(0.0, 1.0, shape).astype(np.float32)
+            outs = [net(x) for net in nets]
+            got = whole(x)
+            for i in range(len(OUTPUTS)):
+                ref = np.mean([o[i].reshape(got[i].shape) for o in outs], axis=0)
+                worst = max(worst, float(np.abs(got[i] - ref).max()))
     return worst
 
 
@@ -126,7 +124,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     sidecar["name"] = args.out.name
     sidecar["members"] = [
         {
-            "file": m.name,
+            "file": str(m),
             **{k: meta.get(k) for k in ("sha256", "seed", "command", "data", "training", "sim_metrics")},
         }
         for m, meta in zip(args.members, metas, strict=True)

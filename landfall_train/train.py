@@ -44,7 +44,7 @@ from typing import Any
 
 import numpy as np
 
-from companion.reasoning.landnet import VIEWS, average_views, view_batch
+from companion.reasoning.landnet import VIEWS, average_views, onnx_runner, view_batch
 from landfall_train import patches
 from landfall_train.augment import augment, targets
 from landfall_train.labels import CLASSES, HAZARD_CLASSES
@@ -316,14 +316,12 @@ def _torch_predict(net: Any, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _onnx_predict(path: Path) -> Predict:
-    import cv2
-
-    dnn = cv2.dnn.readNetFromONNX(str(path))
+    """The exported model run as the companion runs it (:func:`companion.reasoning.landnet.onnx_runner`)."""
+    run, _backend = onnx_runner(path)
 
     def predict(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        dnn.setInput(x)
-        c, s = dnn.forward(["cells", "clear"])
-        return np.asarray(c), np.asarray(s).reshape(-1)
+        c, s = run(x)
+        return c, s.reshape(-1)
 
     return predict
 
@@ -430,8 +428,8 @@ def _auc(p: np.ndarray, t: np.ndarray) -> float:
 
 
 def export(net: Any, out: Path, sidecar: dict[str, Any]) -> None:
-    """ONNX + sidecar; raises RuntimeError when OpenCV's DNN module disagrees with torch."""
-    import cv2
+    """ONNX + sidecar; raises RuntimeError when ONNX Runtime or OpenCV's DNN module (the companion's
+    runtimes) disagrees with torch."""
     import torch
 
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -446,20 +444,22 @@ def export(net: Any, out: Path, sidecar: dict[str, Any]) -> None:
             },
             opset_version=13, dynamo=False, do_constant_folding=True,
         )  # fmt: skip
-    dnn = cv2.dnn.readNetFromONNX(str(onnx_path))
     rng = np.random.default_rng(0)
     worst = 0.0
+    runs = [onnx_runner(onnx_path, backend)[0] for backend in ("onnxruntime", "opencv")]
     for shape in ((1, 3, 128, 128), (5, 3, 96, 96), (1, 3, 128, 208), (2, 3, 256, 160)):
         x = rng.normal(0.0, 1.0, shape).astype(np.float32)
         with torch.no_grad():
             ref_c, ref_s = (t.numpy() for t in net(torch.from_numpy(x)))
-        dnn.setInput(x)
-        got_c, got_s = dnn.forward(["cells", "clear"])
-        worst = max(
-            worst, float(np.abs(got_c - ref_c).max()), float(np.abs(got_s.reshape(ref_s.shape) - ref_s).max())
-        )
+        for run in runs:
+            got_c, got_s = run(x)
+            worst = max(
+                worst,
+                float(np.abs(got_c - ref_c).max()),
+                float(np.abs(got_s.reshape(ref_s.shape) - ref_s).max()),
+            )
     if worst > 1e-3:
-        raise RuntimeError(f"OpenCV DNN and torch disagree by {worst:.2e} on {onnx_path}")
+        raise RuntimeError(f"the ONNX runtimes and torch disagree by {worst:.2e} on {onnx_path}")
     sidecar = dict(sidecar)
     sidecar["parity_max_abs_diff"] = float(f"{worst:.2e}")
     sidecar["onnx_bytes"] = onnx_path.stat().st_size

@@ -69,8 +69,11 @@ def test_landnet_load_packaged_model_and_sidecar(net: LandNet) -> None:
     assert {"roof", "object", "person", "vehicle", "water", "marking"} <= set(net.classes)
     assert 0.0 < net.clear_threshold < 1.0
     assert ((net.cell_thresholds > 0.0) & (net.cell_thresholds < 1.0)).all()
-    assert meta["seed"] == 0
     assert meta["command"].startswith("python -m landfall_train")
+    # the packaged model averages two nets trained from seeds 0 and 1 (landfall_train.ensemble)
+    assert [m["seed"] for m in meta["members"]] == [0, 1]
+    assert all(m["command"].startswith("python -m landfall_train --seed") for m in meta["members"])
+    assert meta["calibration"]["views"] == net.views
     assert DEFAULT_MODEL.stat().st_size < 4_000_000
 
 
@@ -95,7 +98,7 @@ def test_landnet_load_corrupt_weights_are_an_error_naming_the_file(tmp_path: Pat
     onnx.write_bytes(bytes(blob))
     with pytest.raises(LandNetError, match=r"m\.onnx: sha256 .* does not match"):
         LandNet.load(onnx)
-    # a sidecar that vouches for garbage: OpenCV's error, still naming the file
+    # a sidecar that vouches for garbage: the runtime's error, still naming the file
     onnx.write_bytes(b"not an onnx model")
     meta = json.loads(onnx.with_suffix(".json").read_text())
     import hashlib
@@ -103,7 +106,32 @@ def test_landnet_load_corrupt_weights_are_an_error_naming_the_file(tmp_path: Pat
     meta["sha256"] = hashlib.sha256(b"not an onnx model").hexdigest()
     onnx.with_suffix(".json").write_text(json.dumps(meta))
     with pytest.raises(LandNetError, match=r"m\.onnx: OpenCV cannot load"):
-        LandNet.load(onnx)
+        LandNet.load(onnx, backend="opencv")
+    with pytest.raises(LandNetError, match=r"m\.onnx: ONNX Runtime cannot load"):
+        LandNet.load(onnx, backend="onnxruntime")
+
+
+def test_landnet_onnxruntime_and_opencv_read_alike(net: LandNet) -> None:
+    """The default runtime (ONNX Runtime) and the fallback (OpenCV's DNN module) give the same reading."""
+    assert net.backend == "onnxruntime"
+    cv = LandNet.load(backend="opencv")
+    for h, w in ((96, 96), (240, 320), (540, 960)):
+        img = _image(h, w)
+        a, b = net.read(img), cv.read(img)
+        assert a.clear_p == pytest.approx(b.clear_p, abs=1e-5)
+        assert dict(a.shares) == pytest.approx(dict(b.shares), abs=0.02)  # a cell on a threshold may flip
+
+
+def test_landnet_without_onnxruntime_falls_back_to_opencv(monkeypatch: pytest.MonkeyPatch) -> None:
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(
+        importlib.util, "find_spec", lambda name, *a: None if name == "onnxruntime" else real(name, *a)
+    )
+    assert LandNet.load().backend == "opencv"
+    with pytest.raises(ValueError, match="backend must be one of"):
+        LandNet.load(backend="tensorrt")
 
 
 def test_landnet_load_bad_sidecar_is_an_error_naming_it(tmp_path: Path) -> None:
