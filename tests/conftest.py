@@ -17,7 +17,7 @@ import pytest
 
 os.environ.setdefault("MAVLINK20", "1")
 
-from landfall_eval.episode import sped_up_env
+from landfall_eval.episode import sped_up_env, stop_process
 from simbridge.world.camera import Frame
 from simbridge.world.live import LiveWorld
 from tests.mavclient import MavClient
@@ -229,13 +229,7 @@ def rig_starter(start_sim: Callable[..., SimProcess], tmp_path: Path) -> Iterato
         yield start
     finally:
         for p in procs:
-            if p.poll() is None:
-                p.terminate()
-                try:
-                    p.wait(timeout=10)
-                except subprocess.TimeoutExpired:
-                    p.kill()
-                    p.wait()
+            stop_process(p)
 
 
 # Scenes for the onboard-reasoner tests (tests/views.py).
