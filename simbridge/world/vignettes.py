@@ -25,7 +25,7 @@ about 30-50 m a side at 0.04-0.08 m cells, built from a seed with the :class:`Wo
 the extent, the sun (azimuth any, elevation 15-80 deg), every footprint's size and heading (roofs are
 rotated rectangles at any yaw), roof style (gable / hipped), pitch (15-45 deg; barns 15-28), eave height,
 roof materials (TILES, SLATE, SHINGLE, CORRUGATED, SEAM_METAL, METAL pitched; GRAVEL, TAR, MEMBRANE,
-CONCRETE flat), gutters, parapets, dormers, roof hardware, the layout of the surroundings and the actors' colours.
+CONCRETE flat), gutters, parapets, dormers, the layout of the surroundings and the actors' colours.
 
 **Clear and cluttered roofs.** Every roof independently draws a clutter level (:data:`CLUTTER_LEVELS`):
 ``clear`` (half the roofs: nothing on them), ``single`` (exactly one small object: a vent pipe, a
@@ -36,12 +36,6 @@ antennas. Flat-roof objects: HVAC units (with fans), vent pipes, mushroom vents,
 (flat or domed), pipes, cable trays, ducts, solar rows. Barns: ridge vents, turbine vents, skylight
 strips. Objects on a roof are ``ROOF_CLUTTER`` and carry the roof's region id;
 :func:`build_vignette_roofs` returns each roof's :class:`RoofSpec` (region id, style, clutter level).
-
-**Roof hardware is roof.** Independently of the clutter level, roofs carry the fittings real roofs
-carry and that are no obstacle to a landing: snow hooks in staggered rows, snow-guard rails and ridge or
-hip caps on pitched roofs; drains, lightning-conductor wires and edge flashing on flat ones. They are
-painted with the roof's class a few centimetres proud of it (``pitched_hardware``, ``flat_hardware``),
-so a clear roof is not a featureless one.
 
 **Labels.** The world follows the city's conventions (see :mod:`landfall_train.labels`): roof tops
 ``ROOF_FLAT`` / ``ROOF_PITCHED``, parapets ``PARAPET``, fences ``GUARD_RAIL`` (the ``edge`` label),
@@ -495,7 +489,6 @@ class _Builder:
             self._dormers(c, length, width, yaw, eave, pitch, mat, rid)
         spec = RoofSpec(rid, style, mat, clutter or self.level(), c, length, width, yaw, eave, pitch)
         self.roofs.append(spec)
-        self.pitched_hardware(spec)
         self.pitched_clutter(spec)
         return spec
 
@@ -568,7 +561,6 @@ class _Builder:
             )
         spec = RoofSpec(rid, "flat", mat, clutter or self.level(), c, il, iw, yaw, h)
         self.roofs.append(spec)
-        self.flat_hardware(spec)
         self.flat_clutter(spec)
         return spec
 
@@ -584,75 +576,6 @@ class _Builder:
         self.roofs[-1] = spec
         self.barn_clutter(spec)
         return spec
-
-    # ------------------------------------------------------------------ hardware (part of the roof)
-    def pitched_hardware(self, spec: RoofSpec) -> None:
-        """Fittings a clear pitched roof has as well, painted as roof (not clutter) a few centimetres
-        proud of it: snow hooks in staggered rows above the eaves, snow-guard rails, a ridge (and hip)
-        cap. The judge must learn that these are no obstacle, and that a vent pipe still is."""
-        got = self.frame(spec.centre_ne, spec.length_m, spec.width_m, spec.yaw_rad)
-        if got is None:
-            return
-        win, mask, uu, vv = got
-        own = mask & self._roof_mask(win, spec.region)
-        half_l, half_w = spec.length_m / 2, spec.width_m / 2
-        d_side, d_end = half_w - np.abs(vv), half_l - np.abs(uu)
-        if spec.style == "hip":
-            d_eave = np.minimum(d_side, d_end)
-            along = np.where(d_side <= d_end, uu, vv)  # the coordinate along the nearest eave
-        else:
-            d_eave, along = d_side, uu
-        metal = self.pick((M.METAL, spec.material), (0.7, 0.3))
-        if self.p(0.45):  # snow hooks: small brackets in one to four staggered rows
-            rows = int(self.rng.integers(1, 5))
-            first, gap = self.u(0.3, 1.2), self.u(0.4, 1.4)
-            step, hook_l, hook_w = self.u(0.3, 1.0), self.w(self.u(0.04, 0.1)), self.w(self.u(0.08, 0.25))
-            offset = self.u(0.0, step)
-            hooks = np.zeros(own.shape, bool)
-            for r in range(rows):
-                phase = offset + (r % 2) * step / 2
-                hooks |= (np.abs(d_eave - (first + r * gap)) <= hook_w / 2) & (
-                    np.mod(along + phase, step) <= hook_l
-                )
-            self.paint(win, own & hooks, self.u(0.03, 0.08), None, metal, mode="add")
-        if self.p(0.25):  # snow-guard rails (a bar or a tube on brackets) parallel to the eaves
-            for k in range(int(self.rng.integers(1, 3))):
-                rail = np.abs(d_eave - self.u(0.2, 1.5 + k)) <= self.w(self.u(0.03, 0.08)) / 2
-                self.paint(win, own & rail, self.u(0.06, 0.15), None, metal, mode="add")
-        if self.p(0.4):  # a ridge cap (and hip caps) of another shade
-            cap_w = self.w(self.u(0.15, 0.35))
-            cap = np.abs(vv) <= cap_w / 2
-            if spec.style == "hip":
-                cap = (cap & (d_end >= half_w)) | (np.abs(d_side - d_end) <= cap_w / 2)
-            mat = self.pick((spec.material, M.METAL, M.TILES, M.CONCRETE))
-            self.paint(win, own & cap, self.u(0.02, 0.06), None, mat, mode="add")
-
-    def flat_hardware(self, spec: RoofSpec) -> None:
-        """Fittings a clear flat roof has as well, flush with it or nearly (roof, not clutter): roof
-        drains, a lightning-conductor wire around the edge and across, a strip of flashing at the edge."""
-        got = self.frame(spec.centre_ne, spec.length_m, spec.width_m, spec.yaw_rad)
-        if got is None:
-            return
-        win, mask, uu, vv = got
-        own = mask & self._roof_mask(win, spec.region)
-        half_l, half_w = spec.length_m / 2, spec.width_m / 2
-        d_edge = np.minimum(half_l - np.abs(uu), half_w - np.abs(vv))
-        if self.p(0.4):  # roof drains: dark gratings near the edge
-            for _ in range(int(self.rng.integers(1, 4))):
-                u_ = self.pick((-1.0, 1.0)) * self.u(0.3, 0.95) * half_l
-                v_ = self.pick((-1.0, 1.0)) * max(half_w - self.u(0.4, 1.5), 0.0)
-                r = self.u(0.08, 0.2)
-                drain = (uu - u_) ** 2 + (vv - v_) ** 2 <= r * r
-                self.paint(win, own & drain, None, None, self.pick((M.METAL, M.TAR)))
-        if self.p(0.3):  # a lightning-conductor wire on low clips, round the edge and across the roof
-            wire_w = self.w(0.02)
-            wire = np.abs(d_edge - self.u(0.3, 1.0)) <= wire_w / 2
-            for _ in range(int(self.rng.integers(0, 3))):
-                wire |= np.abs(uu - self.u(-0.8, 0.8) * half_l) <= wire_w / 2
-            self.paint(win, own & wire, self.u(0.01, 0.03), None, M.METAL, mode="add")
-        if self.p(0.3):  # metal flashing along the edge
-            flash = d_edge <= self.w(self.u(0.1, 0.4))
-            self.paint(win, own & flash, None, None, self.pick((M.METAL, M.MEMBRANE, M.CONCRETE)))
 
     # ------------------------------------------------------------------ clutter
     def _roof_mask(self, win: Window, rid: int) -> np.ndarray:
