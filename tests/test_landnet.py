@@ -146,6 +146,11 @@ def test_landnet_load_bad_sidecar_is_an_error_naming_it(tmp_path: Path) -> None:
     onnx.with_suffix(".json").write_text(json.dumps(meta))
     with pytest.raises(LandNetError, match=r"m\.json: .*input\.views must be one of \(1, 2, 4\), got 3"):
         LandNet.load(onnx)
+    meta = json.loads(DEFAULT_MODEL.with_suffix(".json").read_text())
+    meta["hazard_classes"] = ["object", "lava"]
+    onnx.with_suffix(".json").write_text(json.dumps(meta))
+    with pytest.raises(LandNetError, match=r"m\.json: .*hazard_classes must be a non-empty list"):
+        LandNet.load(onnx)
 
 
 # --- views: the image and its mirror images ------------------------------------------------------------
@@ -241,7 +246,11 @@ def test_landnet_read_any_size(net: LandNet, h: int, w: int) -> None:
     assert r.size_px == (h, w)
     assert 0.0 <= r.clear_p <= 1.0
     assert all(0.0 <= s <= 1.0 for _c, s in r.shares)
+    assert 0.0 <= r.hazard_peak <= 1.0
     assert 0.0 <= r.hazard <= 3.0
+    for k, c in enumerate(net.classes):  # a hazard class seen: its cell probability reached its threshold
+        if c in ("object", "person", "vehicle", "water", "marking") and r.share(c) > 0.0:
+            assert r.hazard_peak >= net.cell_thresholds[k]
 
 
 def test_landnet_read_is_deterministic_across_threads(net: LandNet) -> None:
@@ -261,7 +270,22 @@ def test_scene_reading_phrases_say_what_and_where() -> None:
     assert r.phrase("object") == "objects on the surface (2: upper left, centre)"
     assert r.observations()[0] == "objects on the surface (2: upper left, centre)"
     assert "roof surface 70 %" in r.observations()
-    assert r.hazard == pytest.approx(2.4)
+    assert r.hazard_peak == 0.0
+    assert r.hazard == pytest.approx(1.2)  # 3 x (0.5 x (1 - 0.2) + 0.5 x 0)
+
+
+def test_scene_reading_hazard_weighs_the_clear_probability_and_the_hazard_peak() -> None:
+    """A rank's hazard: half the clear-site probability's shortfall, half the likeliest hazard cell."""
+
+    def reading(clear_p: float, peak: float) -> SceneReading:
+        return SceneReading("landnet-s", (64, 64), (8, 8), clear_p, (("roof", 1.0),), (), (), peak)
+
+    assert reading(1.0, 0.0).hazard == 0.0
+    assert reading(0.0, 1.0).hazard == pytest.approx(3.0)
+    assert reading(0.4, 0.1).hazard == pytest.approx(3.0 * (0.5 * 0.6 + 0.5 * 0.1))
+    # the same clear-site probability: the roof whose likeliest hazard cell is likelier ranks lower
+    assert reading(0.4, 0.9).hazard > reading(0.4, 0.1).hazard
+    assert reading(0.4, 0.9).to_json()["hazard_peak"] == 0.9
 
 
 # --- the onboard switch ---------------------------------------------------------------------------------

@@ -55,6 +55,11 @@ Runner = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]  # NCHW float32 -
 
 DEFAULT_MODEL = Path(__file__).with_name("models") / "landnet-s.onnx"
 HAZARD_SCALE = 3.0  # rank: hazard points of a surely-not-clear site (the image cues' water weight)
+# rank: weight of the clear-site probability in a site's hazard, the rest on its hazard peak (the most
+# likely object, person, vehicle, water or marking cell). Chosen on the held-out renders (docs/reasoning.md,
+# "Ranking roofs"): over roof-dominated patches, no hazard against some, 0.5 orders them best of
+# 0 / 0.25 / 0.4 / 0.5 / 0.6 / 0.75 / 1 (AUC 0.896 against 0.868 for the probability alone).
+RANK_CLEAR_WEIGHT = 0.5
 COUNTED = ("object", "person", "vehicle")  # classes counted as separate groups of cells
 _INPUT_KEYS = ("mean", "std", "multiple", "short_side_px", "max_long_side_px")
 VIEWS = (1, 2, 4)  # sidecar input.views: the image alone, with its left-right mirror, with all three
@@ -122,11 +127,16 @@ class SceneReading:
     shares: tuple[tuple[str, float], ...]  # per class (sidecar order): share of cells where present
     places: tuple[tuple[str, tuple[str, ...]], ...]  # per present class: compass places, most cells first
     counts: tuple[tuple[str, int], ...]  # COUNTED classes: separate groups of cells holding them
+    hazard_peak: float = 0.0  # the highest probability of a hazard class in any cell (views averaged)
 
     @property
     def hazard(self) -> float:
-        """Hazard points, on the image cues' scale: ``HAZARD_SCALE`` x (1 - clear_p)."""
-        return HAZARD_SCALE * (1.0 - self.clear_p)
+        """Hazard points for a rank, on the image cues' scale: ``HAZARD_SCALE`` x (``RANK_CLEAR_WEIGHT`` x
+        (1 - clear_p) + (1 - ``RANK_CLEAR_WEIGHT``) x hazard_peak). The clear-site probability alone also
+        falls with what surrounds a roof (a garden, a wall at the margin); the peak says whether anything
+        stands on it."""
+        w = RANK_CLEAR_WEIGHT
+        return HAZARD_SCALE * (w * (1.0 - self.clear_p) + (1.0 - w) * self.hazard_peak)
 
     def share(self, name: str) -> float:
         return dict(self.shares).get(name, 0.0)
@@ -161,6 +171,7 @@ class SceneReading:
             "shares": {k: round(v, 4) for k, v in self.shares},
             "places": {k: list(v) for k, v in self.places},
             "counts": dict(self.counts),
+            "hazard_peak": round(self.hazard_peak, 4),
             "hazard": round(self.hazard, 3),
         }
 
@@ -236,6 +247,8 @@ class LandNet:
         thresholds = meta["thresholds"]
         self.clear_threshold = float(thresholds["clear"])
         self.cell_thresholds = np.array([float(thresholds["cells"][c]) for c in self.classes], np.float32)
+        hazards = meta["hazard_classes"]
+        self._hazard_rows = np.array([k for k, c in enumerate(self.classes) if c in hazards], np.intp)
 
     @classmethod
     def load(cls, path: Path | str | None = None, backend: str = "auto") -> LandNet:
@@ -256,6 +269,9 @@ class LandNet:
             classes, inp, thr = meta["classes"], meta["input"], meta["thresholds"]
             if not isinstance(classes, list) or not classes or set(thr["cells"]) != set(classes):
                 raise ValueError("classes and cell thresholds do not match")
+            hazards = meta["hazard_classes"]
+            if not isinstance(hazards, list) or not hazards or not set(hazards) <= set(classes):
+                raise ValueError(f"hazard_classes must be a non-empty list of the classes, got {hazards!r}")
             missing = [k for k in _INPUT_KEYS if k not in inp]
             if missing:
                 raise ValueError(f"input lacks {', '.join(missing)}")
@@ -303,9 +319,10 @@ class LandNet:
             cells, clear = self._net(np.ascontiguousarray(blob, np.float32))
         p, clear_p = average_views(_sigmoid(cells), _sigmoid(np.asarray(clear).reshape(-1)), n)
         present = p[0] >= self.cell_thresholds[:, None, None]
-        return self._reading((h, w), present, float(clear_p[0]))
+        peak = float(p[0][self._hazard_rows].max())
+        return self._reading((h, w), present, float(clear_p[0]), peak)
 
-    def _reading(self, size: tuple[int, int], present: np.ndarray, clear_p: float) -> SceneReading:
+    def _reading(self, size: tuple[int, int], present: np.ndarray, clear_p: float, peak: float) -> SceneReading:
         _k, gh, gw = present.shape
         shares = tuple((c, float(present[i].mean())) for i, c in enumerate(self.classes))
         rows = np.minimum(np.arange(gh) * 3 // gh, 2)
@@ -324,4 +341,4 @@ class LandNet:
             if c in COUNTED:
                 n, _ = cv2.connectedComponents(present[i].astype(np.uint8), connectivity=8)
                 counts.append((c, int(n) - 1))
-        return SceneReading(self.name, size, (gh, gw), clear_p, shares, tuple(places), tuple(counts))
+        return SceneReading(self.name, size, (gh, gw), clear_p, shares, tuple(places), tuple(counts), peak)
