@@ -29,6 +29,8 @@ from typing import Any
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import common as mavlink2
 
+from landfall_eval.episode import ProcessSample
+
 ROOT = Path(__file__).resolve().parent.parent
 TOWARD_M = 1.0
 
@@ -37,16 +39,6 @@ def _port(kind: int) -> int:
     with socket.socket(socket.AF_INET, kind) as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
-
-
-def _rss_mb(pid: int) -> float:
-    try:
-        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024
-    except OSError:
-        pass
-    return 0.0
 
 
 class Relay(asyncio.DatagramProtocol):
@@ -120,10 +112,10 @@ async def one_run(speed: float) -> tuple[float, float, float, float, str]:
             await loop.run_in_executor(None, alarm.recvfrom, 4096)
             t_ack = time.perf_counter()
             alarm.close()
-            peak = 0.0
+            usage = ProcessSample(comp.pid)  # the kernel's high-water mark of resident memory
             deadline = time.monotonic() + 300
             while time.monotonic() < deadline:
-                peak = max(peak, _rss_mb(comp.pid))
+                usage.sample()
                 if episode.exists() and '"touchdown"' in episode.read_text():
                     break
                 await asyncio.sleep(0.2)
@@ -131,7 +123,8 @@ async def one_run(speed: float) -> tuple[float, float, float, float, str]:
             hold, toward = relay.first_setpoint, relay.first_toward
             if hold is None or toward is None:
                 raise RuntimeError("no setpoint toward a site seen")
-            return toward - t_sent, hold - t_sent, t_ack - t_sent, peak, f"{td['surface']} safe={td['safe']}"
+            verdict = f"{td['surface']} safe={td['safe']}"
+            return toward - t_sent, hold - t_sent, t_ack - t_sent, usage.peak_rss_mb, verdict
         finally:
             for p in (comp, sim):
                 p.terminate()

@@ -128,7 +128,10 @@ class EpisodeTimes:
 
 @dataclass(slots=True)
 class ProcessSample:
-    """Peak resident memory and CPU time of a process, sampled from /proc (zeros elsewhere)."""
+    """Peak resident memory and CPU time of a process, sampled from /proc (zeros elsewhere).
+
+    The peak is the kernel's own high-water mark (``VmHWM``), so a peak between two samples counts too;
+    ``VmRSS``, the resident memory at the sample, only where a kernel does not report it."""
 
     pid: int
     peak_rss_mb: float = 0.0
@@ -142,7 +145,7 @@ class ProcessSample:
         except OSError:
             return
         for line in status.splitlines():
-            if line.startswith("VmRSS:"):
+            if line.startswith(("VmHWM:", "VmRSS:")):
                 self.peak_rss_mb = max(self.peak_rss_mb, int(line.split()[1]) / 1024)
         fields = stat.rsplit(")", 1)[1].split()
         self.cpu_s = (int(fields[11]) + int(fields[12])) / self._tick  # utime + stime

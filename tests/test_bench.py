@@ -17,6 +17,7 @@ from landfall_eval.episode import (
     EpisodeSpec,
     EpisodeTimes,
     LogWatch,
+    ProcessSample,
     _grade,
     _record_events,
     alarm_sim_time_s,
@@ -495,3 +496,28 @@ def test_curated_episode_flies_real_arducopter(arducopter: Path, tmp_path: Path)
     # from the truth: the touchdown against what the chosen pixel showed from the frame's true pose
     assert e["landing_error"] is None
     assert e["landing_distance_m"] < 3.0, e["landing_target_ned_m"]
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads Linux /proc")
+def test_process_sample_peak_counts_memory_freed_between_samples() -> None:
+    """The companion's peak RSS is the kernel's high-water mark: 200 MB touched and freed before the
+    first sample still count."""
+    code = (
+        "import sys; b = bytearray(200 * 1024 * 1024); b[::4096] = b'x' * len(b[::4096]); del b; "
+        "print('freed', flush=True); sys.stdin.read()"
+    )
+    child = subprocess.Popen(
+        [sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert child.stdout is not None
+        assert child.stdout.readline().strip() == "freed"
+        usage = ProcessSample(child.pid)
+        usage.sample()
+        status = Path(f"/proc/{child.pid}/status").read_text()
+        now_mb = next(int(x.split()[1]) for x in status.splitlines() if x.startswith("VmRSS:")) / 1024
+        assert usage.peak_rss_mb >= 200.0
+        assert now_mb < 150.0  # the memory is gone now: only the high-water mark remembers it
+        assert usage.cpu_s >= 0.0
+    finally:
+        child.communicate("")

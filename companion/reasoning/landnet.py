@@ -322,7 +322,9 @@ class LandNet:
         peak = float(p[0][self._hazard_rows].max())
         return self._reading((h, w), present, float(clear_p[0]), peak)
 
-    def _reading(self, size: tuple[int, int], present: np.ndarray, clear_p: float, peak: float) -> SceneReading:
+    def _reading(
+        self, size: tuple[int, int], present: np.ndarray, clear_p: float, peak: float
+    ) -> SceneReading:
         _k, gh, gw = present.shape
         shares = tuple((c, float(present[i].mean())) for i, c in enumerate(self.classes))
         rows = np.minimum(np.arange(gh) * 3 // gh, 2)
