@@ -21,10 +21,12 @@ steadier on imagery unlike the renders it learnt from; :func:`view_batch` and :f
 which calibration uses too). Ranks read their crops with ``input.rank_views`` (default: ``views``): a
 rank reads five crops where a confirmation reads one image, and only orders them, which two views do
 nearly as well as four on the held-out renders. :meth:`LandNet.read` returns a
-:class:`SceneReading`: the clear-site probability, per class the share of the image's cells where it is
-present and where (a 3 x 3 compass: "upper left" ... "centre" ... "lower right"), and how many separate
-groups of cells hold objects, people or vehicles. One ``cv2.dnn.Net`` is not safe to call from two
-threads at once (the onboard tier runs in worker threads): a lock guards either runtime.
+:class:`SceneReading`: the clear-site probability, the hazard peak (the highest probability of an
+object, person, vehicle, water or marking in any cell; ranks weigh it), per class the share of the
+image's cells where it is present and where (a 3 x 3 compass: "upper left" ... "centre" ... "lower
+right"), and how many separate groups of cells hold objects, people or vehicles. One ``cv2.dnn.Net``
+is not safe to call from two threads at once (the onboard tier runs in worker threads): a lock guards
+either runtime.
 """
 
 from __future__ import annotations

@@ -22,8 +22,8 @@ limits (a bare field, a yard, a lawn). Among buildings street level is a last re
 was seen where (objects, people, vehicles, vegetation, road surface, ...). With a critical alarm and a
 clear LiDAR disc, one group of objects in view is tolerated, as the cues' one raised blob is.
 
-**Rank (images only).** Score = crop size term - ``SceneReading.hazard`` (``HAZARD_SCALE`` x (1 -
-clear probability)): continuous, so ties are rare.
+**Rank (images only).** Score = crop size term - ``SceneReading.hazard`` (``HAZARD_SCALE`` x (half of
+1 - clear probability, half the hazard peak: the likeliest hazard cell)): continuous, so ties are rare.
 """
 
 from __future__ import annotations
