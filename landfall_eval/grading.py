@@ -150,6 +150,11 @@ def summarise(episodes: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         return round(statistics.fmean(got), 3) if got else None
 
     rss = [float(e["companion"]["peak_rss_mb"]) for e in episodes if e.get("companion")]
+    anon = [
+        float(e["companion"]["peak_anon_mb"])
+        for e in episodes
+        if "peak_anon_mb" in (e.get("companion") or {})
+    ]
     return {
         "episodes": n,
         "safe": len(safe),
@@ -166,6 +171,7 @@ def summarise(episodes: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         "median_landing_distance_m": _median(e.get("landing_distance_m") for e in episodes),
         "mean_landing_distance_m": _mean(e.get("landing_distance_m") for e in episodes),
         "companion_peak_rss_mb": round(max(rss), 1) if rss else None,
+        "companion_peak_anon_mb": round(max(anon), 1) if anon else None,  # results before 2026-11-27: none
         "latency_s": {
             stage: {
                 tier: {

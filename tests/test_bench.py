@@ -266,7 +266,7 @@ def test_summary_counts_safe_landings_rounds_and_latency() -> None:
             "safe": safe, "rounds": rounds, "surface": surface, "outcome": "landed", "reasoner": "onboard",
             "context": "crop", "weather": weather, "time_to_touchdown_s": 80.0, "kinematic_ratio": 1.2,
             "calls": [{"stage": "rank", "tier": "onboard", "latency_s": 0.01 * rounds}],
-            "companion": {"peak_rss_mb": 100.0 + rounds, "cpu_s": 2.0},
+            "companion": {"peak_rss_mb": 100.0 + rounds, "peak_anon_mb": 50.0 + rounds, "cpu_s": 2.0},
         }  # fmt: skip
 
     s = summarise(
@@ -280,6 +280,10 @@ def test_summary_counts_safe_landings_rounds_and_latency() -> None:
     assert s["by_surface"] == {"rooftop_clear": 2, "highway": 1}
     assert s["latency_s"]["rank"]["onboard"]["calls"] == 3
     assert s["companion_peak_rss_mb"] == 103.0
+    assert s["companion_peak_anon_mb"] == 53.0
+    older = ep(True, 1, "rooftop_clear")  # results written before the anonymous peak was recorded
+    del older["companion"]["peak_anon_mb"]
+    assert summarise([older])["companion_peak_anon_mb"] is None
     assert {(g["weather"], g["episodes"]) for g in s["groups"]} == {("clear", 2), ("fog", 1)}
     empty = summarise([])
     assert empty["episodes"] == 0
@@ -361,6 +365,7 @@ def test_curated_run_writes_results_and_report_then_resumes(tmp_path: Path) -> N
         )
         assert math.dist(e["trajectory_ne_m"][-1], e["touchdown_ned_m"][:2]) < 1e-6
         assert e["companion"]["peak_rss_mb"] > 20
+        assert 10 < e["companion"]["peak_anon_mb"] <= e["companion"]["peak_rss_mb"]
         assert e["companion"]["cpu_s"] > 0
         assert (out / "episodes" / e["id"] / "episode.jsonl").exists()
     s = results["summary"]
@@ -518,6 +523,7 @@ def test_process_sample_peak_counts_memory_freed_between_samples() -> None:
         now_mb = next(int(x.split()[1]) for x in status.splitlines() if x.startswith("VmRSS:")) / 1024
         assert usage.peak_rss_mb >= 200.0
         assert now_mb < 150.0  # the memory is gone now: only the high-water mark remembers it
+        assert 0.0 < usage.peak_anon_mb < 150.0  # its own memory at the sample, freed already
         assert usage.cpu_s >= 0.0
     finally:
         child.communicate("")
