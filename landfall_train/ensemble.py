@@ -1,7 +1,8 @@
 """Merge trained LandNet models into one ONNX model whose outputs are the mean of theirs.
 
 ``python -m landfall_train.ensemble --out OUT MEMBER.onnx MEMBER.onnx [...]`` writes ``OUT.onnx`` (one
-graph: every member reads the same image, the ``cells`` and ``clear`` logits are averaged) and a sidecar
+graph: every member reads the same image, each output's logits are averaged: ``cells`` and ``clear``,
+and ``bare`` where every member has its bare head, ``landfall_train.bare``) and a sidecar
 ``OUT.json`` taken from the first member's, with ``members`` naming each member's file, sha256, seed and
 training data. ONNX Runtime and OpenCV's DNN module must both give the members' mean on random inputs,
 or nothing is written. The thresholds are the first member's until ``python -m landfall_train
@@ -25,14 +26,16 @@ from typing import Any
 
 import numpy as np
 
+from companion.reasoning.landnet import BARE
+
 _log = logging.getLogger("landfall_train.ensemble")
 
-OUTPUTS = ("cells", "clear")
+OUTPUTS = ("cells", "clear")  # every member's; BARE too where each member has it
 
 
 def merge(members: Sequence[Path]) -> Any:
     """One ONNX ModelProto: each member's graph under its own name prefix, fed by one ``image`` input,
-    with ``cells`` and ``clear`` the mean of the members' outputs."""
+    each output (``cells``, ``clear``, and ``bare`` where the members have it) the mean of the members'."""
     import onnx
     from onnx import compose, helper
 
@@ -44,12 +47,14 @@ def merge(members: Sequence[Path]) -> Any:
         raise ValueError(f"members use different ONNX opsets: {sorted(opsets)}")
     nodes: list[Any] = []
     inits: list[Any] = []
+    outputs = member_outputs(models[0])
     for k, m in enumerate(models):
         names = [i.name for i in m.graph.input]
         outs = [o.name for o in m.graph.output]
-        if names[:1] != ["image"] or sorted(outs) != sorted(OUTPUTS):
+        if names[:1] != ["image"] or outs != list(outputs) or tuple(outs[:2]) != OUTPUTS:
             raise ValueError(
-                f"{members[k]}: expected input 'image' and outputs {OUTPUTS}, got {names} {outs}"
+                f"{members[k]}: expected input 'image' and outputs {list(outputs)} (as the first member's), "
+                f"got {names} {outs}"
             )
         m = compose.add_prefix(m, f"m{k}/")
         nodes.append(helper.make_node("Identity", ["image"], [f"m{k}/image"], name=f"m{k}/feed"))
@@ -57,7 +62,7 @@ def merge(members: Sequence[Path]) -> Any:
         inits.extend(m.graph.initializer)
     scale = helper.make_tensor("ensemble/scale", onnx.TensorProto.FLOAT, [], [1.0 / len(models)])
     inits.append(scale)
-    for out in OUTPUTS:
+    for out in outputs:
         total = f"m0/{out}"
         for k in range(1, len(models)):
             nxt = f"ensemble/{out}_sum{k}"
@@ -74,21 +79,30 @@ def merge(members: Sequence[Path]) -> Any:
     return model
 
 
+def member_outputs(model: Any) -> tuple[str, ...]:
+    """A member's outputs: ``OUTPUTS``, with ``bare`` after them where it has the bare head."""
+    outs = tuple(o.name for o in model.graph.output)
+    return (*OUTPUTS, BARE) if outs == (*OUTPUTS, BARE) else OUTPUTS
+
+
 def parity(members: Sequence[Path], merged: Path) -> float:
     """Largest absolute difference between the merged model and the mean of its members, through each
     runtime the companion may use (ONNX Runtime and OpenCV's DNN module)."""
+    import onnx
+
     from companion.reasoning.landnet import onnx_runner
 
+    outputs = member_outputs(onnx.load(str(merged)))
     rng = np.random.default_rng(0)
     worst = 0.0
     for backend in ("onnxruntime", "opencv"):
-        nets = [onnx_runner(p, backend)[0] for p in members]
-        whole = onnx_runner(merged, backend)[0]
+        nets = [onnx_runner(p, backend, outputs)[0] for p in members]
+        whole = onnx_runner(merged, backend, outputs)[0]
         for shape in ((1, 3, 128, 128), (4, 3, 96, 160), (2, 3, 256, 128)):
             x = rng.normal(0.0, 1.0, shape).astype(np.float32)
             outs = [net(x) for net in nets]
             got = whole(x)
-            for i in range(len(OUTPUTS)):
+            for i in range(len(outputs)):
                 ref = np.mean([o[i].reshape(got[i].shape) for o in outs], axis=0)
                 worst = max(worst, float(np.abs(got[i] - ref).max()))
     return worst
@@ -125,11 +139,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     sidecar["members"] = [
         {
             "file": str(m),
-            **{k: meta.get(k) for k in ("sha256", "seed", "command", "data", "training", "sim_metrics")},
+            **{
+                k: meta.get(k)
+                for k in ("sha256", "seed", "command", "data", "training", "sim_metrics", BARE)
+                if k in meta
+            },
         }
         for m, meta in zip(args.members, metas, strict=True)
     ]
-    for key in ("seed", "command", "data", "training", "calibration"):
+    for key in ("seed", "command", "data", "training", "calibration", BARE):
         sidecar.pop(key, None)
     sidecar["command"] = "python -m landfall_train.ensemble " + " ".join(
         sys.argv[1:] if argv is None else list(argv)

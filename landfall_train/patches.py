@@ -21,7 +21,8 @@ and direction, stains, soft shadows). City views keep the flight simulator's own
 ``MIN_CITY_SEED`` (``companion-bench city`` flies city 0), and no scenario file (scenario1, scenario2,
 tests/onboard_scene.toml) is ever loaded here.
 
-Patches go to ``OUT/shard-SEED.npz`` (vignettes: ``shard-FIRST.npz`` per ``VIGNETTES_PER_SHARD``)
+Patches go to ``OUT/shard-SEED.npz`` (vignettes: ``shard-FIRST.npz`` per ``VIGNETTES_PER_SHARD``, a
+shorter last shard ``shard-FIRST-COUNT.npz``)
 (``rgb`` (N, S, S, 3) uint8, ``labels`` (N, S, S) uint8, ``meta``
 JSON text), one shard per city; the same seed gives the same bytes.
 """
@@ -266,7 +267,9 @@ def _view(
 def _one_shard(args: tuple[Path, str, int, int, int, int]) -> str:
     out, kind, key, worlds, count, seed = args
     os.environ.setdefault("NUMBA_NUM_THREADS", "1")
-    path = out / f"shard-{key}.npz"
+    # a shard of fewer vignettes than a full one carries its count: asking for more later renders them
+    partial = kind != "city" and worlds != VIGNETTES_PER_SHARD
+    path = out / (f"shard-{key}-{worlds}.npz" if partial else f"shard-{key}.npz")
     if not path.exists():
         if kind == "city":
             rgb, labels, meta = render_city(key, count, seed)

@@ -82,11 +82,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--batch", type=int, default=64)
     p.add_argument("--lr", type=float, default=2e-3)
     p.add_argument("--max-minutes", type=float, default=60.0, help="stop training after this long")
-    p.add_argument("--train-cities", type=int, default=len(TRAIN_SEEDS), help="how many of TRAIN_SEEDS")
-    p.add_argument("--per-city", type=int, default=PER_CITY)
-    p.add_argument(
-        "--vignettes", type=int, default=VIGNETTES, help="training vignettes (fine-grained scenes)"
-    )
+    add_training_args(p)
     p.add_argument("--threads", type=int, default=1, help="torch threads")
     p.add_argument(
         "--views", type=int, choices=VIEWS, default=4,
@@ -129,6 +125,28 @@ def validation_paths(args: argparse.Namespace, seed: int) -> list[Path]:
     )  # fmt: skip
 
 
+def training_paths(args: argparse.Namespace, seed: int) -> list[Path]:
+    """The training renders' shards of seed ``seed`` (rendered when not cached): the first
+    ``args.train_cities`` of ``TRAIN_SEEDS`` and vignettes ``0 .. args.vignettes - 1``."""
+    cache = cache_dir(args.cache, seed)
+    paths = patches.generate(
+        cache / f"train-{args.per_city}", TRAIN_SEEDS[: args.train_cities], args.per_city, seed, args.workers
+    )
+    _log.info("rendering %d vignettes", args.vignettes)
+    return paths + patches.generate_vignettes(
+        cache / f"vignettes-{args.per_vignette}", 0, args.vignettes, args.per_vignette, seed, args.workers
+    )
+
+
+def add_training_args(p: argparse.ArgumentParser) -> None:
+    """The options :func:`training_paths` reads (shared with ``landfall_train.bare``)."""
+    p.add_argument("--train-cities", type=int, default=len(TRAIN_SEEDS), help="how many of TRAIN_SEEDS")
+    p.add_argument("--per-city", type=int, default=PER_CITY)
+    p.add_argument(
+        "--vignettes", type=int, default=VIGNETTES, help="training vignettes (fine-grained scenes)"
+    )
+
+
 def add_validation_args(p: argparse.ArgumentParser) -> None:
     """The options :func:`validation_paths` reads (shared with ``landfall_train.compare``)."""
     p.add_argument("--cache", type=Path, default=Path("runs/train-cache"), help="rendered patches")
@@ -152,19 +170,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.recalibrate:  # the validation renders only
         val = validation_views(x_val, y_val, args.seed)
         return recalibrate(args.out, val, (args.views, args.rank_views), command, val_digest)
-    train_paths = patches.generate(
-        cache / f"train-{args.per_city}", train_seeds, args.per_city, args.seed, args.workers
-    )
-    _log.info("rendering %d vignettes", args.vignettes)
-    train_paths += patches.generate_vignettes(
-        cache / f"vignettes-{args.per_vignette}",
-        0,
-        args.vignettes,
-        args.per_vignette,
-        args.seed,
-        args.workers,
-    )
-    x_train, y_train, train_digest = patches.load_shards(train_paths)
+    x_train, y_train, train_digest = patches.load_shards(training_paths(args, args.seed))
     t_render = time.monotonic() - t0
     _log.info("%d training and %d validation patches in %.0f s", len(x_train), len(x_val), t_render)
     net, steps_done, t_train = fit(x_train, y_train, args)

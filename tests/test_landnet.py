@@ -19,10 +19,13 @@ from companion.perception.surface_id import Candidate
 from companion.reasoning.base import ConfirmRequest, Ranking, RankRequest
 from companion.reasoning.landnet import (
     DEFAULT_MODEL,
+    OUTPUTS,
     LandNet,
     LandNetError,
     SceneReading,
     average_views,
+    model_outputs,
+    rank_hazard,
     view_batch,
 )
 from companion.reasoning.onboard import OnboardReasoner
@@ -288,6 +291,73 @@ def test_scene_reading_hazard_weighs_the_clear_probability_and_the_hazard_peak()
     assert reading(0.4, 0.9).to_json()["hazard_peak"] == 0.9
 
 
+def test_scene_reading_hazard_with_the_bare_head_weighs_it_and_not_the_peak() -> None:
+    """A model with the bare head (landfall-landnet/2): a quarter the clear-site probability, three
+    quarters the probability that nothing stands on the surface; the hazard peak is reported only."""
+
+    def reading(clear_p: float, peak: float, bare: float | None) -> SceneReading:
+        return SceneReading("landnet-s", (64, 64), (8, 8), clear_p, (("roof", 1.0),), (), (), peak, bare)
+
+    assert reading(0.4, 0.9, 0.8).hazard == pytest.approx(3.0 * (1.0 - (0.25 * 0.4 + 0.75 * 0.8)))
+    assert reading(0.4, 0.9, 0.8).hazard == reading(0.4, 0.1, 0.8).hazard
+    assert reading(0.4, 0.1, 0.2).hazard > reading(0.4, 0.1, 0.8).hazard
+    assert reading(1.0, 1.0, 1.0).hazard == 0.0
+    assert reading(0.4, 0.9, 0.8).to_json()["bare_p"] == 0.8
+    assert reading(0.4, 0.9, None).to_json()["bare_p"] is None
+    assert reading(0.4, 0.9, None).hazard == pytest.approx(3.0 * (0.5 * 0.6 + 0.5 * 0.9))
+    # the array form scores held-out renders alike (landfall_train.compare --rank)
+    clear, peak, bare = np.array([0.4, 0.9]), np.array([0.9, 0.2]), np.array([0.8, 0.1])
+    assert rank_hazard(clear, peak, bare) == pytest.approx([reading(0.4, 0.9, 0.8).hazard,
+                                                            reading(0.9, 0.2, 0.1).hazard])  # fmt: skip
+    assert rank_hazard(clear, peak, None, 1.0) == pytest.approx(3.0 * (1.0 - clear))
+
+
+def test_landnet_sidecar_format_names_the_outputs(tmp_path: Path) -> None:
+    assert model_outputs({"format": "landfall-landnet/1"}) == OUTPUTS
+    assert model_outputs({}) == OUTPUTS
+    assert model_outputs({"format": "landfall-landnet/2", "outputs": {"bare": "..."}}) == (*OUTPUTS, "bare")
+    with pytest.raises(ValueError, match=r"names outputs\.bare"):
+        model_outputs({"format": "landfall-landnet/2", "outputs": {}})
+    with pytest.raises(ValueError, match="unknown model format 'landfall-landnet/9'"):
+        model_outputs({"format": "landfall-landnet/9"})
+    # a sidecar that promises the bare head over a graph without it: refused at load, naming the file
+    onnx = _copy_model(tmp_path)
+    meta = json.loads(onnx.with_suffix(".json").read_text())
+    meta["format"] = "landfall-landnet/2"
+    meta["outputs"]["bare"] = "(N, 1, 1, 1) logit"
+    onnx.with_suffix(".json").write_text(json.dumps(meta))
+    for backend in ("onnxruntime", "opencv"):
+        with pytest.raises(LandNetError, match=r"m\.onnx: the ONNX model does not give what its sidecar"):
+            LandNet.load(onnx, backend=backend)
+    meta["format"] = "landfall-landnet/9"
+    onnx.with_suffix(".json").write_text(json.dumps(meta))
+    with pytest.raises(LandNetError, match=r"m\.json: unreadable model sidecar: .*unknown model format"):
+        LandNet.load(onnx)
+
+
+def test_bare_head_fit_reads_the_parts_and_refuses_one_sided_data() -> None:
+    pytest.importorskip("sklearn", reason="the bare head needs scikit-learn: pip install -e '.[train]'")
+    pytest.importorskip("onnx", reason="landfall_train.bare needs onnx: pip install -e '.[train]'")
+    from landfall_train.bare import fit, used_columns
+    from landfall_train.labels import CLASSES
+
+    rng = np.random.default_rng(0)
+    n_feat = 30
+    features = rng.normal(0.0, 1.0, (400, n_feat)).astype(np.float32)
+    bare = features[:, -1] + 0.3 * rng.normal(0.0, 1.0, 400) > 0.0  # the last part decides
+    weight, bias = fit(features, bare, 1.0, "parts")
+    assert (weight[: n_feat - 2 * len(CLASSES)] == 0.0).all()  # the pooled features are not read
+    assert weight[-1] > 0.0
+    logit = features @ weight + bias
+    assert ((logit > 0) == bare).mean() > 0.85
+    assert (fit(features, bare, 1.0, "all")[0] != 0.0).all()
+    assert list(used_columns(30, "parts")) == list(range(30 - 2 * len(CLASSES), 30))
+    with pytest.raises(ValueError, match="all bare or none is"):
+        fit(features, np.ones(400, bool), 1.0)
+    with pytest.raises(ValueError, match="inputs must be"):
+        used_columns(30, "texture")
+
+
 # --- the onboard switch ---------------------------------------------------------------------------------
 def test_companion_defaults_to_landnet_the_class_to_cues_and_unknown_is_refused() -> None:
     # The companion's configuration picks the learned judge; a bare OnboardReasoner (library use,
@@ -421,6 +491,66 @@ def test_landfall_train_smoke_renders_trains_and_exports(tmp_path: Path) -> None
     assert compare.main([str(merged.with_suffix(".onnx")), *tiny_val, "--views", "1,4"]) == 0
     with pytest.raises(SystemExit):
         ensemble.main([str(out.with_suffix(".onnx")), "--out", str(tmp_path / "alone")])  # one member: no
+
+    # the bare head (landfall_train.bare) on each net, then merged: its logit is the members' mean too
+    pytest.importorskip("sklearn", reason="the bare head needs scikit-learn: pip install -e '.[train]'")
+    from landfall_train import bare
+
+    data = [
+        "--train-cities", "1", "--per-city", "4", "--vignettes", "4", "--samples", "80", "--rank-views", "2",
+        *tiny_val,
+    ]  # fmt: skip
+    before = {0: tiny.read(img), 1: LandNet.load(other.with_suffix(".onnx")).read(img)}
+    for seed, model in ((0, out), (1, other)):
+        assert bare.main(["--out", str(model), "--seed", str(seed), *data]) == 0
+        with_head = LandNet.load(model.with_suffix(".onnx"))
+        assert with_head.has_bare
+        side = json.loads(model.with_suffix(".json").read_text())
+        assert side["format"] == "landfall-landnet/2"
+        assert side["bare"]["samples"] == 80
+        assert side["bare"]["fitted_views"] > 0
+        assert 0.0 <= side["bare"]["held_out"]["auc_rank_all"] <= 1.0
+        assert side["parity_max_abs_diff"] < 1e-3
+        got = with_head.read(img)
+        assert got.bare_p is not None
+        assert 0.0 <= got.bare_p <= 1.0
+        # the head adds an output and changes none of the others
+        assert got.clear_p == pytest.approx(before[seed].clear_p, abs=1e-6)
+        assert got.shares == before[seed].shares
+    with pytest.raises(SystemExit):  # a second head on the same net: refused
+        bare.main(["--out", str(out), "--seed", "0", *data])
+    with pytest.raises(SystemExit):  # members with and without the head: refused
+        ensemble.main([str(merged.with_suffix(".onnx")), str(out.with_suffix(".onnx")), "--out",
+                       str(tmp_path / "mixed")])  # fmt: skip
+    headed = tmp_path / "both-bare"
+    assert (
+        ensemble.main([str(out.with_suffix(".onnx")), str(other.with_suffix(".onnx")), "--out", str(headed)])
+        == 0
+    )
+    both_bare = LandNet.load(headed.with_suffix(".onnx"))
+    assert both_bare.has_bare
+    assert json.loads(headed.with_suffix(".json").read_text())["format"] == "landfall-landnet/2"
+    member_logits = [
+        math.log(r.bare_p / (1 - r.bare_p))  # type: ignore[operator]
+        for r in (LandNet.load(m.with_suffix(".onnx")).read(img, views=1) for m in (out, other))
+    ]
+    merged_p = both_bare.read(img, views=1).bare_p
+    assert merged_p is not None
+    assert math.log(merged_p / (1 - merged_p)) == pytest.approx(sum(member_logits) / 2, abs=1e-4)
+    assert compare.main([str(headed.with_suffix(".onnx")), *tiny_val, "--views", "2", "--rank",
+                         "--rank-weights", "0.5"]) == 0  # fmt: skip
+
+
+def test_vignette_shards_asked_for_more_worlds_later_render_them(tmp_path: Path) -> None:
+    """A cached shorter shard is not taken for a longer one (the bare head's data once were 1 vignette
+    where 4 were asked)."""
+    from landfall_train.patches import generate_vignettes, load_shards
+
+    one = generate_vignettes(tmp_path, 0, 1, 2, seed=0)
+    three = generate_vignettes(tmp_path, 0, 3, 2, seed=0)
+    assert len(load_shards(one)[0]) == 2
+    assert len(load_shards(three)[0]) == 6
+    assert len(load_shards(generate_vignettes(tmp_path, 0, 1, 2, seed=0))[0]) == 2
 
 
 def test_vignette_patches_are_labelled_varied_and_the_same_for_the_same_seed() -> None:

@@ -21,8 +21,10 @@ steadier on imagery unlike the renders it learnt from; :func:`view_batch` and :f
 which calibration uses too). Ranks read their crops with ``input.rank_views`` (default: ``views``): a
 rank reads five crops where a confirmation reads one image, and only orders them, which two views do
 nearly as well as four on the held-out renders. :meth:`LandNet.read` returns a
-:class:`SceneReading`: the clear-site probability, the hazard peak (the highest probability of an
-object, person, vehicle, water or marking in any cell; ranks weigh it), per class the share of the
+:class:`SceneReading`: the clear-site probability, the probability that nothing stands on the surface
+(``bare``: a third output of sidecar format ``landfall-landnet/2``, a head trained on roof-dominated
+renders by ``landfall_train.bare``; ranks weigh it), the hazard peak (the highest probability of an
+object, person, vehicle, water or marking in any cell), per class the share of the
 image's cells where it is present and where (a 3 x 3 compass: "upper left" ... "centre" ... "lower
 right"), and how many separate groups of cells hold objects, people or vehicles. One ``cv2.dnn.Net``
 is not safe to call from two threads at once (the onboard tier runs in worker threads): a lock guards
@@ -47,20 +49,25 @@ import numpy as np
 from companion.reasoning.image_cues import check_rgb
 
 __all__ = [
-    "BACKENDS", "DEFAULT_MODEL", "VIEWS", "LandNet", "LandNetError", "SceneReading", "average_views",
-    "onnx_runner", "view_batch",
+    "BACKENDS", "BARE", "DEFAULT_MODEL", "OUTPUTS", "VIEWS", "LandNet", "LandNetError", "SceneReading",
+    "average_views", "model_outputs", "onnx_runner", "rank_hazard", "view_batch",
 ]  # fmt: skip
 
 _log = logging.getLogger(__name__)
 BACKENDS = ("auto", "onnxruntime", "opencv")
-Runner = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]  # NCHW float32 -> (cells, clear) logits
+Runner = Callable[[np.ndarray], tuple[np.ndarray, ...]]  # NCHW float32 -> the outputs' logits, in order
+OUTPUTS = ("cells", "clear")  # every model's outputs; a landfall-landnet/2 model adds BARE
+BARE = "bare"  # (N, 1, 1, 1) logit: nothing (no object, person, vehicle, water, marking) on the surface
 
 DEFAULT_MODEL = Path(__file__).with_name("models") / "landnet-s.onnx"
 HAZARD_SCALE = 3.0  # rank: hazard points of a surely-not-clear site (the image cues' water weight)
-# rank: weight of the clear-site probability in a site's hazard, the rest on its hazard peak (the most
-# likely object, person, vehicle, water or marking cell). Chosen on the held-out renders (docs/reasoning.md,
-# "Ranking roofs"): over roof-dominated patches, no hazard against some, 0.5 orders them best of
-# 0 / 0.25 / 0.4 / 0.5 / 0.6 / 0.75 / 1 (AUC 0.896 against 0.868 for the probability alone).
+# rank, a model with the bare head (landfall-landnet/2): weight of the clear-site probability in a site's
+# hazard, the rest on the probability that nothing stands on it. Chosen on the held-out renders
+# (docs/reasoning.md, "Ranking roofs"): the weight that orders roof-dominated patches (no hazard against
+# some) best without ordering all patches by clear site worse than the model without the head did.
+RANK_BARE_CLEAR_WEIGHT = 0.25
+# rank, a model without it (landfall-landnet/1): weight of the clear-site probability, the rest on the
+# hazard peak (the most likely object, person, vehicle, water or marking cell), chosen the same way.
 RANK_CLEAR_WEIGHT = 0.5
 COUNTED = ("object", "person", "vehicle")  # classes counted as separate groups of cells
 _INPUT_KEYS = ("mean", "std", "multiple", "short_side_px", "max_long_side_px")
@@ -130,15 +137,16 @@ class SceneReading:
     places: tuple[tuple[str, tuple[str, ...]], ...]  # per present class: compass places, most cells first
     counts: tuple[tuple[str, int], ...]  # COUNTED classes: separate groups of cells holding them
     hazard_peak: float = 0.0  # the highest probability of a hazard class in any cell (views averaged)
+    bare_p: float | None = None  # probability that nothing stands on the surface (None: no bare head)
 
     @property
     def hazard(self) -> float:
-        """Hazard points for a rank, on the image cues' scale: ``HAZARD_SCALE`` x (``RANK_CLEAR_WEIGHT`` x
-        (1 - clear_p) + (1 - ``RANK_CLEAR_WEIGHT``) x hazard_peak). The clear-site probability alone also
-        falls with what surrounds a roof (a garden, a wall at the margin); the peak says whether anything
-        stands on it."""
-        w = RANK_CLEAR_WEIGHT
-        return HAZARD_SCALE * (w * (1.0 - self.clear_p) + (1.0 - w) * self.hazard_peak)
+        """Hazard points for a rank, on the image cues' scale. With the bare head: ``HAZARD_SCALE`` x
+        (1 - (``RANK_BARE_CLEAR_WEIGHT`` x clear_p + (1 - ``RANK_BARE_CLEAR_WEIGHT``) x bare_p)); without
+        it: ``HAZARD_SCALE`` x (``RANK_CLEAR_WEIGHT`` x (1 - clear_p) + (1 - ``RANK_CLEAR_WEIGHT``) x
+        hazard_peak). The clear-site probability alone also falls with what surrounds a roof (a garden, a
+        wall at the margin); a rank asks above all whether anything stands on it."""
+        return float(rank_hazard(self.clear_p, self.hazard_peak, self.bare_p))
 
     def share(self, name: str) -> float:
         return dict(self.shares).get(name, 0.0)
@@ -174,15 +182,27 @@ class SceneReading:
             "places": {k: list(v) for k, v in self.places},
             "counts": dict(self.counts),
             "hazard_peak": round(self.hazard_peak, 4),
+            "bare_p": None if self.bare_p is None else round(self.bare_p, 4),
             "hazard": round(self.hazard, 3),
         }
+
+
+def rank_hazard(clear_p: Any, hazard_peak: Any, bare_p: Any | None, weight: float | None = None) -> Any:
+    """A rank's hazard points (:attr:`SceneReading.hazard`) of one reading or of arrays of them
+    (``landfall_train.compare`` scores held-out renders with it); ``weight`` replaces the clear-site
+    probability's weight (``RANK_BARE_CLEAR_WEIGHT`` or ``RANK_CLEAR_WEIGHT``) to compare others."""
+    if bare_p is not None:
+        w = RANK_BARE_CLEAR_WEIGHT if weight is None else weight
+        return HAZARD_SCALE * (1.0 - (w * clear_p + (1.0 - w) * bare_p))
+    w = RANK_CLEAR_WEIGHT if weight is None else weight
+    return HAZARD_SCALE * (w * (1.0 - clear_p) + (1.0 - w) * hazard_peak)
 
 
 def _sigmoid(x: np.ndarray) -> np.ndarray:
     return np.asarray(1.0 / (1.0 + np.exp(-x.astype(np.float64))), np.float64)
 
 
-def _onnxruntime_runner(onnx_path: Path) -> Runner:
+def _onnxruntime_runner(onnx_path: Path, outputs: tuple[str, ...]) -> Runner:
     import onnxruntime as ort
 
     opts = ort.SessionOptions()
@@ -191,27 +211,34 @@ def _onnxruntime_runner(onnx_path: Path) -> Runner:
     opts.log_severity_level = 3  # errors only
     session = ort.InferenceSession(str(onnx_path), opts, providers=["CPUExecutionProvider"])
 
-    def run(blob: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        cells, clear = session.run(["cells", "clear"], {"image": blob})
-        return np.asarray(cells), np.asarray(clear)
+    have = {o.name for o in session.get_outputs()}
+    if not set(outputs) <= have:
+        raise ValueError(f"the graph has outputs {sorted(have)}, not {list(outputs)}")
+
+    def run(blob: np.ndarray) -> tuple[np.ndarray, ...]:
+        return tuple(np.asarray(o) for o in session.run(list(outputs), {"image": blob}))
 
     return run
 
 
-def _opencv_runner(onnx_path: Path) -> Runner:
+def _opencv_runner(onnx_path: Path, outputs: tuple[str, ...]) -> Runner:
     net = cv2.dnn.readNetFromONNX(str(onnx_path))
+    have = set(net.getUnconnectedOutLayersNames())
+    if not set(outputs) <= have:
+        raise ValueError(f"the graph has outputs {sorted(have)}, not {list(outputs)}")
 
-    def run(blob: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def run(blob: np.ndarray) -> tuple[np.ndarray, ...]:
         net.setInput(blob)
-        cells, clear = net.forward(["cells", "clear"])
-        return np.asarray(cells), np.asarray(clear)
+        return tuple(np.asarray(o) for o in net.forward(list(outputs)))
 
     return run
 
 
-def onnx_runner(onnx_path: Path, backend: str = "auto") -> tuple[Runner, str]:
-    """The ONNX model at ``onnx_path`` as a callable, and the runtime's name; LandNetError when it
-    cannot be loaded."""
+def onnx_runner(
+    onnx_path: Path, backend: str = "auto", outputs: tuple[str, ...] = OUTPUTS
+) -> tuple[Runner, str]:
+    """The ONNX model at ``onnx_path`` as a callable returning ``outputs`` in that order, and the
+    runtime's name; LandNetError when it cannot be loaded or lacks one of ``outputs``."""
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
     if backend == "auto":
@@ -220,11 +247,13 @@ def onnx_runner(onnx_path: Path, backend: str = "auto") -> tuple[Runner, str]:
             _log.info("onnxruntime is not installed: LandNet runs through OpenCV's DNN module (slower)")
     try:
         make = _onnxruntime_runner if backend == "onnxruntime" else _opencv_runner
-        return make(onnx_path), backend
+        return make(onnx_path, tuple(outputs)), backend
     except ImportError as exc:
         raise LandNetError(f"backend {backend} is not installed: {exc}", onnx_path) from exc
     except cv2.error as exc:
         raise LandNetError(f"OpenCV cannot load the ONNX model: {exc}", onnx_path) from exc
+    except ValueError as exc:
+        raise LandNetError(f"the ONNX model does not give what its sidecar names: {exc}", onnx_path) from exc
     except Exception as exc:  # onnxruntime raises its own exception types for a bad graph
         raise LandNetError(f"ONNX Runtime cannot load the model: {exc}", onnx_path) from exc
 
@@ -250,6 +279,7 @@ class LandNet:
         self.clear_threshold = float(thresholds["clear"])
         self.cell_thresholds = np.array([float(thresholds["cells"][c]) for c in self.classes], np.float32)
         hazards = meta["hazard_classes"]
+        self.has_bare = model_outputs(meta) == (*OUTPUTS, BARE)
         self._hazard_rows = np.array([k for k, c in enumerate(self.classes) if c in hazards], np.intp)
 
     @classmethod
@@ -281,6 +311,7 @@ class LandNet:
                 if inp.get(key, 1) not in VIEWS:
                     raise ValueError(f"input.{key} must be one of {VIEWS}, got {inp.get(key)!r}")
             float(thr["clear"])
+            outputs = model_outputs(meta)
         except (OSError, ValueError, KeyError, TypeError) as exc:
             raise LandNetError(f"unreadable model sidecar: {exc!r}", meta_path) from exc
         blob = onnx_path.read_bytes()
@@ -289,7 +320,7 @@ class LandNet:
             raise LandNetError(
                 f"sha256 {digest[:12]}... does not match the sidecar's ({meta.get('sha256')})", onnx_path
             )
-        net, used = onnx_runner(onnx_path, backend)
+        net, used = onnx_runner(onnx_path, backend, outputs)
         return cls(net, meta, str(meta.get("name", onnx_path.stem)), used)
 
     def input_size(self, h: int, w: int) -> tuple[int, int]:
@@ -318,14 +349,15 @@ class LandNet:
         n = self.views if views is None else views
         blob = view_batch(((x - self.mean) / self.std).transpose(2, 0, 1), n)
         with self._lock:
-            cells, clear = self._net(np.ascontiguousarray(blob, np.float32))
-        p, clear_p = average_views(_sigmoid(cells), _sigmoid(np.asarray(clear).reshape(-1)), n)
+            out = self._net(np.ascontiguousarray(blob, np.float32))
+        p, clear_p = average_views(_sigmoid(out[0]), _sigmoid(np.asarray(out[1]).reshape(-1)), n)
         present = p[0] >= self.cell_thresholds[:, None, None]
         peak = float(p[0][self._hazard_rows].max())
-        return self._reading((h, w), present, float(clear_p[0]), peak)
+        bare = float(_sigmoid(np.asarray(out[2]).reshape(-1)).mean()) if self.has_bare else None
+        return self._reading((h, w), present, float(clear_p[0]), peak, bare)
 
     def _reading(
-        self, size: tuple[int, int], present: np.ndarray, clear_p: float, peak: float
+        self, size: tuple[int, int], present: np.ndarray, clear_p: float, peak: float, bare: float | None
     ) -> SceneReading:
         _k, gh, gw = present.shape
         shares = tuple((c, float(present[i].mean())) for i, c in enumerate(self.classes))
@@ -345,4 +377,19 @@ class LandNet:
             if c in COUNTED:
                 n, _ = cv2.connectedComponents(present[i].astype(np.uint8), connectivity=8)
                 counts.append((c, int(n) - 1))
-        return SceneReading(self.name, size, (gh, gw), clear_p, shares, tuple(places), tuple(counts), peak)
+        return SceneReading(
+            self.name, size, (gh, gw), clear_p, shares, tuple(places), tuple(counts), peak, bare
+        )
+
+
+def model_outputs(meta: dict[str, Any]) -> tuple[str, ...]:
+    """The outputs a model's sidecar promises: ``OUTPUTS`` (format ``landfall-landnet/1``), and ``BARE``
+    too (``landfall-landnet/2``). ValueError for another format, or a /2 sidecar without ``outputs.bare``."""
+    fmt = meta.get("format", "landfall-landnet/1")
+    if fmt == "landfall-landnet/1":
+        return OUTPUTS
+    if fmt == "landfall-landnet/2":
+        if BARE not in meta.get("outputs", {}):
+            raise ValueError("format landfall-landnet/2 names outputs.bare")
+        return (*OUTPUTS, BARE)
+    raise ValueError(f"unknown model format {fmt!r} (landfall-landnet/1 or /2)")
