@@ -61,10 +61,11 @@ BARE = "bare"  # (N, 1, 1, 1) logit: nothing (no object, person, vehicle, water,
 
 DEFAULT_MODEL = Path(__file__).with_name("models") / "landnet-s.onnx"
 HAZARD_SCALE = 3.0  # rank: hazard points of a surely-not-clear site (the image cues' water weight)
-# rank, a model with the bare head (landfall-landnet/2): weight of the clear-site probability in a site's
-# hazard, the rest on the probability that nothing stands on it. Chosen on the held-out renders
-# (docs/reasoning.md, "Ranking roofs"): the weight that orders roof-dominated patches (no hazard against
-# some) best without ordering all patches by clear site worse than the model without the head did.
+# rank, a model with the bare head (landfall-landnet/2; the packaged model has none): weight of the
+# clear-site probability in a site's hazard, the rest on the probability that nothing stands on it.
+# Chosen on the held-out renders for landfall_train.bare's default head (docs/reasoning.md, "A head for
+# the rank's own question"): the weight that orders roof-dominated patches (no hazard against some) best
+# without ordering all patches by clear site worse than the model without the head did.
 RANK_BARE_CLEAR_WEIGHT = 0.25
 # rank, a model without it (landfall-landnet/1): weight of the clear-site probability, the rest on the
 # hazard peak (the most likely object, person, vehicle, water or marking cell), chosen the same way.
