@@ -46,6 +46,8 @@ from landfall_train.train import (
     _commit,
     add_training_args,
     add_validation_args,
+    normalised,
+    read_views,
     training_paths,
     validation_paths,
     validation_views,
@@ -84,8 +86,7 @@ def pooled_features(model: Any, imgs: np.ndarray) -> np.ndarray:
     session = ort.InferenceSession(probe.SerializeToString(), opts, providers=["CPUExecutionProvider"])
     out = []
     for k in range(0, len(imgs), 64):
-        x = (imgs[k : k + 64].astype(np.float32) / np.float32(255.0) - np.float32(0.5)) / np.float32(0.25)
-        blob = np.ascontiguousarray(x.transpose(0, 3, 1, 2))
+        blob = normalised(imgs[k : k + 64])
         out.append(session.run([name], {"image": blob})[0].reshape(len(blob), -1))
     return np.concatenate(out)
 
@@ -169,13 +170,10 @@ def parity(model: Any, path: Path, weight: np.ndarray, bias: float) -> float:
     rng = np.random.default_rng(0)
     imgs = rng.integers(0, 256, (4, 96, 128, 3), dtype=np.uint8)
     want = pooled_features(model, imgs) @ weight.astype(np.float64) + bias
-    x = ((imgs.astype(np.float32) / np.float32(255.0) - np.float32(0.5)) / np.float32(0.25)).transpose(
-        0, 3, 1, 2
-    )
     worst = 0.0
     for backend in ("onnxruntime", "opencv"):
         run, _used = onnx_runner(path, backend, (*OUTPUTS, BARE))
-        got = run(np.ascontiguousarray(x))[2].reshape(-1)
+        got = run(normalised(imgs))[2].reshape(-1)
         worst = max(worst, float(np.abs(got - want).max()))
     return worst
 
@@ -185,22 +183,12 @@ def rank_readings(path: Path, val: dict[str, np.ndarray], views: int) -> dict[st
     ``clear``, ``peak`` (the likeliest hazard cell) and ``bare`` (absent for a model without the head)."""
     import onnx
 
-    from companion.reasoning.landnet import average_views, view_batch
     from landfall_train.ensemble import member_outputs
 
-    outputs = member_outputs(onnx.load(str(path)))
-    run, _used = onnx_runner(path, "onnxruntime", outputs)
-    out: dict[str, list[float]] = {"clear": [], "peak": []}
-    hazard_rows = list(HAZARD_CLASSES)
-    for img in val["img"]:
-        x = (img.astype(np.float32) / np.float32(255.0) - np.float32(0.5)) / np.float32(0.25)
-        got = run(view_batch(x.transpose(2, 0, 1), views))
-        cells_p, clear_p = average_views(_sigmoid(got[0]), _sigmoid(got[1].reshape(-1)), views)
-        out["clear"].append(float(clear_p[0]))
-        out["peak"].append(float(cells_p[0][hazard_rows].max()))
-        if len(got) > 2:
-            out.setdefault("bare", []).append(float(_sigmoid(got[2].reshape(-1)).mean()))
-    return {k: np.array(v) for k, v in out.items()}
+    run, _used = onnx_runner(path, "onnxruntime", member_outputs(onnx.load(str(path))))
+    cells, clear, *bare = read_views(run, val["img"], views)
+    out = {"clear": clear, "peak": cells[:, list(HAZARD_CLASSES)].max(axis=(1, 2, 3))}
+    return out | ({"bare": bare[0]} if bare else {})
 
 
 def held_out(
@@ -230,10 +218,6 @@ def held_out(
     if weights:
         out["by_weight"] = {f"{w:g}": both(w) for w in weights}
     return out
-
-
-def _sigmoid(z: np.ndarray) -> np.ndarray:
-    return np.asarray(1.0 / (1.0 + np.exp(-np.asarray(z, np.float64))), np.float64)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -26,11 +26,9 @@ from typing import Any
 
 import numpy as np
 
-from companion.reasoning.landnet import BARE
+from companion.reasoning.landnet import BARE, OUTPUTS
 
 _log = logging.getLogger("landfall_train.ensemble")
-
-OUTPUTS = ("cells", "clear")  # every member's; BARE too where each member has it
 
 
 def merge(members: Sequence[Path]) -> Any:

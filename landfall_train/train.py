@@ -332,18 +332,35 @@ def _onnx_predict(path: Path) -> Predict:
     return predict
 
 
-def _predict(predict: Predict, img: np.ndarray, views: int) -> tuple[np.ndarray, np.ndarray]:
-    """Cell and clear probabilities of NHWC uint8 images, each read in ``views`` views and averaged as
-    the companion does (:func:`companion.reasoning.landnet.average_views`)."""
-    cells, clears = [], []
+def normalised(img: np.ndarray) -> np.ndarray:
+    """NHWC uint8 images as the net reads them: NCHW float32, RGB / 255 normalised by ``MEAN``, ``STD``."""
+    x = (img.astype(np.float32) / np.float32(255.0) - np.float32(0.5)) / np.float32(0.25)
+    return np.ascontiguousarray(x.transpose(0, 3, 1, 2))
+
+
+def read_views(
+    predict: Callable[[np.ndarray], tuple[np.ndarray, ...]], img: np.ndarray, views: int
+) -> list[np.ndarray]:
+    """Probabilities of NHWC uint8 images, each read in ``views`` views and averaged as the companion
+    does (:func:`companion.reasoning.landnet.average_views`): the cells (N, K, h, w), then per image each
+    further output ``predict`` gives (the clear site; the bare head where a model has it)."""
+    parts: list[list[np.ndarray]] = []
     for k in range(0, len(img), 64):
-        x = (img[k : k + 64].astype(np.float32) / np.float32(255.0) - np.float32(0.5)) / np.float32(0.25)
-        batch = np.concatenate([view_batch(chw, views) for chw in x.transpose(0, 3, 1, 2)])
-        c, s = predict(batch)
-        c_p, s_p = average_views(1.0 / (1.0 + np.exp(-c.astype(np.float64))), 1.0 / (1.0 + np.exp(-s)), views)
-        cells.append(c_p)
-        clears.append(s_p)
-    return np.concatenate(cells), np.concatenate(clears)
+        batch = np.concatenate([view_batch(chw, views) for chw in normalised(img[k : k + 64])])
+        c, *rest = predict(batch)
+        probs = [1.0 / (1.0 + np.exp(-np.asarray(r).reshape(-1))) for r in rest]
+        c_p, first = average_views(1.0 / (1.0 + np.exp(-c.astype(np.float64))), probs[0], views)
+        got = [c_p, first, *(q.reshape(-1, views).mean(axis=1) for q in probs[1:])]
+        parts = parts or [[] for _ in got]
+        for acc, a in zip(parts, got, strict=True):
+            acc.append(a)
+    return [np.concatenate(a) for a in parts]
+
+
+def _predict(predict: Predict, img: np.ndarray, views: int) -> tuple[np.ndarray, np.ndarray]:
+    """Cell and clear probabilities of NHWC uint8 images (:func:`read_views`)."""
+    cells, clear = read_views(predict, img, views)
+    return cells, clear
 
 
 def recalibrate(
