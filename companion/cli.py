@@ -22,6 +22,7 @@ from companion.perception.surface_id import SurfaceParams
 from companion.reasoning.tiers import BUILTIN_PROFILES, ONBOARD, build_cascade
 from companion.recovery import RecoveryParams
 from companion.redact import redact_logs
+from companion.search import SearchLimits
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -55,8 +56,12 @@ def params_from(cfg: CompanionConfig) -> RecoveryParams:
         blind_descent_agl_m=r.blind_descent_agl_m,
         sensor_loss_s=r.sensor_loss_s,
         link_loss_s=r.link_loss_s,
-        extra_rounds=r.extra_rounds,
-        explore_reserve_pct=r.explore_reserve_pct,
+        search=SearchLimits(
+            reserve_pct=r.search_reserve_pct,
+            window_s={c: getattr(r.search_window_s, c.name.lower()) for c in Criticality},
+            max_legs=r.search_max_legs,
+        ),
+        search_agl_m=r.search_agl_m,
         surface=SurfaceParams(
             cell_px=pc.cell_px,
             window_cells=pc.window_cells,

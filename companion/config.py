@@ -33,7 +33,7 @@ import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any, Literal, get_args, get_origin
+from typing import Annotated, Any, Literal, Self, get_args, get_origin
 
 from pydantic import (
     AfterValidator,
@@ -60,6 +60,7 @@ __all__ = [
     "RecordConfig",
     "RecoveryConfig",
     "RoundsByCriticality",
+    "SearchWindow",
     "SensorsConfig",
     "env_var_name",
     "load_config",
@@ -172,21 +173,36 @@ class SensorsConfig(_Section):
         return _host_port(endpoint)
 
 
-class RoundsByCriticality(_Section):
+class _ByCriticality(_Section):
+    """A value per alarm criticality (``low``, ``high``, ``critical`` fields of the subclass) that must
+    not grow with it: a more urgent alarm never gets more."""
+
+    @model_validator(mode="after")
+    def _check_order(self) -> Self:
+        low, high, critical = (getattr(self, k) for k in ("low", "high", "critical"))
+        if not low >= high >= critical:
+            raise ValueError(
+                "must not grow with criticality (low >= high >= critical); "
+                f"got low={low}, high={high}, critical={critical}"
+            )
+        return self
+
+
+class RoundsByCriticality(_ByCriticality):
     """Round budget per alarm criticality; a critical alarm accepts a riskier site sooner."""
 
     low: int = Field(default=10, ge=1)
     high: int = Field(default=6, ge=1)
     critical: int = Field(default=3, ge=1)
 
-    @model_validator(mode="after")
-    def _check_order(self) -> RoundsByCriticality:
-        if not self.low >= self.high >= self.critical:
-            raise ValueError(
-                "must not grow with criticality (low >= high >= critical); "
-                f"got low={self.low}, high={self.high}, critical={self.critical}"
-            )
-        return self
+
+class SearchWindow(_ByCriticality):
+    """Seconds of the autopilot's clock after the alarm within which the search may start a new leg or
+    round, per criticality: a critical alarm has little time, a GPS-spoofing alarm has minutes."""
+
+    low: float = Field(default=480.0, ge=0)
+    high: float = Field(default=300.0, ge=0)
+    critical: float = Field(default=60.0, ge=0)
 
 
 class RecoveryConfig(_Section):
@@ -204,8 +220,10 @@ class RecoveryConfig(_Section):
     blind_descent_agl_m: float = Field(default=70.0, gt=0)
     sensor_loss_s: float = Field(default=30.0, gt=0)
     link_loss_s: float = Field(default=60.0, gt=0)
-    extra_rounds: int = Field(default=4, ge=0)
-    explore_reserve_pct: float = Field(default=40.0, ge=0, le=100)
+    search_reserve_pct: float = Field(default=25.0, ge=0, le=100)
+    search_window_s: SearchWindow = SearchWindow()
+    search_agl_m: float = Field(default=75.0, gt=0)
+    search_max_legs: int = Field(default=40, ge=0)
 
 
 class PerceptionConfig(_Section):

@@ -17,6 +17,10 @@ topic              payload (JSON)                                               
                    with the candidates boxed and the chosen one in green, ``frame_px``: the
                    frame's [width, height], the boxes' pixels) and each
                    confirmation (``accept``, ``rationale``, the LiDAR check)
+``state``          also the search's plan (``kind`` ``note``, ``state`` the line to show): each   no
+                   search leg and why (``search_leg``: target, aim, reason), a site struck
+                   off from afar (``search_instead``), and why the search ended
+                   (``search_end``: battery, need, window)
 ``fault``          sensor faults the recovery met (``sensor_fault``)                           no
 ``telemetry``      position NED, velocity, altitude above ground, mode (``custom_mode`` and    no
                    its name), armed, battery, GPS fix, seconds since the autopilot's last
@@ -54,6 +58,7 @@ from companion.alarms import Alarm, Criticality, ReasonCode
 
 __all__ = ["GroundFeed", "GroundParams", "TeeRecord", "annotated_thumbnail"]
 
+SEARCH_EVENTS = ("search_leg", "search_instead", "search_end")  # record events carrying a ``note``
 RESULT_NAMES = {0: "accepted", 1: "temporarily_rejected", 2: "denied", 3: "unsupported", 5: "in_progress"}
 BACKOFF_S = (1.0, 2.0, 4.0, 8.0, 15.0, 30.0)
 Payload = dict[str, Any] | Callable[[], dict[str, Any]]  # a callable is built in a worker thread
@@ -138,6 +143,8 @@ class GroundFeed:
             self.publish("decision", {"stage": "confirm", **body})
         elif kind == "sensor_fault":
             self.publish("fault", {"kind": kind, **body})
+        elif kind in SEARCH_EVENTS:  # the search's plan: a line in the station's timeline
+            self.publish("state", {**body, "kind": "note", "state": str(body.get("note", kind))})
 
     def save_image(self, name: str, rgb: Any) -> None:
         if name.endswith("-acquire") and isinstance(rgb, np.ndarray):

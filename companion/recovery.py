@@ -2,12 +2,15 @@
 
 One :class:`Recovery` per alarm. Its state is explicit (:class:`State`); every decision is announced
 (STATUSTEXT), recorded, and taken from telemetry, never from sleeps. A round that finds nothing
-explores (climbs, then spirals outward); a target never reached or a site rejected at confirmation
-ends the round. When the round budget runs out with nothing acceptable seen, the vehicle explores
-further while its battery allows (``extra_rounds``, ``explore_reserve_pct``), then lands at the least bad
-site it measured (:mod:`companion.site_ledger`), never "here" blindly. A defect of the companion's own
-(any unexpected exception) never leaves the vehicle without a commander: it is announced, recorded with
-its traceback, and the vehicle lands (:meth:`Recovery._fail_safe`).
+explores (climbs, or flies a search leg); a target never reached or a site rejected at confirmation
+ends the round. When the round budget runs out with nothing acceptable seen, the vehicle searches on,
+leg by leg (:mod:`companion.search`), while the battery holds more than the landing needs plus a
+reserve and the alarm's window allows; then it lands at the least bad site it measured
+(:mod:`companion.site_ledger`), never "here" blindly. The battery and the window also end the rounds
+within the budget: a battery at its reserve lands at the least bad site after the first look. A
+defect of the companion's own (any unexpected exception) never leaves the vehicle without a
+commander: it is announced, recorded with its traceback, and the vehicle lands
+(:meth:`Recovery._fail_safe`).
 """
 
 from __future__ import annotations
@@ -52,6 +55,7 @@ from companion.perception.surface_id import (
 )
 from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequest, Reasoner
 from companion.reasoning.onboard import OnboardReasoner, lidar_kind
+from companion.search import Leg, SearchLimits, SearchPlanner, Verdict
 from companion.site_ledger import Hazard, LedgerSite, SiteLedger, hazard_of
 from companion.telemetry import TelemetryCache
 
@@ -106,8 +110,8 @@ class RecoveryParams:
     land_timeout_s: float = 120.0
     sensor_loss_s: float = 30.0  # wall seconds without a usable frame before landing without sensors
     link_loss_s: float = 60.0  # wall seconds without telemetry before leaving the vehicle to the autopilot
-    extra_rounds: int = 4  # budget spent, nothing acceptable seen: explore this many rounds more at most
-    explore_reserve_pct: float = 40.0  # ... while the battery holds more than this (unknown: it does)
+    search: SearchLimits = field(default_factory=SearchLimits)  # when searching on must stop
+    search_agl_m: float = 75.0  # a search leg's least height above the ground
 
 
 class Record(Protocol):
@@ -169,11 +173,14 @@ class Recovery:
         self.round = 0
         self.best: Site | None = None
         self.rejected: list[tuple[float, float, float]] = []  # north, east, radius (metres)
-        self._explore_step = 0
         self._reengaged = 0
         self._descending: tuple[tuple[float, float, float], Candidate] | None = None
         self.ledger = SiteLedger(self.p.rejected_radius_m)
         self.extra = 0  # rounds flown past the budget (nothing acceptable seen)
+        self.search = SearchPlanner(
+            alarm.criticality, self.p.search, search_agl_m=self.p.search_agl_m, lidar_range_m=100.0
+        )
+        self._ended: Verdict | None = None  # why the search stopped, when the battery or the window did
         # judges every measured site for the ledger, whoever decides: the cascade's own onboard tier (its
         # judge, cues or LandNet-S, as configured) when there is one
         onboard = getattr(reasoner, "onboard", None)
@@ -190,6 +197,7 @@ class Recovery:
         """A repeated alarm can make the recovery more urgent (a shorter budget), never less."""
         if criticality > self.criticality:
             self.criticality = criticality
+            self.search.raise_criticality(criticality)
             self._say(5, f"alarm raised to {criticality.name.lower()}: {self.budget} rounds")
 
     def _set(self, state: State) -> None:
@@ -205,10 +213,11 @@ class Recovery:
     # ------------------------------------------------------------------ the loop
     async def run(self) -> Outcome:
         self._say(5, f"alarm '{self.alarm.reason}' ({self.criticality.name.lower()}), {self.budget} rounds")
+        self.search.start(self._clock_s(), self.tm.state.battery_pct)
         try:
             await self._engage_and_look()
             resume: tuple[tuple[float, float, float], Candidate] | None = None
-            while resume is not None or self.round < self.budget or self._may_extend():
+            while resume is not None or self._go_on():
                 try:
                     if resume is not None:  # the link came back mid-descent: same site, confirm first
                         landed = await self._confirm_and_descend(*resume)
@@ -236,6 +245,8 @@ class Recovery:
                     return await self._land_at_best("sensors lost", measure_here=False)
                 if landed:
                     return Outcome(State.LANDED, self.round, self._site_ned(), "landed")
+            if self._ended is not None:
+                return await self._land_at_best(f"search ended ({self._ended.why})")
             return await self._land_at_best("round budget spent")
         except TouchedDown as exc:
             # the surface came sooner than measured: the vehicle is down, and says so
@@ -263,19 +274,77 @@ class Recovery:
                 self._first_look = None
 
     # ------------------------------------------------------------------ when nothing was accepted
+    def _clock_s(self) -> float:
+        """The autopilot's clock (seconds since its boot), so that a faster-than-real-time simulation
+        keeps the alarm's window; the companion's monotonic clock before any telemetry."""
+        t = self.tm.state.t_boot_s
+        return t if t > 0 else time.monotonic()
+
+    def _verdict(self) -> tuple[Verdict, LedgerSite | None]:
+        """The search's verdict now (:meth:`SearchPlanner.verdict`), with the site the vehicle would
+        land on were it to stop (whose distance the landing's need counts)."""
+        s = self.tm.state
+        n, e, _ = s.pos_ned_m
+        site = self._fallback_site()
+        to_site = math.dist(site.ned_m[:2], (n, e)) if site is not None else 0.0
+        return self.search.verdict(self._clock_s(), s.battery_pct, s.rangefinder_m, to_site), site
+
+    async def _search_instead(self, choice: Candidate) -> bool:
+        """Policy: the best candidate in view already looks like water or traffic from afar (the
+        ledger's judgement of its rank crop): while the search may go on, it is struck off and a
+        search leg flies instead of a round spent flying there to refuse it close up. True when it
+        did so."""
+        if choice.site_ned_m is None:
+            return False
+        seen = self.ledger.near((choice.site_ned_m[0], choice.site_ned_m[1]))
+        if seen is None or seen.hazard < Hazard.TRAFFIC or not self._verdict()[0].search:
+            return False
+        what = seen.hazard.name.lower()
+        self.rejected.append((seen.ned_m[0], seen.ned_m[1], self._rejected_radius(seen.ned_m, choice)))
+        self.record.record_event(
+            "search_instead",
+            {"round": self.round, "candidate": choice.to_json(), "hazard": what, "why": seen.why},
+        )
+        self._say(5, f"site {choice.index} looks like {what} from afar ({seen.why[:60]}): searching instead")
+        await self._search_leg()
+        return True
+
+    def _go_on(self) -> bool:
+        """Policy: whether another round (or search leg and round) starts. The first look always does.
+        Then the battery (what the landing needs plus a reserve) and the alarm's window may end the
+        search, within the round budget too; past the budget it goes on only while nothing acceptable
+        was judged close up (a roof with nothing against it)."""
+        if self.round == 0:
+            return True
+        if self.round >= self.budget and not self._may_extend():
+            return False
+        verdict, site = self._verdict()
+        if verdict.search:
+            return True
+        self._ended = verdict
+        self._say(4, f"search ends: {verdict.why}")
+        self.record.record_event(
+            "search_end",
+            {
+                "note": f"search ends: {verdict.why}",
+                "round": self.round,
+                "reason": verdict.why,
+                "battery_pct": round(verdict.battery_pct, 1) if math.isfinite(verdict.battery_pct) else None,
+                "need_pct": round(verdict.need_pct, 1),
+                "elapsed_s": round(verdict.elapsed_s, 1),
+                "legs": len(self.search.legs),
+                "best": None if site is None else site.to_json(),
+            },
+        )
+        return False
+
     def _may_extend(self) -> bool:
-        """Policy: the budget is spent and nothing acceptable was judged close up (a roof with nothing
-        against it): go on, ``extra_rounds`` at most, while the battery holds more than
-        ``explore_reserve_pct`` (an unknown level does not stop it: the rounds are bounded anyway)."""
+        """Past the round budget: nothing acceptable was judged close up (a roof with nothing against
+        it), so the search goes on (the battery and the window bound it, :meth:`_go_on`)."""
         if self.best is not None:
             return False
         site = self.ledger.least_bad()
-        if site is not None and site.hazard.acceptable and site.closeup:
-            return False
-        if self.extra >= self.p.extra_rounds:
-            return False
-        battery = self.tm.state.battery_pct
-        return not (math.isfinite(battery) and battery <= self.p.explore_reserve_pct)
+        return not (site is not None and site.hazard.acceptable and site.closeup)
 
     async def _extra_round(self) -> bool:
         """A round past the budget: a closer look at the best roof seen only from afar (nothing seen
@@ -288,7 +357,7 @@ class Recovery:
         site = self.ledger.least_bad((n, e))
         battery = self.tm.state.battery_pct
         charge = f", battery {battery:.0f} %" if math.isfinite(battery) else ""
-        count = f"{self.extra}/{self.p.extra_rounds}{charge}"
+        count = f"{self.extra}{charge}"
         look = (
             site is not None
             and site.hazard.acceptable
@@ -317,9 +386,45 @@ class Recovery:
             if site is None
             else f"the best seen is {site.hazard.name.lower().replace('_', ' ')}"
         )
-        self._say(4, f"budget spent, {seen}: exploring further ({count})")
-        await self._explore(outward=True)
+        self._say(4, f"budget spent, {seen}: searching on ({count})")
+        await self._search_leg()
         return await self._round()
+
+    async def _search_leg(self) -> Leg:
+        """Fly the planner's next leg (:meth:`SearchPlanner.next_leg`): climb first when the leg goes
+        higher, descend last when it goes lower, so the level part flies at the safer height. Said,
+        recorded (``search_leg``) and shown on the ground feed."""
+        self._set(State.EXPLORE)
+        s = self.tm.state
+        n, e, d = s.pos_ned_m
+        leg = await asyncio.to_thread(self.search.next_leg, (n, e, d), self.ledger, s.rangefinder_m)
+        tn, te, td = leg.target_ned_m
+        count = len(self.search.legs)
+        note = f"search leg {count}: {leg.reason}"
+        self._say(5, note)
+        self.record.record_event(
+            "search_leg",
+            {
+                "note": note,
+                "round": self.round,
+                "leg": count,
+                "from_ned_m": [round(v, 1) for v in (n, e, d)],
+                "battery_pct": round(s.battery_pct, 1) if math.isfinite(s.battery_pct) else None,
+                **leg.to_json(),
+            },
+        )
+        steps = [(n, e, td), (tn, te, td)] if td < d - 3.0 else [(tn, te, d), (tn, te, td)]
+        for sn, se, sd in steps:
+            with contextlib.suppress(TargetTimeout):
+                await self.ctl.goto(
+                    sn,
+                    se,
+                    sd,
+                    tolerance_m=2.0,
+                    speed_m_s=0.5,
+                    timeout_s=self.p.move_timeout_s + math.dist((sn, se, sd), self.tm.state.pos_ned_m) / 2.0,
+                )
+        return leg
 
     async def _fail_safe(self, exc: Exception) -> Outcome:
         """Policy for a defect of the companion's own (an exception no stage expects): announce it
@@ -454,6 +559,9 @@ class Recovery:
         self._set(State.SURFACE_ID)
         camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
         candidates = await asyncio.to_thread(self._surface_id, frame, camera)
+        await asyncio.to_thread(self._observe, frame)  # the search's map of what was seen
+        # roofs the LiDAR saw beyond Surface ID's candidates make it a built-up area too
+        self._roofs_seen = self._roofs_seen or bool(self.search.roof_groups())
         self._roofs_seen = self._roofs_seen or any(c.elevated for c in candidates)
         candidates = [c for c in candidates if not self._near_rejected(c)]
         if frame.image_rgb is not None:  # JPEG encoding off the event loop: the setpoint stream runs there
@@ -468,6 +576,8 @@ class Recovery:
         choice = candidates[chosen] if chosen is not None else None
         if choice is None:
             await self._explore()
+            return False
+        if await self._search_instead(choice):
             return False
         target = await asyncio.to_thread(self._ipm, choice, frame, camera)
         if target is None:
@@ -595,6 +705,7 @@ class Recovery:
         judging the spot under the vehicle too when sensors allow (``measure_here``); "here" only when
         nothing at all was measured, and said so."""
         if measure_here and self.best is None:
+            await self._look_around()
             await self._measure_here()
         site = self._fallback_site()
         if site is None and not self.ledger.sites:
@@ -650,6 +761,19 @@ class Recovery:
             self._say(4, f"{what} target not reached ({exc.error_m:.1f} m off): {then}")
             return False
         return True
+
+    async def _look_around(self) -> None:
+        """One look at what is in view now (Surface ID's candidates, judged from afar into the
+        ledger), so that the least bad site is chosen among what can be reached at once, not only
+        among what earlier rounds measured: a search that ends after a blind first look, a battery
+        at its reserve. One frame, no waiting: a missing frame skips it."""
+        try:
+            frame = await self._frames()
+        except FrameUnavailable:
+            return
+        camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
+        candidates = await asyncio.to_thread(self._surface_id, frame, camera)
+        await asyncio.to_thread(self._note_candidates, candidates, frame, camera)
 
     async def _measure_here(self) -> None:
         """Judge the spot under the vehicle (one frame, no waiting: a missing frame skips it) into the
@@ -715,11 +839,9 @@ class Recovery:
                 )
             )
 
-    async def _explore(self, blind: bool = False, *, outward: bool = False) -> None:
-        """Nothing survived screening: climb for a wider view, then step outward on a spiral.
-
-        ``outward``: a round past the budget (nothing acceptable seen here): climb to
-        ``explore_max_alt_m`` first when lower (clear of the roofs around), then step outward.
+    async def _explore(self, blind: bool = False) -> None:
+        """Nothing survived screening: climb for a wider view, else fly a search leg
+        (:meth:`_search_leg`) to roofs the LiDAR saw or to ground not yet seen.
 
         ``blind``: the LiDAR returned nothing at all. When the rangefinder agrees that the ground is
         far (beyond ``blind_descent_agl_m``), everything below is out of the LiDAR's range: climbing
@@ -727,25 +849,13 @@ class Recovery:
         says nothing stands within its range below, so the descent has nothing to hit. A silent
         LiDAR with the ground near is a failed LiDAR: no blind descent then.
 
-        Whenever the rangefinder puts the ground more than ``explore_max_alt_m`` below (the spiral
-        flies level, and the ground falls away under it once it leaves a roof behind), the step is a
-        descent to ``explore_max_alt_m`` above it: from higher up the LiDAR reaches nothing flat."""
+        Whenever the rangefinder puts the ground more than ``explore_max_alt_m`` below (a roof left
+        behind, low ground), the step is a descent to ``explore_max_alt_m`` above it: from higher up
+        the LiDAR reaches nothing flat."""
         self._set(State.EXPLORE)
         n, e, d = self.tm.state.pos_ned_m
         alt = self.tm.state.rangefinder_m
-        if outward and math.isfinite(alt) and alt < self.p.explore_max_alt_m - 1.0:
-            climb = self.p.explore_max_alt_m - alt
-            self._say(6, f"climbing {climb:.0f} m to look farther")
-            with contextlib.suppress(TargetTimeout):
-                await self.ctl.goto(
-                    n, e, d - climb, tolerance_m=1.0, speed_m_s=0.5, timeout_s=self.p.move_timeout_s
-                )
-            n, e, d = self.tm.state.pos_ned_m
-        # The spiral flies level: where the ground falls away under it (a roof left behind, a valley)
-        # it ends up higher above the ground than the LiDAR reaches, and every look finds nothing.
         beyond = math.isfinite(alt) and alt > self.p.explore_max_alt_m + 5.0
-        if outward and not beyond:
-            alt = math.inf  # straight to the spiral's next step
         if blind and math.isfinite(alt) and alt > self.p.blind_descent_agl_m + 5.0:
             drop = alt - self.p.blind_descent_agl_m
             target = (n, e, d + drop)
@@ -755,17 +865,23 @@ class Recovery:
             drop = alt - self.p.explore_max_alt_m
             target = (n, e, d + drop)
             self._say(6, f"ground {alt:.0f} m below, beyond the LiDAR's reach: descending {drop:.0f} m")
-        elif math.isfinite(alt) and alt + self.p.explore_climb_m <= self.p.explore_max_alt_m:
+        elif math.isfinite(alt) and alt + self.p.explore_climb_m <= self.p.search_agl_m:
+            # low down a climb widens the view; at the search height the LiDAR's reach would shrink
             target = (n, e, d - self.p.explore_climb_m)
             self._say(6, f"no flat site in view: climbing {self.p.explore_climb_m:.0f} m")
         else:
-            self._explore_step += 1
-            angle = self._explore_step * 2.4  # golden-angle spiral
-            radius = 30.0 * math.sqrt(self._explore_step)
-            target = (n + radius * math.cos(angle), e + radius * math.sin(angle), d)
-            self._say(6, f"no flat site in view: moving {radius:.0f} m outward")
+            await self._search_leg()
+            return
         with contextlib.suppress(TargetTimeout):
             await self.ctl.goto(*target, tolerance_m=1.0, speed_m_s=0.5, timeout_s=self.p.move_timeout_s)
+
+    def _observe(self, frame: Any) -> None:
+        """The frame into the search's map: the LiDAR's sweep, and with LandNet-S as the onboard judge
+        what the camera shows beyond it (water and traffic). A worker-thread job."""
+        self.search.observe(frame)
+        net = self._onboard.landnet
+        if net is not None and frame.image_rgb is not None:
+            self.search.observe_camera(frame, net.presence, tuple(net.classes))
 
     def _surface_id(self, frame: Any, camera: PinholeCamera) -> list[Candidate]:
         """Candidates from the configured depth source; the quadrant fallback when it has nothing."""

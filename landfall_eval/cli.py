@@ -38,6 +38,7 @@ from landfall_eval.episode import EpisodeSpec, EpisodeTimes, describe_last_state
 from landfall_eval.grading import summarise
 from landfall_eval.launches import halton_launches
 from simbridge.cli import non_negative_seed
+from simbridge.world.scenario_file import builtin_scenario_names
 
 __all__ = ["SCHEMA", "load_results", "main", "save_results"]
 
@@ -197,7 +198,13 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--scenario", action="append", choices=("scenario1", "scenario2"), help="default: both")
     _ekf_error_option(m, "landing flights")
     c = sub.add_parser("curated", parents=[common, flying], help="full pipeline in a curated scenario")
-    c.add_argument("--scenario", required=True, choices=("scenario1", "scenario2"))
+    c.add_argument(
+        "--scenario",
+        required=True,
+        choices=builtin_scenario_names(),
+        help="a scenario file that ships with simbridge: the study's scenario1 and scenario2, or "
+        "river_crossing (a launch over a river, the roofs out of view)",
+    )
     c.add_argument("--runs", type=_positive(int, "--runs"), default=10)
     y = sub.add_parser("city", parents=[common, flying], help="full pipeline from Halton launch points")
     y.add_argument("--seeds", type=_positive(int, "--seeds"), default=20, help="number of launch points")

@@ -16,6 +16,8 @@ record event                        feed message
 ``link_lost``
 ``extend``, ``fallback_site``,      ``state`` with ``kind`` ``note``: a line in the timeline
 ``link_restored``
+``search_leg``, ``search_instead``, ``state`` with ``kind`` ``note``: the event's own ``note``,
+``search_end``                      as the live feed sends it
 ==================================  ==========================================================
 
 A line that is not a JSON object, or an event whose fields have the wrong shape, is counted as
@@ -157,6 +159,8 @@ def _convert(row: dict[str, Any], session_dir: Path) -> tuple[str, dict[str, Any
         return "fault", {"kind": kind, **body}
     if kind in ("extend", "fallback_site", "link_restored"):
         return "state", {"kind": "note", "state": _note(kind, body), **_without(body, "state")}
+    if kind in ("search_leg", "search_instead", "search_end"):  # as the live feed sends them
+        return "state", {**body, "kind": "note", "state": str(body.get("note", kind))}
     return None
 
 

@@ -146,6 +146,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="the emulated autopilot's estimator errors: off (it knows the truth) or nominal (GPS/EKF bias "
         "drift, noise, lag, attitude error; its telemetry and its position targets are in that frame)",
     )
+    p.add_argument(
+        "--battery",
+        type=float,
+        default=100.0,
+        metavar="PCT",
+        help="the battery's charge at the start, percent (default 100): a low-battery flight",
+    )
     p.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
     return p
 
@@ -198,6 +205,7 @@ def config_from_args(args: argparse.Namespace) -> SimConfig:
         launch=args.launch,
         sitl=args.sitl,
         ekf_error=args.ekf_error,
+        battery_pct=args.battery,
     )
 
 

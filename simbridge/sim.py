@@ -18,6 +18,7 @@ from landfall_link.mavlink import MavlinkUdpLink
 from simbridge.autopilot.core import Autopilot
 from simbridge.autopilot.flavours import flavour_named
 from simbridge.autopilot.server import AutopilotServer
+from simbridge.battery import BatteryConfig
 from simbridge.episode_log import EpisodeLog
 from simbridge.estimate import EstimateError, estimate_preset
 from simbridge.geo import GeoOrigin
@@ -52,12 +53,17 @@ class SimConfig:
     launch: tuple[float, ...] | None = None  # (north, east[, height above ground]) override
     sitl: str | None = None  # ArduCopter SITL binary (autopilot "ardupilot-sitl"; default: find_arducopter)
     ekf_error: str = "off"  # the emulation's estimator errors (simbridge.estimate.PRESETS)
+    battery_pct: float = 100.0  # the pack's charge at the start (a low-battery alarm's flight)
 
     def __post_init__(self) -> None:
+        if not 0.0 < self.battery_pct <= 100.0:
+            raise ValueError(f"--battery must be in (0, 100] percent, got {self.battery_pct}")
         if self.autopilot not in AUTOPILOTS:
             raise ValueError(f"--autopilot must be one of {', '.join(AUTOPILOTS)}, got {self.autopilot!r}")
         estimate_preset(self.ekf_error)  # raises ValueError naming the flag
         if self.autopilot == SITL_AUTOPILOT:
+            if self.battery_pct != 100.0:
+                raise ValueError("--battery: real firmware simulates its own battery (leave it at 100)")
             if self.ekf_error != "off":
                 raise ValueError("--ekf-error: real firmware has its own estimator (leave it off)")
             if self.signing_key is not None:
@@ -102,7 +108,12 @@ class SimBridge:
         )
         rng = np.random.default_rng(config.seed)
         wind = WindModel(config.wind, rng) if config.wind != WindConfig() else None
-        self.vehicle = Vehicle(config.origin, self.scenario.terrain, wind=wind)
+        self.vehicle = Vehicle(
+            config.origin,
+            self.scenario.terrain,
+            wind=wind,
+            battery=BatteryConfig(initial_fraction=config.battery_pct / 100.0),
+        )
         sc = self.scenario
         n, e = sc.launch_ne_m
         ground = sc.terrain.height_m(n, e)

@@ -14,6 +14,7 @@ from companion.config import (
     CompanionConfig,
     ConfigError,
     RoundsByCriticality,
+    SearchWindow,
     env_var_name,
     load_config,
 )
@@ -550,8 +551,10 @@ def test_deploy_companion_toml_lists_every_option_with_a_comment() -> None:
         model = field.annotation
         assert isinstance(model, type)
         for key in model.model_fields:
-            if key == "rounds_by_criticality":
-                expected.update(f"{section}.{key}.{k}" for k in RoundsByCriticality.model_fields)
+            sub = model.model_fields[key].annotation
+            if sub in (RoundsByCriticality, SearchWindow):
+                assert isinstance(sub, type)
+                expected.update(f"{section}.{key}.{k}" for k in sub.model_fields)
             else:
                 expected.add(f"{section}.{key}")
     # The key itself is documented but commented out: keys belong in the environment. LVLM profiles are

@@ -209,6 +209,21 @@ class PinholeCamera:
         inside: np.ndarray = (u >= 0.0) & (u < self.width) & (v >= 0.0) & (v < self.height)
         return inside
 
+    def pixel_rays_frd(self, uv: npt.ArrayLike) -> np.ndarray:
+        """Unit (N, 3) directions in body FRD of the rays through (N, 2) pixel coordinates, as
+        :meth:`pixel_ray_frd` gives them one at a time."""
+        arr = np.asarray(uv, dtype=np.float64)
+        if arr.ndim != 2 or arr.shape[1] != 2 or not np.isfinite(arr).all():
+            raise GeometryInputError(
+                "uv", "an (N, 2) array of finite pixel coordinates", f"shape {arr.shape}"
+            )
+        cam = np.column_stack(
+            [(arr[:, 0] - self.cx) / self.fx, (arr[:, 1] - self.cy) / self.fy, np.ones(len(arr))]
+        )
+        rays: np.ndarray = cam @ CAMERA_TO_BODY.T
+        unit: np.ndarray = rays / np.linalg.norm(rays, axis=1, keepdims=True)
+        return unit
+
     def pixel_ray_frd(self, u: float, v: float) -> np.ndarray:
         """Unit (3,) direction in body FRD of the ray through continuous pixel coordinates ``(u, v)``.
 

@@ -343,19 +343,34 @@ class LandNet:
             ValueError: not a non-empty (H, W, 3) uint8 numpy array.
         """
         img = check_rgb(rgb)
+        p, clear_p, out = self._infer(img, self.views if views is None else views)
+        present = p[0] >= self.cell_thresholds[:, None, None]
+        peak = float(p[0][self._hazard_rows].max())
+        bare = float(_sigmoid(np.asarray(out[2]).reshape(-1)).mean()) if self.has_bare else None
+        return self._reading(img.shape[:2], present, float(clear_p[0]), peak, bare)
+
+    def _infer(self, img: np.ndarray, views: int) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
+        """One image (H, W, 3) uint8 scaled, normalised and run in ``views`` views: the cells'
+        probabilities (1, K, h, w) and the clear site's (1,), views averaged, and the raw outputs."""
         h, w = img.shape[:2]
         ih, iw = self.input_size(h, w)
         interp = cv2.INTER_AREA if ih * iw < h * w else cv2.INTER_LINEAR
         x = cv2.resize(img, (iw, ih), interpolation=interp).astype(np.float32) * np.float32(1.0 / 255.0)
-        n = self.views if views is None else views
-        blob = view_batch(((x - self.mean) / self.std).transpose(2, 0, 1), n)
+        blob = view_batch(((x - self.mean) / self.std).transpose(2, 0, 1), views)
         with self._lock:
             out = self._net(np.ascontiguousarray(blob, np.float32))
-        p, clear_p = average_views(_sigmoid(out[0]), _sigmoid(np.asarray(out[1]).reshape(-1)), n)
-        present = p[0] >= self.cell_thresholds[:, None, None]
-        peak = float(p[0][self._hazard_rows].max())
-        bare = float(_sigmoid(np.asarray(out[2]).reshape(-1)).mean()) if self.has_bare else None
-        return self._reading((h, w), present, float(clear_p[0]), peak, bare)
+        p, clear_p = average_views(_sigmoid(out[0]), _sigmoid(np.asarray(out[1]).reshape(-1)), views)
+        return p, clear_p, out
+
+    def presence(self, rgb: np.ndarray, views: int = 1) -> np.ndarray:
+        """Per class (sidecar order) and cell of 8 x 8 input pixels, whether it is present: (K, h, w)
+        bool, cell (r, c) covering rows ``r * H / h`` .. and columns ``c * W / w`` .. of the image.
+
+        Raises:
+            ValueError: not a non-empty (H, W, 3) uint8 numpy array.
+        """
+        p, _clear, _out = self._infer(check_rgb(rgb), views)
+        return np.asarray(p[0] >= self.cell_thresholds[:, None, None])
 
     def _reading(
         self, size: tuple[int, int], present: np.ndarray, clear_p: float, peak: float, bare: float | None
