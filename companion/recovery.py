@@ -290,12 +290,12 @@ class Recovery:
         return self.search.verdict(self._clock_s(), s.battery_pct, s.rangefinder_m, to_site), site
 
     async def _search_instead(self, choice: Candidate) -> bool:
-        """Policy: the best candidate in view already looks like water or traffic from afar (the
-        ledger's judgement of its rank crop): while the search may go on, it is struck off and a
-        search leg flies instead of a round spent flying there to refuse it close up. True when it
-        did so."""
-        if choice.site_ned_m is None:
-            return False
+        """Policy: the best candidate in view, at street level or on an elevated strip, already looks
+        like water or traffic from afar (the ledger's judgement of its rank crop): while the search
+        may go on, it is struck off and a search leg flies instead of a round spent flying there to
+        refuse it close up. A roof always gets its close look. True when it did so."""
+        if choice.site_ned_m is None or (choice.elevated and not choice.strip):
+            return False  # from afar a marking on a roof may be a shadow or a painted helipad
         seen = self.ledger.near((choice.site_ned_m[0], choice.site_ned_m[1]))
         if seen is None or seen.hazard < Hazard.TRAFFIC or not self._verdict()[0].search:
             return False

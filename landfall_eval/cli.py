@@ -1,8 +1,8 @@
 """``companion-bench``: the study's experiments on simbridge, graded from ground truth, with a report.
 
     companion-bench modules [--iterations 20] [--reasoner NAME] --out DIR
-    companion-bench curated --scenario scenario1|scenario2 --runs N [--weather W[,W...]] [--context C]
-                            [--reasoner NAME] --out DIR
+    companion-bench curated --scenario scenario1|scenario2|river_crossing --runs N [--weather W[,W...]]
+                            [--context C] [--reasoner NAME] --out DIR
     companion-bench city --seeds N [--start-index K] [--city-seeds S[,S...]] [--weather W[,W...]]
                          [--context C] [--reasoner NAME] --out DIR
     ... [--executor local|ray [--ray-address ADDR] [--cpus-per-episode C]] [--resume]
