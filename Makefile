@@ -23,7 +23,7 @@ $(DEPTH_STAMP): $(STAMP)
 	touch $(DEPTH_STAMP)
 
 demo: $(STAMP)
-	$(VENV)/bin/python -m companion.demo
+	$(VENV)/bin/python -m landfall_eval.demo
 
 # The MQTT tests talk to a real broker: mosquitto from Debian's packages (installed when missing and
 # we are root; otherwise say how).

@@ -17,9 +17,10 @@ from companion.alarms import Alarm, Criticality
 from companion.config import CompanionConfig, ConfigError, load_config
 from companion.daemon import Companion
 from companion.ground import GroundFeed, GroundParams
-from companion.perception.depth import DepthError, DepthSource, make_source
+from companion.perception.depth import DepthError, DepthSource
+from companion.perception.sources import make_source
 from companion.perception.surface_id import SurfaceParams
-from companion.reasoning.tiers import BUILTIN_PROFILES, ONBOARD, build_cascade
+from companion.reasoning.tiers import BUILTIN_PROFILES, ONBOARD, build_cascade, secrets
 from companion.recovery import RecoveryParams
 from companion.redact import redact_logs
 from companion.search import SearchLimits
@@ -167,7 +168,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"companion: configuration error: {exc}", file=sys.stderr)
         return 2
     logging.basicConfig(level=cfg.log.level, stream=sys.stderr, format="%(levelname)s %(name)s: %(message)s")
-    redact_logs(cfg.secrets(os.environ))
+    redact_logs(secrets(cfg, os.environ))
 
     # What the start-up imported (numpy, scipy, cv2, pydantic, pymavlink: some 70,000 objects) lives as
     # long as the daemon: frozen out of the collector, a full collection no longer walks it and stalls

@@ -388,17 +388,6 @@ class CompanionConfig(_Section):
         """The broker password from the variable named by ``mqtt.password_env`` (never from the file)."""
         return env.get(self.mqtt.password_env) or None
 
-    def secrets(self, env: Mapping[str, str]) -> list[str]:
-        """Every secret this configuration gives the daemon (for the log's redaction): the signing key
-        as hex in both cases, the broker password, the API keys of the reasoner's profiles."""
-        from companion.reasoning.tiers import api_keys
-
-        out = [k for k in (self.mqtt_password(env),) if k]
-        key = self.signing_key()
-        if key is not None:
-            out += [key.hex(), key.hex().upper()]
-        return out + api_keys(self.reasoner, env)
-
     def rounds_for(self, criticality: Literal["low", "high", "critical"]) -> int:
         """Round budget for an alarm: the criticality's budget, capped by ``recovery.max_rounds``."""
         by = self.recovery.rounds_by_criticality

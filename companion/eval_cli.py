@@ -51,8 +51,8 @@ from companion.perception.depth import (
     DepthSource,
     LidarDepth,
     load_depth_file,
-    make_source,
 )
+from companion.perception.sources import make_source
 from companion.perception.surface_id import Candidate, SurfaceParams, propose
 from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequest, Reasoner, ReasonerError
 from companion.reasoning.cascade import Cascade

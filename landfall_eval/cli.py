@@ -37,7 +37,7 @@ from landfall_eval.campaign import EXECUTORS, EpisodeJob, RayUnavailable, make_e
 from landfall_eval.episode import EpisodeSpec, EpisodeTimes, describe_last_state
 from landfall_eval.grading import summarise
 from landfall_eval.launches import halton_launches
-from simbridge.cli import non_negative_seed
+from simbridge.args import non_negative_seed
 from simbridge.world.scenario_file import builtin_scenario_names
 
 __all__ = ["SCHEMA", "load_results", "main", "save_results"]

@@ -11,10 +11,11 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from landfall_link.mavlink import LinkUrl, LinkUrlError, parse_signing_key
+from simbridge.args import non_negative_seed
 from simbridge.estimate import PRESETS
 from simbridge.geo import GeoOrigin
 from simbridge.scenarios import scenario_names
-from simbridge.sim import AUTOPILOTS, SimConfig, make_bridge
+from simbridge.sim import AUTOPILOTS, SITL_AUTOPILOT, SimBridge, SimConfig
 from simbridge.sitl import ENV_BINARY, SitlError
 from simbridge.wind import WindConfig
 
@@ -43,17 +44,6 @@ def _launch(text: str) -> tuple[float, ...]:
     if len(values) == 3 and not 5.0 <= values[2] <= 300.0:
         raise argparse.ArgumentTypeError(f"--launch: height must be 5..300 m above ground, got {values[2]}")
     return values
-
-
-def non_negative_seed(text: str) -> int:
-    """An argparse type: a whole number >= 0 (argparse names the flag in its error)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
-    return value
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -207,6 +197,16 @@ def config_from_args(args: argparse.Namespace) -> SimConfig:
         ekf_error=args.ekf_error,
         battery_pct=args.battery,
     )
+
+
+def make_bridge(config: SimConfig, logger: logging.Logger | None = None) -> SimBridge:
+    """The bridge for ``config.autopilot``: the emulation, or real ArduCopter SITL (which subclasses it,
+    so it is chosen here, above both)."""
+    if config.autopilot == SITL_AUTOPILOT:
+        from simbridge.sitl_bridge import SitlBridge
+
+        return SitlBridge(config, logger)
+    return SimBridge(config, logger)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -13,7 +13,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from simbridge.cli import non_negative_seed
+from simbridge.args import non_negative_seed
 from simbridge.geo import euler_to_quat
 
 

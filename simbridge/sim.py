@@ -88,15 +88,6 @@ class SimConfig:
             raise ValueError(f"--weather must be clear, fog or rain, got {self.weather!r}")
 
 
-def make_bridge(config: SimConfig, logger: logging.Logger | None = None) -> SimBridge:
-    """The bridge for ``config.autopilot``: the emulation, or real ArduCopter SITL."""
-    if config.autopilot == SITL_AUTOPILOT:
-        from simbridge.sitl_bridge import SitlBridge
-
-        return SitlBridge(config, logger)
-    return SimBridge(config, logger)
-
-
 class SimBridge:
     """Build with a config, then ``await run()``; ``stop()`` ends it cleanly."""
 

@@ -18,6 +18,7 @@ from companion.config import (
     env_var_name,
     load_config,
 )
+from companion.reasoning.tiers import secrets as tier_secrets
 
 REPO = Path(__file__).resolve().parents[1]
 KEY_HEX = "0123456789abcdef" * 4
@@ -500,7 +501,7 @@ def test_the_log_redacts_every_secret_the_config_gives(
         '[reasoner.profiles.edge]\nbase_url = "http://127.0.0.1:1/v1"\nmodel = "m"\n'
         'api_key_env = "MY_EDGE_KEY"\n[mqtt]\npassword_env = "LANDFALL_MQTT_PASSWORD"\n'
     )
-    secrets = load_config(path, env, {}).secrets(env)
+    secrets = tier_secrets(load_config(path, env, {}), env)
     assert set(secrets) == {
         KEY_HEX, KEY_HEX.upper(), "sk-openai-0123456789", "edge-key-abcdefgh", "broker-pass-1234"
     }  # fmt: skip

@@ -14,7 +14,7 @@ pytestmark = pytest.mark.slow
 
 
 def test_demo_lands_safely(tmp_path: Path) -> None:
-    cmd = [sys.executable, "-m", "companion.demo", "--speed", "6", "--out", str(tmp_path)]
+    cmd = [sys.executable, "-m", "landfall_eval.demo", "--speed", "6", "--out", str(tmp_path)]
     out = subprocess.run(cmd, capture_output=True, text=True, timeout=400)
     assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
     assert "accepted: recovery started" in out.stdout

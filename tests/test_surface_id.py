@@ -29,9 +29,9 @@ from companion.perception.depth import (
     DepthError,
     DepthMap,
     LidarDepth,
-    make_source,
     ring_spacing_rad,
 )
+from companion.perception.sources import make_source
 from companion.perception.surface_id import Candidate, SurfaceParams, propose, quadrant_fallback, surface_id
 from simbridge.world.lidar import LidarModel
 

@@ -13,6 +13,7 @@ Every source turns what the drone has into a :class:`DepthMap` on the camera's i
 - :class:`ArrayDepth`: a depth image from a file (``simbridge render --depth-out``), metric or not,
   sampled at each cell's centre pixel.
 - :class:`companion.perception.mono_depth.DepthAnythingV2`: relative depth from the image alone
+  (:func:`companion.perception.sources.make_source` builds the configured one)
   (optional ``depth`` extra; torch).
 
 Depth is the camera z coordinate (along the optical axis), not the range along the ray; NaN marks
@@ -40,7 +41,6 @@ __all__ = [
     "FirstAvailable",
     "LidarDepth",
     "load_depth_file",
-    "make_source",
 ]
 
 
@@ -277,27 +277,6 @@ class FirstAvailable:
             except DepthError as exc:
                 problems.append(f"{src.name}: {exc}")
         raise DepthError("; ".join(problems) or "no depth source configured")
-
-
-def make_source(
-    kind: str, *, cell_px: int = 4, model: str | Path | None = None, lidar_range_m: float = 100.0
-) -> DepthSource:
-    """A configured depth source: ``lidar``, ``depth-anything`` or ``auto`` (LiDAR, else the image).
-
-    Loading the monocular network happens here, so a missing extra or missing weights fail at start-up.
-    """
-    if kind == "lidar":
-        return LidarDepth(cell_px=cell_px, range_m=lidar_range_m)
-    if kind in ("depth-anything", "auto"):
-        from companion.perception.mono_depth import DEFAULT_MODEL, DepthAnythingV2
-
-        mono = DepthAnythingV2(model or DEFAULT_MODEL, cell_px=cell_px)
-        return (
-            mono
-            if kind == "depth-anything"
-            else FirstAvailable((LidarDepth(cell_px=cell_px, range_m=lidar_range_m), mono))
-        )
-    raise DepthError(f"unknown depth source {kind!r}; use lidar, depth-anything or auto")
 
 
 def load_depth_file(path: Path) -> np.ndarray:

@@ -29,14 +29,12 @@ clear LiDAR disc, one group of objects in view is tolerated, as the cues' one ra
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from companion.reasoning.base import ConfirmRequest, RankRequest
 from companion.reasoning.image_cues import SITE_WINDOW_CROP, SITE_WINDOW_FRAME, centre, check_rgb
 from companion.reasoning.landnet import COUNTED, LandNet, SceneReading
-
-if TYPE_CHECKING:
-    from companion.reasoning.onboard import ConfirmParams, GeometryWeights
+from companion.reasoning.onboard_params import ConfirmParams, GeometryWeights
 
 __all__ = ["confirm_reading", "rank_readings", "site_window"]
 

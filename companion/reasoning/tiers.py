@@ -18,14 +18,14 @@ from typing import Any
 
 import httpx
 
-from companion.config import ConfigError, LvlmProfileConfig, ReasonerConfig
+from companion.config import CompanionConfig, ConfigError, LvlmProfileConfig, ReasonerConfig
 from companion.reasoning.base import Reasoner
 from companion.reasoning.cascade import Cascade, CascadeParams, Hedged
 from companion.reasoning.landnet import LandNetError
 from companion.reasoning.lvlm import LvlmProfile, LvlmReasoner
 from companion.reasoning.onboard import OnboardReasoner
 
-__all__ = ["BUILTIN_PROFILES", "ONBOARD", "build_cascade", "resolve_profile", "tier_names"]
+__all__ = ["BUILTIN_PROFILES", "ONBOARD", "build_cascade", "resolve_profile", "secrets", "tier_names"]
 
 _log = logging.getLogger(__name__)
 
@@ -138,6 +138,16 @@ def api_keys(cfg: ReasonerConfig, env: Mapping[str, str]) -> list[str]:
             if var and env.get(var, "").strip():
                 keys.append(env[var].strip())
     return keys
+
+
+def secrets(cfg: CompanionConfig, env: Mapping[str, str]) -> list[str]:
+    """Every secret a configuration gives the daemon (for the log's redaction): the signing key as hex
+    in both cases, the broker password, the API keys of the reasoner's profiles."""
+    out = [k for k in (cfg.mqtt_password(env),) if k]
+    key = cfg.signing_key()
+    if key is not None:
+        out += [key.hex(), key.hex().upper()]
+    return out + api_keys(cfg.reasoner, env)
 
 
 def tier_names(cfg: ReasonerConfig, stage: str) -> list[str]:

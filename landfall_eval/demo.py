@@ -1,4 +1,4 @@
-"""``python -m companion.demo``: a simulated emergency landing, end to end, with the onboard reasoner.
+"""``python -m landfall_eval.demo``: a simulated emergency landing, end to end, with the onboard reasoner.
 
 Starts simbridge (PX4 flavour, scenario1, airborne 110 m above the street between two roofs) and
 the companion as separate processes wired over loopback UDP and the sensor socket, sends an alarm
