@@ -1,5 +1,5 @@
 """A test-only fault hook: make one stage of a recovery raise, to prove the fail-safe that catches the
-companion's own defects (companion/recovery.py, ``Recovery._fail_safe``).
+companion's own defects (companion/recovery/machine.py, ``Recovery._fail_safe``).
 
 Off unless the environment variable ``LANDFALL_TEST_FAULT`` names a stage, alone (``rank``: the first
 time the recovery reaches it) or with a round (``confirm:2``: the first time in round 2). The stage

@@ -1,6 +1,6 @@
 """Properties (hypothesis) of the recovery chain from a frame to a target, stage by stage and whole:
 Surface ID -> crops per context variant -> the onboard rank -> IPM -> the confirm close-up -> the
-onboard confirm and the LiDAR site check (companion/recovery.py ``_round``).
+onboard confirm and the LiDAR site check (companion/recovery/machine.py ``_round``).
 
 Frames are synthetic and small: a camera at a random size, height and attitude over level ground,
 with flat rectangles (roofs) placed anywhere in the image, down to one pixel or one depth cell, and
@@ -905,7 +905,7 @@ def test_chain_from_a_frame_to_a_confirmed_target_raises_only_typed_errors(
 
 
 def test_recovery_ipm_with_no_lidar_and_a_zero_rangefinder_places_nothing() -> None:
-    """The recovery's IPM (companion/recovery.py ``Recovery._ipm``): no LiDAR, and a rangefinder that
+    """The recovery's IPM (companion/recovery/looking.py ``Looking._ipm``): no LiDAR, and a rangefinder that
     reads 0 (the flat-ground plane through the camera: no ray meets it). Neither way places the site:
     None, and the round moves on, instead of an IpmError escaping the round."""
     import logging

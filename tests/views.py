@@ -96,7 +96,7 @@ def close_up(
 
 def site_cut(w: LiveWorld, frame: Frame, height_m: float, half_m: float = 6.0) -> np.ndarray:
     """The close-up the recovery loop sends: +-``half_m`` around the site under the camera
-    (companion/recovery.py, ``closeup_half_m``; companion/perception/crops.py, ``site_box``)."""
+    (companion/recovery/core.py, ``closeup_half_m``; companion/perception/crops.py, ``site_box``)."""
     h, wd = frame.rgb.shape[:2]
     half = int(w.camera.focal_px * half_m / height_m)
     return crop(frame, site_box(*w.camera.principal_px, half, wd, h))

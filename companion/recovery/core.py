@@ -1,0 +1,270 @@
+"""What a recovery is made of: its states, parameters, outcome, record protocol, and the state every
+part of :class:`~companion.recovery.Recovery` shares (:class:`RecoveryBase`)."""
+
+from __future__ import annotations
+
+import asyncio
+import enum
+import logging
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+from companion.alarms import Alarm, Criticality
+from companion.control import (
+    VehicleController,
+)
+from companion.faults import FaultHook
+from companion.guidance.frames import PinholeCamera
+from companion.perception.depth import DepthSource, LidarDepth
+from companion.perception.site_check import SiteCheck
+from companion.perception.surface_id import (
+    Candidate,
+    SurfaceParams,
+)
+from companion.reasoning.base import Decision, Ranking, Reasoner
+from companion.reasoning.onboard import OnboardReasoner
+from companion.search import Leg, SearchLimits, SearchPlanner, Verdict
+from companion.site_ledger import LedgerSite, SiteLedger
+from companion.telemetry import TelemetryCache
+
+MAX_REENGAGE = 2
+SENSOR_RETRY_S = 1.0  # between two asks for a frame after one failed
+SITE_RETRIES = 2  # more frames asked for when a LiDAR sweep misses the site before judging it unmeasured
+SEVERITY_CRITICAL = 2  # MAV_SEVERITY_CRITICAL: a defect of the companion's own
+MAX_REJECTED_RADIUS_M = 15.0  # water or traffic rules out at most this far around a rejected site
+
+
+class FrameUnavailable(Exception):
+    """No usable sensor frame this time (timed out, disconnected, too old): the round holds and asks
+    again. What a ``FrameSource`` raises; anything else it raises is a defect and ends the recovery."""
+
+
+class SensorsLost(Exception):
+    """No usable frame for ``sensor_loss_s``: the recovery lands without its sensors."""
+
+
+class State(enum.Enum):
+    IDLE = "idle"
+    ACQUIRE = "acquire"
+    SURFACE_ID = "surface_id"
+    RANK = "rank"
+    MOVE = "move"
+    CONFIRM = "confirm"
+    DESCEND = "descend"
+    EXPLORE = "explore"
+    LAND = "land"
+    LANDED = "landed"
+    ABORTED = "aborted"
+
+
+@dataclass(frozen=True, slots=True)
+class RecoveryParams:
+    rounds_by_criticality: dict[Criticality, int] = field(
+        default_factory=lambda: {Criticality.LOW: 10, Criticality.HIGH: 6, Criticality.CRITICAL: 3}
+    )
+    descent_fraction: float = 0.8  # descend by this share of the rangefinder distance per step
+    final_land_m: float = 5.0
+    arrival_tolerance_m: float = 0.5
+    arrival_speed_m_s: float = 0.3
+    move_timeout_s: float = 60.0
+    explore_climb_m: float = 15.0
+    explore_max_alt_m: float = 90.0  # below the LiDAR's range (100 m): higher up it sees nothing
+    blind_descent_agl_m: float = 70.0  # no LiDAR return at all and the ground farther: descend to this
+    surface: SurfaceParams = field(default_factory=SurfaceParams)
+    depth_source: DepthSource = field(default_factory=LidarDepth)
+    rejected_radius_m: float = 4.0  # a rejected site rules out candidates this close to it
+    context: str = "crop"  # what the reasoner sees per candidate: crop, pad20..pad60, or full (+ frame)
+    closeup_half_m: float = 6.0  # the confirmation close-up shows this far around the site
+    land_timeout_s: float = 120.0
+    sensor_loss_s: float = 30.0  # wall seconds without a usable frame before landing without sensors
+    link_loss_s: float = 60.0  # wall seconds without telemetry before leaving the vehicle to the autopilot
+    search: SearchLimits = field(default_factory=SearchLimits)  # when searching on must stop
+    search_agl_m: float = 75.0  # a search leg's least height above the ground
+
+
+class Record(Protocol):
+    def record_event(self, kind: str, fields: dict[str, Any]) -> None: ...
+
+    def save_image(self, name: str, rgb: Any) -> Any: ...
+
+
+class NoRecord:
+    def record_event(self, kind: str, fields: dict[str, Any]) -> None:
+        return None
+
+    def save_image(self, name: str, rgb: Any) -> Any:
+        return None
+
+
+@dataclass
+class Site:
+    ned_m: tuple[float, float, float]
+    candidate: Candidate
+
+
+@dataclass(frozen=True, slots=True)
+class Outcome:
+    state: State
+    rounds: int
+    site_ned_m: tuple[float, float, float] | None
+    reason: str
+
+
+FrameSource = Callable[[], Awaitable[Any]]  # -> SensorFrame-like; raises FrameUnavailable
+
+
+class RecoveryBase:
+    """The state one recovery keeps (one per alarm) and what every part of it uses: the budget, the
+    state change (recorded with where the vehicle was) and the announcement."""
+
+    def __init__(
+        self,
+        alarm: Alarm,
+        *,
+        control: VehicleController,
+        telemetry: TelemetryCache,
+        frames: FrameSource,
+        reasoner: Reasoner,
+        announce: Callable[[int, str], None],
+        params: RecoveryParams | None = None,
+        record: Record | None = None,
+        logger: logging.Logger | None = None,
+    ) -> None:
+        self.alarm = alarm
+        self.ctl = control
+        self.tm = telemetry
+        self._frames = frames
+        self.reasoner = reasoner
+        self._announce = announce
+        self.p = params or RecoveryParams()
+        self.record: Record = record or NoRecord()
+        self.log = logger or logging.getLogger("companion.recovery")
+        self.state = State.IDLE
+        self.criticality = alarm.criticality
+        self.round = 0
+        self.best: Site | None = None
+        self.rejected: list[tuple[float, float, float]] = []  # north, east, radius (metres)
+        self._reengaged = 0
+        self._descending: tuple[tuple[float, float, float], Candidate] | None = None
+        self.ledger = SiteLedger(self.p.rejected_radius_m)
+        self.extra = 0  # rounds flown past the budget (nothing acceptable seen)
+        self.search = SearchPlanner(
+            alarm.criticality, self.p.search, search_agl_m=self.p.search_agl_m, lidar_range_m=100.0
+        )
+        self._ended: Verdict | None = None  # why the search stopped, when the battery or the window did
+        # judges every measured site for the ledger, whoever decides: the cascade's own onboard tier (its
+        # judge, cues or LandNet-S, as configured) when there is one
+        onboard = getattr(reasoner, "onboard", None)
+        self._onboard = onboard if isinstance(onboard, OnboardReasoner) else OnboardReasoner()
+        self._fault = FaultHook.from_env()
+        self._roofs_seen = False  # a roof measured during this recovery: a built-up area
+        self._first_look: asyncio.Task[Any] | None = None  # the first frame, asked for while engaging
+
+    @property
+    def budget(self) -> int:
+        return self.p.rounds_by_criticality[self.criticality]
+
+    def raise_criticality(self, criticality: Criticality) -> None:
+        """A repeated alarm can make the recovery more urgent (a shorter budget), never less."""
+        if criticality > self.criticality:
+            self.criticality = criticality
+            self.search.raise_criticality(criticality)
+            self._say(5, f"alarm raised to {criticality.name.lower()}: {self.budget} rounds")
+
+    def _set(self, state: State) -> None:
+        self.state = state
+        # where the vehicle was: a flight record's trajectory for a replay (the record keeps no telemetry)
+        where = [round(v, 2) for v in self.tm.state.pos_ned_m]
+        self.record.record_event("state", {"state": state.value, "round": self.round, "pos_ned_m": where})
+
+    def _say(self, severity: int, text: str) -> None:
+        self.log.info("%s", text)
+        self._announce(severity, f"Landfall: {text}")
+
+    def _site_ned(self) -> tuple[float, float, float] | None:
+        return self.best.ned_m if self.best is not None else None
+
+    # ------------------------------------------------------------------ what the parts provide
+    # Declared here so that each part can call the others; the parts' own definitions come first in
+    # Recovery's method resolution order (Recovery, Searching, SiteChoice, Looking, RecoveryBase).
+    async def _round(self) -> bool:
+        raise NotImplementedError
+
+    async def _confirm_and_descend(self, target: tuple[float, float, float], choice: Candidate) -> bool:
+        raise NotImplementedError
+
+    async def _acquire(self, *, first_round: bool = False) -> Any:
+        raise NotImplementedError
+
+    def _surface_id(self, frame: Any, camera: PinholeCamera) -> list[Candidate]:
+        raise NotImplementedError
+
+    def _closeup(self, image: Any, frame: Any, target: tuple[float, float, float]) -> Any:
+        raise NotImplementedError
+
+    async def _land(self) -> bool:
+        raise NotImplementedError
+
+    async def _final_land(self) -> None:
+        raise NotImplementedError
+
+    async def _land_at_best(self, reason: str, *, measure_here: bool = True) -> Outcome:
+        raise NotImplementedError
+
+    def _fallback_site(self) -> LedgerSite | None:
+        raise NotImplementedError
+
+    async def _fly_over(self, site: LedgerSite, what: str, then: str = "landing here") -> bool:
+        raise NotImplementedError
+
+    def _rejected_radius(self, target: tuple[float, float, float], choice: Candidate) -> float:
+        raise NotImplementedError
+
+    def _near_rejected(self, c: Candidate) -> bool:
+        raise NotImplementedError
+
+    def _judge(
+        self,
+        frame: Any,
+        check: SiteCheck,
+        target: tuple[float, float, float],
+        up_m: float | None,
+        strip: bool,
+    ) -> tuple[str, ...]:
+        raise NotImplementedError
+
+    def _note_candidates(self, candidates: list[Candidate], frame: Any, camera: PinholeCamera) -> None:
+        raise NotImplementedError
+
+    async def _explore(self, blind: bool = False) -> None:
+        raise NotImplementedError
+
+    async def _search_instead(self, choice: Candidate) -> bool:
+        raise NotImplementedError
+
+    async def _search_leg(self) -> Leg:
+        raise NotImplementedError
+
+    def _go_on(self) -> bool:
+        raise NotImplementedError
+
+    async def _extra_round(self) -> bool:
+        raise NotImplementedError
+
+    def _observe(self, frame: Any) -> None:
+        raise NotImplementedError
+
+    async def _rank(self, candidates: list[Candidate], frame: Any) -> tuple[Ranking, int | None]:
+        raise NotImplementedError
+
+    def _ipm(self, c: Candidate, frame: Any, camera: PinholeCamera) -> tuple[float, float, float] | None:
+        raise NotImplementedError
+
+    async def _measure_site(self, target: tuple[float, float, float]) -> tuple[Any, SiteCheck]:
+        raise NotImplementedError
+
+    async def _confirm(
+        self, check: SiteCheck, frame: Any, target: tuple[float, float, float], choice: Candidate
+    ) -> Decision:
+        raise NotImplementedError

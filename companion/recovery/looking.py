@@ -1,0 +1,322 @@
+"""The recovery's eyes: a frame (held for while none comes), Surface ID, the reasoner's rank and
+confirmation, the LiDAR check of a site, and the chosen pixel placed in the world (IPM)."""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+from companion.alarms import Criticality
+from companion.guidance.frames import PinholeCamera, quat_to_matrix
+from companion.guidance.ipm import IpmError, LidarPixelIndex, pixel_to_ned, pixel_to_ned_flat
+from companion.perception.crops import crop, pad_of, rank_crops, site_box
+from companion.perception.depth import DepthError
+from companion.perception.site_check import SiteCheck, check_site, world_points
+from companion.perception.surface_id import (
+    Candidate,
+    propose,
+    quadrant_fallback,
+)
+from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequest
+from companion.reasoning.onboard import lidar_kind
+from companion.recovery.core import (
+    SENSOR_RETRY_S,
+    SITE_RETRIES,
+    FrameUnavailable,
+    RecoveryBase,
+    SensorsLost,
+    State,
+)
+from companion.site_ledger import LedgerSite, hazard_of
+
+
+class Looking(RecoveryBase):
+    """Acquire, Surface ID, rank, confirm, the site check and IPM (DESIGN.md section 2, steps 1-5)."""
+
+    async def _acquire(self, *, first_round: bool = False) -> Any:
+        """A frame; while none comes, the vehicle holds on its current setpoint and the request is
+        repeated every ``SENSOR_RETRY_S``, each failure recorded. Raises ``SensorsLost`` after
+        ``sensor_loss_s`` without one."""
+        self._set(State.ACQUIRE)
+        self._fault.check("acquire", 1 if first_round else self.round)
+        since = time.monotonic()
+        for attempt in itertools.count():
+            try:
+                return await self._frames()
+            except FrameUnavailable as exc:
+                waited = time.monotonic() - since
+                self.record.record_event(
+                    "sensor_fault", {"round": self.round, "error": str(exc), "waited_s": round(waited, 2)}
+                )
+                if waited >= self.p.sensor_loss_s:
+                    raise SensorsLost(f"no usable sensor frame for {waited:.0f} s ({exc})") from exc
+                if attempt == 0:
+                    self._say(4, f"no sensor frame ({exc}): holding, asking again")
+                await asyncio.sleep(SENSOR_RETRY_S)
+        raise AssertionError("unreachable")
+
+    def _observe(self, frame: Any) -> None:
+        """The frame into the search's map: the LiDAR's sweep, and with LandNet-S as the onboard judge
+        what the camera shows beyond it (water and traffic). A worker-thread job."""
+        self.search.observe(frame)
+        net = self._onboard.landnet
+        if net is not None and frame.image_rgb is not None:
+            self.search.observe_camera(frame, net.presence, tuple(net.classes))
+
+    def _surface_id(self, frame: Any, camera: PinholeCamera) -> list[Candidate]:
+        """Candidates from the configured depth source; the quadrant fallback when it has nothing."""
+        self._fault.check("surface_id", self.round)
+        try:
+            cands, _depth = propose(
+                self.p.depth_source,
+                camera,
+                image=frame.image_rgb,
+                lidar_frd=frame.lidar_frd,
+                quat_wxyz=frame.quat_wxyz,
+                pos_ned_m=frame.pos_ned_m,
+                ground_up_m=frame.pos_ned_m[2],
+                params=self.p.surface,
+            )
+        except DepthError as exc:
+            self.log.warning("Surface ID has no depth (%s): quadrant fallback", exc)
+            return quadrant_fallback(camera)
+        return cands
+
+    async def _rank(self, candidates: list[Candidate], frame: Any) -> tuple[Ranking, int | None]:
+        """The reasoner's order of the candidates, from their crops (the configured context variant),
+        and the one the vehicle flies to: the first in that order that is not a fallback crop (a
+        quadrant has no measured site). Both go to the record's ``rank`` event (``order``, ``chosen``)."""
+        self._fault.check("rank", self.round)
+        image = frame.image_rgb
+        names: list[str] = []
+        if image is None:
+            # no camera image this frame: Surface ID's own order (its score), said so in the record
+            ranking = Ranking(
+                tuple(c.index for c in candidates),
+                "no camera image: Surface ID's order (flat area, clearance, elevation)",
+                "surface-id",
+                0.0,
+            )
+        else:
+            crops, cores, names = await asyncio.to_thread(self._rank_crops, image, candidates)
+            request = RankRequest(
+                crops,
+                None if all(c.fallback for c in candidates) else tuple(candidates),
+                context=image if self.p.context == "full" else None,
+                critical=self.criticality == Criticality.CRITICAL,
+                cores=cores if pad_of(self.p.context) > 0 else None,
+            )
+            ranking = await self.reasoner.rank(request)
+        chosen = next((k for k in ranking.order if not candidates[k].fallback), None)
+        self.record.record_event(
+            "rank",
+            {
+                "round": self.round,
+                "order": list(ranking.order),
+                "chosen": chosen,
+                "rationale": ranking.rationale,
+                "tier": ranking.tier,
+                "latency_s": ranking.latency_s,
+                "context": self.p.context,
+                "images": names,
+                "candidates": [c.to_json() for c in candidates],
+                # the candidates' frame, on the autopilot's clock: where an evaluation finds what the
+                # chosen pixel truly shows (the simulator's episode log holds the pose it was taken from)
+                "frame_time_boot_ms": getattr(frame, "time_boot_ms", None),
+            },
+        )
+        return ranking, chosen
+
+    async def _confirm(
+        self, check: SiteCheck, frame: Any, target: tuple[float, float, float], choice: Candidate
+    ) -> Decision:
+        """Reasoner and geometric veto on a close-up of the site (the cascade arbitrates); the verdict
+        goes to the ledger too, with what the onboard tier saw against the site whoever decided."""
+        self._fault.check("confirm", self.round)
+        image = frame.image_rgb
+        if image is None and not check.measured:
+            # neither sensor judged the site: not a reason to strike it off (contested: asked again)
+            decision = Decision(
+                False, "no camera image, and the LiDAR missed the site: not judged", "site-check", 0.0, True
+            )
+            closeup_name = ""
+        elif image is None:
+            decision = Decision(
+                check.clear,
+                "no camera image: LiDAR check only: "
+                + ("clear" if check.clear else "; ".join(check.reasons)),
+                "site-check",
+                0.0,
+            )
+            closeup_name = ""
+        else:
+            closeup, closeup_name = await asyncio.to_thread(self._closeup_saved, image, frame, target)
+            decision = await self.reasoner.confirm(
+                ConfirmRequest(
+                    closeup,
+                    check if check.measured else None,
+                    critical=self.criticality == Criticality.CRITICAL,
+                    site_ne_m=(target[0], target[1]),
+                    site_up_m=choice.height_above_m if math.isfinite(choice.height_above_m) else None,
+                    site_strip=choice.strip,
+                    built_up=self._roofs_seen,
+                )
+            )
+        up_m = choice.height_above_m if math.isfinite(choice.height_above_m) else None
+        if decision.tier == self._onboard.name or image is None:
+            kinds = decision.hazards or ((lidar_kind(check),) if check.measured and not check.clear else ())
+        else:  # a remote tier decided: the ledger still wants the onboard tier's view of the site
+            kinds = await asyncio.to_thread(self._judge, frame, check, target, up_m, choice.strip)
+        hazard = hazard_of(
+            kinds,
+            accepted=decision.accept,
+            street_level=not choice.elevated and not choice.strip,
+            strip=choice.strip,
+            judged=image is not None or check.measured,
+        )
+        why = decision.rationale[:160] if not decision.accept else "confirmed for descent"
+        self.ledger.add(
+            LedgerSite(
+                target, hazard, why, self.round, True, choice.edge_distance_m, f"site {choice.index}", choice
+            )
+        )
+        self.record.record_event(
+            "confirm",
+            {
+                "round": self.round,
+                "accept": decision.accept,
+                "rationale": decision.rationale,
+                "tier": decision.tier,
+                "latency_s": decision.latency_s,
+                "site_ned_m": list(target),
+                "candidate": choice.to_json(),  # whose pixel the site is (its rank event has its frame)
+                "hazard": hazard.name.lower(),
+                "image": closeup_name,
+                "check": {
+                    "points": check.points,
+                    "roughness_m": check.roughness_m,
+                    "obstacle_m": check.obstacle_m,
+                    "edge_distance_m": check.edge_distance_m,
+                    "reasons": list(check.reasons),
+                },
+            },
+        )
+        return decision
+
+    async def _measure_site(self, target: tuple[float, float, float]) -> tuple[Any, SiteCheck]:
+        """A frame and the LiDAR check of the site under it.
+
+        Policy: a sweep that misses the site (empty, or too few returns in the rotor disc: a partial
+        sweep) is a sensor gap, not a hazard. It is recorded as a ``sensor_fault`` and a new frame is
+        asked for, ``SITE_RETRIES`` times at most; then the site goes to the reasoner unmeasured and is
+        judged from the image, as with no LiDAR at all (a frame without one goes so at once). A gap
+        never strikes a site off."""
+        for attempt in range(SITE_RETRIES + 1):
+            frame = await self._acquire()
+            self._set(State.CONFIRM)
+            check = await asyncio.to_thread(
+                check_site, frame.lidar_frd, frame.pos_ned_m, frame.quat_wxyz, (target[0], target[1])
+            )
+            if check.measured or frame.lidar_frd is None:
+                return frame, check
+            self.record.record_event(
+                "sensor_fault",
+                {
+                    "round": self.round,
+                    "error": f"site not measured: {check.points} LiDAR returns in the rotor disc",
+                    "attempt": attempt,
+                },
+            )
+            if attempt < SITE_RETRIES:
+                await asyncio.sleep(SENSOR_RETRY_S)
+        self._say(4, "the LiDAR keeps missing the site: judging it from the image")
+        return frame, check
+
+    def _rank_crops(
+        self, image: Any, candidates: list[Candidate]
+    ) -> tuple[tuple[Any, ...], tuple[tuple[int, int, int, int], ...], list[str]]:
+        """The crops the reasoner ranks (and their cores), saved to the record: a worker-thread job."""
+        crops, cores = rank_crops(image, [c.box_px for c in candidates], self.p.context)
+        names = [
+            self._saved_name(self.record.save_image(f"round{self.round:02d}-rank-crop{k}", c))
+            for k, c in enumerate(crops)
+        ]
+        return crops, cores, names
+
+    def _closeup_saved(self, image: Any, frame: Any, target: tuple[float, float, float]) -> tuple[Any, str]:
+        closeup = self._closeup(image, frame, target)
+        return closeup, self._saved_name(self.record.save_image(f"round{self.round:02d}-confirm", closeup))
+
+    @staticmethod
+    def _saved_name(path: Any) -> str:
+        return str(getattr(path, "name", path)) if path is not None else ""
+
+    def _closeup(self, image: Any, frame: Any, target: tuple[float, float, float]) -> Any:
+        camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
+        return site_closeup(image, camera, frame.pos_ned_m, frame.quat_wxyz, target, self.p.closeup_half_m)
+
+    def _ipm(self, c: Candidate, frame: Any, camera: PinholeCamera) -> tuple[float, float, float] | None:
+        """The chosen pixel -> world point through the LiDAR; the flat-ground fallback without it;
+        None when neither can place it."""
+        self._fault.check("ipm", self.round)
+        u, v = c.centre_px
+        try:
+            index = LidarPixelIndex(frame.lidar_frd, camera)
+            p = pixel_to_ned(u, v, index, frame.pos_ned_m, frame.quat_wxyz)
+        except IpmError as exc:
+            ground_d = frame.pos_ned_m[2] + frame.rangefinder_m
+            self.log.warning(
+                "IPM through the LiDAR failed (%s): flat ground at the rangefinder distance", exc
+            )
+            try:
+                p = pixel_to_ned_flat(u, v, camera, frame.pos_ned_m, frame.quat_wxyz, ground_d)
+            except IpmError as flat:  # e.g. a rangefinder reading 0: the ray never meets that plane
+                self.log.warning("and flat ground failed too (%s): no world position", flat)
+                return None
+        return (float(p[0]), float(p[1]), float(p[2]))
+
+
+def site_closeup(
+    image: np.ndarray,
+    camera: PinholeCamera,
+    pos_ned_m: Any,
+    quat_wxyz: Any,
+    target_ned_m: Any,
+    half_m: float,
+) -> np.ndarray:
+    """The part of a camera frame within ``half_m`` of the site, centred on it (``site_box``), or the
+    whole frame when the site is not in view: what the confirm stage judges."""
+    rel = np.asarray(target_ned_m, dtype=float) - np.asarray(pos_ned_m, dtype=float)
+    uv, front = camera.project_frd((rel @ quat_to_matrix(quat_wxyz))[None, :])
+    dist = float(np.linalg.norm(rel))
+    if not front[0] or not (0 <= uv[0, 0] < camera.width and 0 <= uv[0, 1] < camera.height) or dist <= 0:
+        return image
+    half = int(camera.fx * half_m / dist)
+    return crop(image, site_box(uv[0, 0], uv[0, 1], half, camera.width, camera.height))
+
+
+UNMEASURED = SiteCheck(0, math.nan, math.nan, math.nan, math.nan, ("not measured",))
+
+
+def height_above_surroundings(frame: Any, check: SiteCheck) -> float | None:
+    """How far the measured surface under a site stands above the lowest tenth of the sweep's returns
+    (what Surface ID calls elevation), or None without enough returns."""
+    if frame.lidar_frd is None or len(frame.lidar_frd) < 20:
+        return None
+    up = -world_points(frame.lidar_frd, frame.pos_ned_m, frame.quat_wxyz)[:, 2]
+    if len(up) < 20:
+        return None
+    return float(check.surface_up_m - np.percentile(up, 10))
+
+
+def lidar_silent(lidar_frd: Any) -> bool:
+    """A LiDAR sweep came and has no return with a finite position (a missing sweep is not silence)."""
+    if lidar_frd is None:
+        return False
+    pts = np.asarray(lidar_frd, dtype=float)
+    return pts.ndim != 2 or pts.shape[0] == 0 or not bool(np.isfinite(pts[:, :3]).all(axis=1).any())

@@ -1,0 +1,319 @@
+"""The recovery loop (DESIGN.md section 2): acquire, Surface ID, rank, move, confirm, descend, land.
+
+One :class:`Recovery` per alarm. Its state is explicit (:class:`State`); every decision is announced
+(STATUSTEXT), recorded, and taken from telemetry, never from sleeps. A round that finds nothing
+explores (climbs, or flies a search leg); a target never reached or a site rejected at confirmation
+ends the round. When the round budget runs out with nothing acceptable seen, the vehicle searches on,
+leg by leg (:mod:`companion.search`), while the battery holds more than the landing needs plus a
+reserve and the alarm's window allows; then it lands at the least bad site it measured
+(:mod:`companion.site_ledger`), never "here" blindly. The battery and the window also end the rounds
+within the budget: a battery at its reserve lands at the least bad site after the first look. A
+defect of the companion's own (any unexpected exception) never leaves the vehicle without a
+commander: it is announced, recorded with its traceback, and the vehicle lands
+(:meth:`Recovery._fail_safe`).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+import traceback
+
+from companion.control import (
+    AutopilotFailsafe,
+    ControlError,
+    OperatorTakeover,
+    TargetTimeout,
+    TelemetryLost,
+    TouchedDown,
+)
+from companion.guidance.descent import height_above_site
+from companion.guidance.frames import PinholeCamera
+from companion.perception.surface_id import (
+    Candidate,
+)
+from companion.recovery.core import MAX_REENGAGE, SEVERITY_CRITICAL, Outcome, SensorsLost, Site, State
+from companion.recovery.looking import Looking, lidar_silent
+from companion.recovery.searching import Searching
+from companion.recovery.site_choice import SiteChoice
+
+
+class Recovery(Searching, SiteChoice, Looking):
+    """One recovery, from the alarm to the ground (module docstring): the state machine; its parts
+    (:class:`Looking`, :class:`SiteChoice`, :class:`Searching`) each hold one idea of it."""
+
+    # ------------------------------------------------------------------ the loop
+    async def run(self) -> Outcome:
+        self._say(5, f"alarm '{self.alarm.reason}' ({self.criticality.name.lower()}), {self.budget} rounds")
+        self.search.start(self._clock_s(), self.tm.state.battery_pct)
+        try:
+            await self._engage_and_look()
+            resume: tuple[tuple[float, float, float], Candidate] | None = None
+            while resume is not None or self._go_on():
+                try:
+                    if resume is not None:  # the link came back mid-descent: same site, confirm first
+                        landed = await self._confirm_and_descend(*resume)
+                    elif self.round >= self.budget:
+                        landed = await self._extra_round()
+                    else:
+                        self.round += 1
+                        self._descending = None
+                        landed = await self._round()
+                    resume = None
+                except AutopilotFailsafe as exc:
+                    resume = None
+                    await self._reengage(exc)
+                    continue
+                except TelemetryLost as exc:
+                    resume = self._descending
+                    ended = await self._ride_out_link_loss(exc)
+                    if ended is not None:
+                        return ended
+                    continue
+                except SensorsLost as exc:
+                    # policy: no sensors, no new site; the alarm still stands, so come down: at the
+                    # best site measured so far (flown to on the autopilot's position hold), else here
+                    self._say(3, f"{exc}: landing without them")
+                    return await self._land_at_best("sensors lost", measure_here=False)
+                if landed:
+                    return Outcome(State.LANDED, self.round, self._site_ned(), "landed")
+            if self._ended is not None:
+                return await self._land_at_best(f"search ended ({self._ended.why})")
+            return await self._land_at_best("round budget spent")
+        except TouchedDown as exc:
+            # the surface came sooner than measured: the vehicle is down, and says so
+            self._set(State.LANDED)
+            self._say(4, f"touched down before the final approach: {exc}")
+            await self.ctl.release()
+            return Outcome(State.LANDED, self.round, self._site_ned(), "touched down during a descent step")
+        except OperatorTakeover as exc:
+            self._set(State.ABORTED)
+            self._say(4, "operator took over: stopped commanding")
+            await self.ctl.release()
+            return Outcome(State.ABORTED, self.round, None, str(exc))
+        except ControlError as exc:
+            self._set(State.ABORTED)
+            self._say(2, f"aborted: {exc}")
+            await self.ctl.release()
+            return Outcome(State.ABORTED, self.round, None, str(exc))
+        except Exception as exc:  # a defect of the companion's own: never leave the vehicle uncommanded
+            return await self._fail_safe(exc)
+        finally:
+            if self._first_look is not None:  # ended before the first round used it
+                self._first_look.cancel()
+                with contextlib.suppress(asyncio.CancelledError, Exception):
+                    await self._first_look
+                self._first_look = None
+
+    async def _fail_safe(self, exc: Exception) -> Outcome:
+        """Policy for a defect of the companion's own (an exception no stage expects): announce it
+        (STATUSTEXT, critical), record it with its traceback, and land: at the best site already
+        measured (accepted, else the ledger's least bad; nothing is measured anew), else with the
+        autopilot's land mode where the vehicle is. Should that landing fail too, land mode once more,
+        then the vehicle is left to the autopilot."""
+        where = self.state.value
+        text = f"{type(exc).__name__}: {exc}"
+        self.log.error("defect in the recovery (%s): %s", where, text, exc_info=exc)
+        self.record.record_event(
+            "defect",
+            {
+                "round": self.round,
+                "state": where,
+                "error": text,
+                "traceback": "".join(traceback.format_exception(exc)),
+            },
+        )
+        # a STATUSTEXT holds 50 characters: what happened and what the vehicle does come first
+        self._say(SEVERITY_CRITICAL, f"internal error, landing: {type(exc).__name__} in {where}: {exc}"[:150])
+        site = self._fallback_site()
+        try:
+            try:
+                if site is not None:
+                    await self._fly_over(site, "best site measured")
+                await self._final_land()
+            except (TouchedDown, OperatorTakeover):
+                raise
+            except Exception as again:  # the landing itself failed: the autopilot's land mode, once more
+                self.log.error("fail-safe landing failed (%r): autopilot land mode", again)
+                self.record.record_event(
+                    "defect", {"round": self.round, "state": "land", "error": repr(again)}
+                )
+                await self._final_land()
+        except TouchedDown:
+            self._set(State.LANDED)
+        except OperatorTakeover as taken:
+            self._set(State.ABORTED)
+            await self.ctl.release()
+            return Outcome(State.ABORTED, self.round, None, f"defect ({text}), then {taken}")
+        except Exception as last:
+            self._set(State.ABORTED)
+            self._say(SEVERITY_CRITICAL, "fail-safe landing failed: the autopilot has the vehicle")
+            with contextlib.suppress(Exception):
+                await self.ctl.release()
+            return Outcome(State.ABORTED, self.round, None, f"defect ({text}); landing failed ({last!r})")
+        return Outcome(
+            State.LANDED, self.round, site.ned_m if site is not None else None, f"defect ({text}): landed"
+        )
+
+    async def _reengage(self, exc: AutopilotFailsafe) -> None:
+        """Policy: the autopilot's own failsafe (e.g. a lost setpoint stream) is re-engaged from where
+        the vehicle is, ``MAX_REENGAGE`` times at most; then the autopilot keeps control."""
+        self._reengaged += 1
+        if self._reengaged > MAX_REENGAGE:
+            raise ControlError(f"{exc}; not re-engaging again") from exc
+        self._say(4, f"{exc}: re-engaging")
+        await self.ctl.engage()
+
+    async def _ride_out_link_loss(self, exc: TelemetryLost) -> Outcome | None:
+        """Policy for a lost MAVLink link: keep streaming the last setpoint and wait up to
+        ``link_loss_s`` for telemetry. Meanwhile the autopilot holds (PX4's offboard-loss failsafe
+        after COM_OF_LOSS_T; ArduPilot's GUIDED keeps the last target). When the link returns: a
+        vehicle that came down meanwhile ends the recovery; a failsafe is re-engaged from where the
+        vehicle is; someone else's mode is a takeover. Then an interrupted descent goes on at the
+        same site, confirmed again first; otherwise the next round starts. No telemetry within
+        ``link_loss_s``: the companion stops commanding and leaves the vehicle to the autopilot."""
+        self.record.record_event("link_lost", {"round": self.round, "state": self.state.value})
+        self._say(3, f"link to the autopilot lost ({exc}): holding, waiting {self.p.link_loss_s:.0f} s")
+        try:
+            silent_s = await self.ctl.await_link(self.p.link_loss_s)
+        except TelemetryLost as lost:
+            raise ControlError(f"{lost}: leaving the vehicle to the autopilot") from lost
+        s = self.tm.state
+        self.record.record_event(
+            "link_restored",
+            {"round": self.round, "silent_s": round(silent_s, 2), "custom_mode": s.custom_mode},
+        )
+        self._say(5, f"link back after {silent_s:.1f} s")
+        if s.on_ground:
+            self._set(State.LANDED)
+            self._say(4, "the vehicle came down while the link was lost")
+            return Outcome(State.LANDED, self.round, None, "landed by the autopilot during a link loss")
+        try:
+            self.ctl.check_interruption()
+        except AutopilotFailsafe as failsafe:
+            await self._reengage(failsafe)
+        return None
+
+    async def _engage_and_look(self) -> None:
+        """Take control and ask for the first round's frame at the same time: the frame (render,
+        transfer) takes longer than the mode switch, and the vehicle holds either way."""
+        look = asyncio.create_task(self._acquire(first_round=True), name="first-frame")
+        try:
+            await self.ctl.engage()
+        except BaseException:
+            look.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await look
+            raise
+        self._first_look = look
+
+    async def _round(self) -> bool:
+        look, self._first_look = self._first_look, None
+        frame = await (look if look is not None else self._acquire())
+        self._set(State.SURFACE_ID)
+        camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
+        candidates = await asyncio.to_thread(self._surface_id, frame, camera)
+        await asyncio.to_thread(self._observe, frame)  # the search's map of what was seen
+        # roofs the LiDAR saw beyond Surface ID's candidates make it a built-up area too
+        self._roofs_seen = self._roofs_seen or bool(self.search.roof_groups())
+        self._roofs_seen = self._roofs_seen or any(c.elevated for c in candidates)
+        candidates = [c for c in candidates if not self._near_rejected(c)]
+        if frame.image_rgb is not None:  # JPEG encoding off the event loop: the setpoint stream runs there
+            await asyncio.to_thread(self.record.save_image, f"round{self.round:02d}-acquire", frame.image_rgb)
+        if not candidates or all(c.fallback for c in candidates):
+            await self._explore(blind=lidar_silent(frame.lidar_frd))
+            return False
+        self._set(State.RANK)
+        ranking, chosen = await self._rank(candidates, frame)
+        if frame.image_rgb is not None:
+            await asyncio.to_thread(self._note_candidates, candidates, frame, camera)
+        choice = candidates[chosen] if chosen is not None else None
+        if choice is None:
+            await self._explore()
+            return False
+        if await self._search_instead(choice):
+            return False
+        target = await asyncio.to_thread(self._ipm, choice, frame, camera)
+        if target is None:
+            self._say(4, f"site {choice.index} cannot be placed in the world: next round")
+            return False
+        n, e, d = self.tm.state.pos_ned_m
+        dist = math.hypot(target[0] - n, target[1] - e)
+        bearing = _compass(math.degrees(math.atan2(target[1] - e, target[0] - n)))
+        kind = "roof" if choice.height_above_m >= 3.0 else "ground"
+        self._say(6, f"site {choice.index} {kind} {dist:.0f} m {bearing}")
+        self._say(6, ranking.rationale[:200])
+        self._set(State.MOVE)
+        self._fault.check("move", self.round)
+        try:
+            await self.ctl.goto(
+                target[0],
+                target[1],
+                d,
+                tolerance_m=self.p.arrival_tolerance_m,
+                speed_m_s=self.p.arrival_speed_m_s,
+                timeout_s=self.p.move_timeout_s + dist / 2.0,
+            )
+        except TargetTimeout as exc:
+            self._say(4, f"target not reached ({exc.error_m:.1f} m off): next round")
+            return False
+        return await self._confirm_and_descend(target, choice)
+
+    async def _confirm_and_descend(self, target: tuple[float, float, float], choice: Candidate) -> bool:
+        self._descending = (target, choice)  # what a link loss resumes: this site, confirmed again
+        while True:
+            frame, check = await self._measure_site(target)
+            decision = await self._confirm(check, frame, target, choice)
+            if not decision.accept and decision.contested:
+                # a lone "no" on a clear site: ask again next round (the cascade's lone-"no" rule)
+                self._say(4, f"site {choice.index} contested: {decision.rationale[:110]}")
+                return False
+            if not decision.accept:
+                self.rejected.append((target[0], target[1], self._rejected_radius(target, choice)))
+                if (
+                    self.best is not None
+                    and math.dist(self.best.ned_m[:2], target[:2]) < self.p.rejected_radius_m
+                ):
+                    self.best = None
+                self._say(4, f"site {choice.index} {decision.rationale[:120]}")
+                return False
+            self.best = Site(target, choice)
+            _n, _e, d = self.tm.state.pos_ned_m
+            rng_m, rng_quat = frame.rangefinder_m, frame.quat_wxyz
+            if not math.isfinite(rng_m):
+                rng_m, rng_quat = self.tm.state.rangefinder_m, self.tm.state.quat_wxyz
+            height_m = height_above_site(
+                d,
+                surface_up_m=check.surface_up_m,
+                site_d_m=target[2],
+                rangefinder_m=rng_m,
+                quat_wxyz=rng_quat,
+            )
+            if not math.isfinite(height_m):
+                self._say(4, "no height above the site measured: next round")
+                return False
+            if height_m <= self.p.final_land_m:
+                return await self._land()
+            self._set(State.DESCEND)
+            self._fault.check("descend", self.round)
+            step_m = self.p.descent_fraction * height_m
+            new_d = d + step_m
+            self._say(6, f"descending {step_m:.0f} m, {decision.rationale[:80]}")
+            try:
+                await self.ctl.goto(
+                    target[0],
+                    target[1],
+                    new_d,
+                    tolerance_m=self.p.arrival_tolerance_m,
+                    speed_m_s=self.p.arrival_speed_m_s,
+                    timeout_s=self.p.move_timeout_s + rng_m,
+                )
+            except TargetTimeout as exc:
+                self._say(4, f"descent target not reached ({exc.error_m:.1f} m off): next round")
+                return False
+
+
+def _compass(bearing_deg: float) -> str:
+    names = ["N", "NE", "E", "SE", "S", "SW", "W", "NW"]
+    return names[round((bearing_deg % 360) / 45) % 8]

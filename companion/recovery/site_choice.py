@@ -1,0 +1,194 @@
+"""Where to land when nothing was accepted: the site ledger's least bad site (companion/site_ledger.py),
+the last look at what is in view, the spot below, and the landing itself."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from typing import Any
+
+from companion.control import (
+    TargetTimeout,
+)
+from companion.guidance.frames import PinholeCamera
+from companion.perception.site_check import SiteCheck, check_site
+from companion.perception.surface_id import (
+    ROOF_HEIGHT_M,
+    Candidate,
+)
+from companion.reasoning.base import ConfirmRequest
+from companion.reasoning.onboard import lidar_kind
+from companion.recovery.core import MAX_REJECTED_RADIUS_M, FrameUnavailable, Outcome, RecoveryBase, State
+from companion.recovery.looking import UNMEASURED, height_above_surroundings
+from companion.site_ledger import Hazard, LedgerSite, hazard_of
+
+
+class SiteChoice(RecoveryBase):
+    """The least bad site and the landing (docs/recovery.md, "When it ends without an accepted site")."""
+
+    async def _land(self) -> bool:
+        self._set(State.LAND)
+        self._fault.check("land", self.round)
+        await self._final_land()
+        return True
+
+    async def _final_land(self) -> None:
+        self._set(State.LAND)
+        self._say(5, "final approach: autopilot land mode")
+        await self.ctl.land(self.p.land_timeout_s)
+        self._set(State.LANDED)
+        self._say(5, "landed")
+
+    async def _land_at_best(self, reason: str, *, measure_here: bool = True) -> Outcome:
+        """Land at the accepted site, else at the least bad one measured (:mod:`companion.site_ledger`),
+        judging the spot under the vehicle too when sensors allow (``measure_here``); "here" only when
+        nothing at all was measured, and said so."""
+        if measure_here and self.best is None:
+            await self._look_around()
+            await self._measure_here()
+        site = self._fallback_site()
+        if site is None and not self.ledger.sites:
+            self._say(4, f"{reason} with nothing measured: landing here")
+        elif site is None:
+            self._say(4, f"{reason}, only water or traffic measured elsewhere: landing here")
+        else:
+            where = "here" if site.label == "here" else f"at {site.label}"
+            self._say(
+                4, f"{reason}: landing {where} ({site.hazard.name.lower().replace('_', ' ')}: {site.why})"
+            )
+            self.record.record_event(
+                "fallback_site",
+                {
+                    "round": self.round,
+                    "reason": reason,
+                    "chosen": site.to_json(),
+                    "sites": [s.to_json() for s in self.ledger.sites],
+                },
+            )
+            await self._fly_over(site, "the chosen site")
+        await self._land()
+        return Outcome(State.LANDED, self.round, site.ned_m if site is not None else None, reason)
+
+    def _fallback_site(self) -> LedgerSite | None:
+        """The accepted site, else the ledger's least bad, else None."""
+        if self.best is not None:
+            label = f"site {self.best.candidate.index}"
+            return LedgerSite(
+                self.best.ned_m, Hazard.ACCEPTED, "confirmed for descent", self.round, True, label=label
+            )
+        n, e, _ = self.tm.state.pos_ned_m
+        site = self.ledger.least_bad((n, e))
+        if site is not None and site.hazard > Hazard.UNKNOWN and not self.ledger.near((n, e)):
+            return None  # only water or traffic measured, and not here: unknown beats known bad
+        return site
+
+    async def _fly_over(self, site: LedgerSite, what: str, then: str = "landing here") -> bool:
+        """Fly over ``site`` at the current altitude; False (said, with what happens ``then``) when it
+        was not reached in time."""
+        n, e, _ = site.ned_m
+        n0, e0, d = self.tm.state.pos_ned_m
+        try:
+            await self.ctl.goto(
+                n,
+                e,
+                d,
+                tolerance_m=self.p.arrival_tolerance_m,
+                speed_m_s=self.p.arrival_speed_m_s,
+                timeout_s=self.p.move_timeout_s + math.hypot(n - n0, e - e0) / 2.0,
+            )
+        except TargetTimeout as exc:
+            self._say(4, f"{what} target not reached ({exc.error_m:.1f} m off): {then}")
+            return False
+        return True
+
+    async def _look_around(self) -> None:
+        """One look at what is in view now (Surface ID's candidates, judged from afar into the
+        ledger), so that the least bad site is chosen among what can be reached at once, not only
+        among what earlier rounds measured: a search that ends after a blind first look, a battery
+        at its reserve. One frame, no waiting: a missing frame skips it."""
+        try:
+            frame = await self._frames()
+        except FrameUnavailable:
+            return
+        camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
+        candidates = await asyncio.to_thread(self._surface_id, frame, camera)
+        await asyncio.to_thread(self._note_candidates, candidates, frame, camera)
+
+    async def _measure_here(self) -> None:
+        """Judge the spot under the vehicle (one frame, no waiting: a missing frame skips it) into the
+        ledger, so that "here" competes with the sites measured before on what is there."""
+        try:
+            frame = await self._frames()
+        except FrameUnavailable:
+            return
+        n, e, d = self.tm.state.pos_ned_m
+        check = await asyncio.to_thread(check_site, frame.lidar_frd, frame.pos_ned_m, frame.quat_wxyz, (n, e))
+        rng = frame.rangefinder_m if math.isfinite(frame.rangefinder_m) else self.tm.state.rangefinder_m
+        ground_d = -check.surface_up_m if check.measured else d + rng
+        if not math.isfinite(ground_d):
+            return
+        target = (n, e, ground_d)
+        up_m = height_above_surroundings(frame, check) if check.measured else None
+        kinds = await asyncio.to_thread(self._judge, frame, check, target, up_m, False)
+        hazard = hazard_of(
+            kinds,
+            accepted=False,
+            street_level=up_m is None or up_m < ROOF_HEIGHT_M,
+            strip=False,
+            judged=check.measured or frame.image_rgb is not None,
+        )
+        self.ledger.add(
+            LedgerSite(
+                target, hazard, ", ".join(kinds) or "nothing seen against it", self.round, True, label="here"
+            )
+        )
+
+    def _judge(
+        self,
+        frame: Any,
+        check: SiteCheck,
+        target: tuple[float, float, float],
+        up_m: float | None,
+        strip: bool,
+    ) -> tuple[str, ...]:
+        """What the onboard tier sees against a site (``Decision.hazards``), from the close-up of
+        ``frame`` around it and the LiDAR check; the LiDAR's kind alone without an image. A worker-
+        thread job."""
+        if frame.image_rgb is None:
+            return (lidar_kind(check),) if check.measured and not check.clear else ()
+        closeup = self._closeup(frame.image_rgb, frame, target)
+        request = ConfirmRequest(closeup, check if check.measured else None, site_up_m=up_m, site_strip=strip)
+        return self._onboard.confirm_sync(request).hazards
+
+    def _note_candidates(self, candidates: list[Candidate], frame: Any, camera: PinholeCamera) -> None:
+        """Every measured candidate of a round into the ledger, judged from afar: the onboard tier's
+        view of the frame around its site, as a confirmation would see it (a worker-thread job)."""
+        for c in candidates:
+            if c.fallback or c.site_ned_m is None:
+                continue
+            up_m = c.height_above_m if math.isfinite(c.height_above_m) else None
+            kinds = self._judge(frame, UNMEASURED, c.site_ned_m, up_m, c.strip)
+            hazard = hazard_of(
+                kinds, accepted=False, street_level=not c.elevated and not c.strip, strip=c.strip
+            )
+            why = ", ".join(kinds) or "nothing seen against it from afar"
+            self.ledger.add(
+                LedgerSite(
+                    c.site_ned_m, hazard, why, self.round, False, c.edge_distance_m, f"site {c.index}", c
+                )
+            )
+
+    def _near_rejected(self, c: Candidate) -> bool:
+        if c.site_ned_m is None:
+            return False
+        return any(math.dist(c.site_ned_m[:2], (n, e)) < r for n, e, r in self.rejected)
+
+    def _rejected_radius(self, target: tuple[float, float, float], choice: Candidate) -> float:
+        """How far a rejected site rules out candidates: ``rejected_radius_m``; for water or a traffic
+        lane, the surface's own size (half the side of a square of its area, up to
+        ``MAX_REJECTED_RADIUS_M``): another point of the same harbour or street is no better."""
+        site = self.ledger.near((target[0], target[1]))
+        radius = self.p.rejected_radius_m
+        if site is not None and site.hazard >= Hazard.TRAFFIC and math.isfinite(choice.area_m2):
+            radius = max(radius, min(MAX_REJECTED_RADIUS_M, 0.5 * math.sqrt(choice.area_m2)))
+        return radius
