@@ -5,7 +5,7 @@ PYTHON ?= python3
 STAMP := $(VENV)/.installed
 DEPTH_STAMP := $(VENV)/.installed-depth
 
-.PHONY: demo test lint bench clean mosquitto chromium model
+.PHONY: demo test test-fast lint bench clean mosquitto chromium model
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -43,10 +43,17 @@ chromium:
 	     (apt-get update -q >/dev/null && apt-get install -y -q chromium >/dev/null)); \
 	  else echo "the browser tests need chromium: sudo apt-get install chromium (they skip without it)" >&2; fi
 
+# The suite runs on every core (pytest-xdist): each test file on one worker, so a file's module-scoped
+# simulator start-ups are shared by its tests; TEST_WORKERS=0 runs it in this process, one test at a time.
+TEST_WORKERS ?= auto
 test: $(DEPTH_STAMP) mosquitto chromium
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/mypy
-	$(VENV)/bin/pytest
+	$(VENV)/bin/pytest -n $(TEST_WORKERS) --dist loadfile --durations=25
+
+# The inner loop while developing: the unit tests only (no end-to-end flights), on every core.
+test-fast: $(DEPTH_STAMP)
+	$(VENV)/bin/pytest -m "not slow" -n auto -q
 
 # The onboard image judgement's weights (companion/reasoning/models/landnet-s.onnx + .json): render patches
 # from procedural cities, train LandNet-S on the CPU twice (seeds 0 and 1, one core each, side by side),
