@@ -26,7 +26,8 @@ with atheris.instrument_imports(include=["companion", "simbridge", "landfall_lin
     from companion.ground import alarm_from_mqtt
     from companion.reasoning.base import ReasonerError
     from companion.reasoning.parsing import parse_confirm, parse_rank
-    from landfall_link.sensorstream import SensorStreamError, _frame_from_wire, _part_specs
+    from landfall_link.sensorstream import SensorStreamError
+    from landfall_link.sensorstream.wire import _frame_from_wire, _part_specs
 
 from pymavlink.dialects.v20 import common as mavlink2
 
@@ -142,7 +143,8 @@ def seeds(target: str) -> list[bytes]:
     if target == "sensor":
         import numpy as np
 
-        from landfall_link.sensorstream import ImageEncoding, Part, SensorFrame, _encode_frame
+        from landfall_link.sensorstream import ImageEncoding, Part, SensorFrame
+        from landfall_link.sensorstream.wire import _encode_frame
 
         frame = SensorFrame(
             t_s=1.0, time_boot_ms=1000, pos_ned_m=(0.0, 0.0, -50.0), quat_wxyz=(1.0, 0.0, 0.0, 0.0),

@@ -22,15 +22,8 @@ from companion.daemon import Companion
 from companion.ground import alarm_from_mqtt
 from companion.reasoning.base import ReasonerError
 from companion.reasoning.parsing import parse_confirm, parse_rank
-from landfall_link.sensorstream import (
-    ImageEncoding,
-    Part,
-    SensorFrame,
-    SensorStreamError,
-    _encode_frame,
-    _frame_from_wire,
-    _part_specs,
-)
+from landfall_link.sensorstream import ImageEncoding, Part, SensorFrame, SensorStreamError
+from landfall_link.sensorstream.wire import _encode_frame, _frame_from_wire, _part_specs
 
 MANY = settings(max_examples=2000, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 SOME = settings(max_examples=500, deadline=None, suppress_health_check=[HealthCheck.too_slow])
