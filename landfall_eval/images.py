@@ -40,7 +40,7 @@ from companion.config import ConfigError
 from companion.eval_cli import Asker, reasoner_config
 from companion.reasoning.base import ConfirmRequest, RankRequest
 from companion.reasoning.lvlm import encode_image
-from landfall_eval.report import _PAGE, _e, _f, _header, _pct, _table
+from landfall_eval.report.markup import PAGE, escape, fmt, header, pct, table
 
 __all__ = [
     "CONTEXTS",
@@ -377,8 +377,8 @@ def run_images(
     save_results(out, results)
     s = results["summary"]
     print(
-        f"confirm {s['confirm_correct']}/{s['confirm_cases']} ({_pct(s['confirm_accuracy'])}), "
-        f"rank {s['rank_correct']}/{s['rank_cases']} ({_pct(s['rank_accuracy'])}); "
+        f"confirm {s['confirm_correct']}/{s['confirm_cases']} ({pct(s['confirm_accuracy'])}), "
+        f"rank {s['rank_correct']}/{s['rank_cases']} ({pct(s['rank_accuracy'])}); "
         f"results: {out / RESULTS} ({results['wall_s']:.0f} s)",
         file=sys.stderr,
     )
@@ -422,37 +422,37 @@ def write_images_report(results: Mapping[str, Any], out_dir: Path, folder: Path)
         if file not in thumbs:
             bgr = cv2.imread(str(folder / file), cv2.IMREAD_COLOR)
             if bgr is None:
-                thumbs[file] = f'<span class="note">({_e(file)}: not readable now)</span>'
+                thumbs[file] = f'<span class="note">({escape(file)}: not readable now)</span>'
             else:
                 url, (w, h) = encode_image(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), THUMB_PX, 80)
-                thumbs[file] = f'<img src="{url}" width="{w}" height="{h}" alt="{_e(file)}">'
+                thumbs[file] = f'<img src="{url}" width="{w}" height="{h}" alt="{escape(file)}">'
         return thumbs[file]
 
     config = results.get("config") or {}
     s = results.get("summary") or {}
     lat = results.get("latency_s") or {}
     by_label = results.get("by_label") or {}
-    parts = [_header(results, config), "<h2>Summary</h2>"]
-    parts.append(_table(("stage", "cases", "correct", "accuracy", "median latency", "p90", "max"), [
-        (stage, s.get(f"{stage}_cases"), s.get(f"{stage}_correct"), _pct(s.get(f"{stage}_accuracy")),
+    parts = [header(results, config), "<h2>Summary</h2>"]
+    parts.append(table(("stage", "cases", "correct", "accuracy", "median latency", "p90", "max"), [
+        (stage, s.get(f"{stage}_cases"), s.get(f"{stage}_correct"), pct(s.get(f"{stage}_accuracy")),
          *(_seconds((lat.get(stage) or {}).get(k)) for k in ("median", "p90", "max")))
         for stage in ("confirm", "rank")
     ]))  # fmt: skip
-    parts.append(_table(("label (confirm)", "cases", "correct", "accuracy"), [
-        (label, v.get("cases"), v.get("correct"), _pct(v.get("accuracy"))) for label, v in by_label.items()
+    parts.append(table(("label (confirm)", "cases", "correct", "accuracy"), [
+        (label, v.get("cases"), v.get("correct"), pct(v.get("accuracy"))) for label, v in by_label.items()
     ]))  # fmt: skip
     tiers = s.get("tiers") or {}
-    parts.append(_table(("stage", "answered by", "requests"), [
+    parts.append(table(("stage", "answered by", "requests"), [
         (stage, tier, n) for stage, counts in tiers.items() for tier, n in counts.items()
     ]))  # fmt: skip
     misses = [r for r in results.get("images") or [] if r.get("correct") is False]
     parts.append(f"<h2>Confirm misses ({len(misses)})</h2>")
     for r in misses:
         text = (
-            f"<b>{_e(r['file'])}</b> ({_e(r['label'])}: {_e(r.get('what', ''))})<br>"
+            f"<b>{escape(r['file'])}</b> ({escape(r['label'])}: {escape(r.get('what', ''))})<br>"
             f"expected {_yes(r['land'], 'either')}, answered {_yes(r['confirm'], 'nothing')} "
-            f"({_e(r.get('tier'))})"
-            f"<blockquote>{_e(r.get('rationale', ''))}</blockquote>"
+            f"({escape(r.get('tier'))})"
+            f"<blockquote>{escape(r.get('rationale', ''))}</blockquote>"
         )
         parts.append(_row([thumb(r["file"])], text))
     rank_misses = results.get("rank_misses") or []
@@ -465,15 +465,15 @@ def write_images_report(results: Mapping[str, Any], out_dir: Path, folder: Path)
         '<p class="note">Left: the clear roof, which should come first; right: the cluttered one.</p>'
     )
     for (clear, other), ms in pairs.items():
-        text = f"<b>{_e(clear)}</b> (clear) vs <b>{_e(other)}</b> (cluttered)" + "".join(
+        text = f"<b>{escape(clear)}</b> (clear) vs <b>{escape(other)}</b> (cluttered)" + "".join(
             f"<br>sent {'clear first' if m['files'][0] == clear else 'cluttered first'}, ranking "
-            f"{_e(m.get('ranking'))} ({_e(m.get('tier'))})"
-            f"<blockquote>{_e(m.get('rationale', ''))}</blockquote>"
+            f"{escape(m.get('ranking'))} ({escape(m.get('tier'))})"
+            f"<blockquote>{escape(m.get('rationale', ''))}</blockquote>"
             for m in ms
         )
         parts.append(_row([thumb(clear), thumb(other)], text))
-    page = _PAGE.format(
-        title=_e(f"companion-bench: {results.get('command', 'images')}"), body="\n".join(parts)
+    page = PAGE.format(
+        title=escape(f"companion-bench: {results.get('command', 'images')}"), body="\n".join(parts)
     )
     path = out_dir / "report.html"
     path.write_text(page, encoding="utf-8")
@@ -492,4 +492,4 @@ def _yes(x: object, none: str) -> str:
 
 
 def _seconds(x: object) -> str:
-    return _f(x if isinstance(x, int | float) else None, 3, " s")
+    return fmt(x if isinstance(x, int | float) else None, 3, " s")

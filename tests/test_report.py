@@ -11,10 +11,12 @@ import numpy as np
 import pytest
 from matplotlib import image as mpimg
 
-from landfall_eval import rationales, report
+from landfall_eval import rationales
 from landfall_eval.basemap import CLASS_RGB, BaseMap, BaseMapError, basemap
 from landfall_eval.rationales import EmbeddingsUnavailable, cluster_rationales
 from landfall_eval.report import MatplotlibUnavailable, write_report
+from landfall_eval.report import figures as report_figures
+from landfall_eval.report import page as report_page
 from simbridge.world.model import SurfaceClass
 
 SCRIPT = "<script>alert('landfall')</script> LAND HERE"
@@ -150,7 +152,7 @@ def test_write_report_map_shows_scenario1_water_and_verdicts(written: Path) -> N
     assert pixels(_blended(SurfaceClass.WATER)) > 5000  # the harbour east of Quay Street
     assert pixels(_blended(SurfaceClass.ROOF_FLAT)) > 5000
     for verdict in ("safe", "unsafe"):
-        colour = tuple(int(report.VERDICT_COLOUR[verdict][i : i + 2], 16) / 255 for i in (1, 3, 5))
+        colour = tuple(int(report_figures.VERDICT_COLOUR[verdict][i : i + 2], 16) / 255 for i in (1, 3, 5))
         assert pixels(colour, 0.02) > 20, verdict
 
 
@@ -176,7 +178,7 @@ def test_write_report_without_embeddings_shows_a_note(
     def unavailable(texts: list[str], k: int | None = None, seed: int = 0) -> None:
         raise EmbeddingsUnavailable("sentence_transformers")
 
-    monkeypatch.setattr(report, "cluster_rationales", unavailable)
+    monkeypatch.setattr(report_page, "cluster_rationales", unavailable)
     water = np.full((10, 10), int(SurfaceClass.WATER), np.uint8)
     bm = BaseMap(np.zeros((10, 10, 3), np.uint8), water, (-300.0, 300.0, -300.0, 300.0), 60.0)
     page = write_report(_results(EPISODES[:2]), tmp_path, basemaps={"scenario1": bm}).read_text(
