@@ -43,13 +43,13 @@ chromium:
 	     (apt-get update -q >/dev/null && apt-get install -y -q chromium >/dev/null)); \
 	  else echo "the browser tests need chromium: sudo apt-get install chromium (they skip without it)" >&2; fi
 
-# The suite runs on every core (pytest-xdist): each test file on one worker, so a file's module-scoped
-# simulator start-ups are shared by its tests; TEST_WORKERS=0 runs it in this process, one test at a time.
+# The suite runs on every core (pytest-xdist, work stealing: an idle worker takes tests queued on a busy
+# one, so one file of long flights does not hold up the end); TEST_WORKERS=0 runs it in this process.
 TEST_WORKERS ?= auto
 test: $(DEPTH_STAMP) mosquitto chromium
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/mypy
-	$(VENV)/bin/pytest -n $(TEST_WORKERS) --dist loadfile --durations=25
+	$(VENV)/bin/pytest -n $(TEST_WORKERS) --dist worksteal --durations=25
 
 # The inner loop while developing: the unit tests only (no end-to-end flights), on every core.
 test-fast: $(DEPTH_STAMP)
