@@ -379,7 +379,7 @@ def test_render_labels_name_material_and_kind_per_pixel() -> None:
 
 
 def test_render_palette_recolours_and_is_checked() -> None:
-    from simbridge.world.camera import _MAT_RGB
+    from simbridge.world.camera_textures import MAT_RGB as _MAT_RGB
 
     g, p, sm, sun = _label_scene()
     cam = CameraModel(64, 64, 60.0)
