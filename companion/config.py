@@ -23,6 +23,9 @@ Unknown options in the file, unknown ``LANDFALL_<SECTION>_*`` variables for a kn
 override keys are rejected with the allowed names listed. Variables named by a ``*_env`` option (the
 signing key's and the MQTT password's) are exempt, as is any ``LANDFALL_*`` name whose second word is
 not a section.
+
+Kept whole (about 700 lines): one schema, every section's options and checks beside the loader
+that names them in errors; a section read apart from the loader's rules would not say what it accepts.
 """
 
 from __future__ import annotations

@@ -17,6 +17,9 @@ the companion took control (the vehicle's switch to OFFBOARD or GUIDED after ``r
 after the alarm; where the vehicle already holds in GUIDED, as real ArduCopter does after its take-off,
 the alarm's acceptance, placed on the log's clock through the autopilot's boot clock) to the touchdown.
 The companion's peak RSS and CPU time are sampled from ``/proc`` every poll (Linux).
+
+Kept whole (about 660 lines): one episode's life, from starting the processes to the graded entry,
+in the order it happens.
 """
 
 from __future__ import annotations

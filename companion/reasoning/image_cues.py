@@ -67,6 +67,9 @@ Method (numpy + OpenCV, deterministic):
 ``hazard`` is a weighted sum (``WEIGHTS``), each term capped at its weight, so that water or a road's
 markings alone outweigh the bonus an onboard ranker gives a surface for standing above the street.
 Thresholds were set on simbridge renders (clear, fog, rain) and are explained where they are defined.
+
+Kept whole (about 900 lines): one pipeline whose numbered steps above each rely on the previous
+steps' masks; split, the steps would read apart from the masks they pass on.
 """
 
 from __future__ import annotations
