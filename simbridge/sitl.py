@@ -437,8 +437,8 @@ class LockStep:
             if self.first_frame_wall_s is None:
                 self.first_frame_wall_s = now - started
             if frame.frame_count == last_count:
+                self.resent += 1  # counted before the reply goes: whoever reads it after the reply sees it
                 sock.sendto(last_reply, addr)  # our reply was lost or late: answer again, no step
-                self.resent += 1
                 continue
             if frame.frame_count < last_count:
                 raise SitlProtocolError(
