@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from companion.alarms import Criticality
-from companion.guidance.frames import PinholeCamera, quat_to_matrix
+from companion.guidance.frames import PinholeCamera, compass_point, quat_to_matrix
 from companion.perception.site_check import world_points
 from companion.site_ledger import Hazard, SiteLedger
 
@@ -391,7 +391,7 @@ class SearchPlanner:
         cn, ce = (float(v) for v in np.mean([self._centre(c) for c in best], axis=0))
         area = len(best) * self.cell_m**2
         dist = math.hypot(cn - here[0], ce - here[1])
-        towards = _compass(math.degrees(math.atan2(ce - here[1], cn - here[0])))
+        towards = compass_point(math.degrees(math.atan2(ce - here[1], cn - here[0])))
         reason = (
             f"roofs seen by the LiDAR {dist:.0f} m {towards} "
             f"(about {area:.0f} m2 level and raised), not yet judged"
@@ -434,7 +434,7 @@ class SearchPlanner:
                 best = (score, t[0], t[1], why)
         assert best is not None
         _score, tn, te, why = best
-        bearing = _compass(math.degrees(math.atan2(te - here[1], tn - here[0])))
+        bearing = compass_point(math.degrees(math.atan2(te - here[1], tn - here[0])))
         return tn, te, "new ground", f"{step:.0f} m {bearing} to ground not yet seen ({why})"
 
     def _leg_down(
@@ -492,8 +492,3 @@ def _why(covered: float, roofs: float, bad: float | None, shown_bad: float) -> s
     elif bad is not None and bad == 0.0:
         parts.append("away from the water, traffic and clutter seen")
     return ", ".join(parts)
-
-
-def _compass(bearing_deg: float) -> str:
-    names = ["N", "NE", "E", "SE", "S", "SW", "W", "NW"]
-    return names[round((bearing_deg % 360) / 45) % 8]

@@ -37,6 +37,7 @@ __all__ = [
     "CAMERA_TO_BODY",
     "GeometryInputError",
     "PinholeCamera",
+    "compass_point",
     "frd_to_ned",
     "quat_to_matrix",
 ]
@@ -234,3 +235,10 @@ class PinholeCamera:
         )
         ray: np.ndarray = CAMERA_TO_BODY @ ray_cam
         return ray / float(np.linalg.norm(ray))
+
+
+def compass_point(bearing_deg: float) -> str:
+    """The nearest of the eight compass points (``"N"``, ``"NE"`` ... ``"NW"``) to a bearing in degrees
+    from north toward east, as the recovery names directions to people."""
+    names = ["N", "NE", "E", "SE", "S", "SW", "W", "NW"]
+    return names[round((bearing_deg % 360) / 45) % 8]

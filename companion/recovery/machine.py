@@ -29,7 +29,7 @@ from companion.control import (
     TouchedDown,
 )
 from companion.guidance.descent import height_above_site
-from companion.guidance.frames import PinholeCamera
+from companion.guidance.frames import PinholeCamera, compass_point
 from companion.perception.surface_id import (
     Candidate,
 )
@@ -240,7 +240,7 @@ class Recovery(Searching, SiteChoice, Looking):
             return False
         n, e, d = self.tm.state.pos_ned_m
         dist = math.hypot(target[0] - n, target[1] - e)
-        bearing = _compass(math.degrees(math.atan2(target[1] - e, target[0] - n)))
+        bearing = compass_point(math.degrees(math.atan2(target[1] - e, target[0] - n)))
         kind = "roof" if choice.height_above_m >= 3.0 else "ground"
         self._say(6, f"site {choice.index} {kind} {dist:.0f} m {bearing}")
         self._say(6, ranking.rationale[:200])
@@ -312,8 +312,3 @@ class Recovery(Searching, SiteChoice, Looking):
             except TargetTimeout as exc:
                 self._say(4, f"descent target not reached ({exc.error_m:.1f} m off): next round")
                 return False
-
-
-def _compass(bearing_deg: float) -> str:
-    names = ["N", "NE", "E", "SE", "S", "SW", "W", "NW"]
-    return names[round((bearing_deg % 360) / 45) % 8]
