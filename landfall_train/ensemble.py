@@ -139,13 +139,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             "file": str(m),
             **{
                 k: meta.get(k)
-                for k in ("sha256", "seed", "command", "data", "training", "sim_metrics", BARE)
+                for k in ("sha256", "seed", "command", "data", "training", "photos", "sim_metrics", BARE)
                 if k in meta
             },
         }
         for m, meta in zip(args.members, metas, strict=True)
     ]
-    for key in ("seed", "command", "data", "training", "calibration", BARE):
+    for key in ("seed", "command", "data", "training", "photos", "calibration", BARE):
         sidecar.pop(key, None)
     sidecar["command"] = "python -m landfall_train.ensemble " + " ".join(
         sys.argv[1:] if argv is None else list(argv)

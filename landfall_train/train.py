@@ -23,6 +23,9 @@
 ``python -m landfall_train --recalibrate [--views V]`` redoes step 3 alone for the model at ``--out``
 (its ONNX file through OpenCV's DNN module, no training, the weights untouched) and rewrites the
 sidecar's thresholds, sim metrics and ``input.views``; the sidecar's ``calibration`` says how.
+``--clear-floor P`` keeps the clear threshold at P at least (``make model``: the threshold the source-split
+cross-validation on photographs chose for nets fine-tuned on them, :mod:`landfall_train.folds`): a site
+then passes only where both the renders' calibration and the photographs' would pass it.
 """
 
 from __future__ import annotations
@@ -97,6 +100,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="only calibrate the model at --out again (its ONNX file; no training) and rewrite its sidecar",
     )  # fmt: skip
     p.add_argument(
+        "--clear-floor", type=float, default=0.0,
+        help="--recalibrate: the clear threshold is at least this (chosen on photographs)",
+    )  # fmt: skip
+    p.add_argument(
         "--head", choices=("fused", "features"), default="fused",
         help="clear-site head: pooled features and cell logits (fused) or pooled features only",
     )  # fmt: skip
@@ -169,7 +176,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     x_val, y_val, val_digest = patches.load_shards(validation_paths(args, args.seed))
     if args.recalibrate:  # the validation renders only
         val = validation_views(x_val, y_val, args.seed)
-        return recalibrate(args.out, val, (args.views, args.rank_views), command, val_digest)
+        how = (args.views, args.rank_views)
+        return recalibrate(args.out, val, how, command, val_digest, args.clear_floor)
     x_train, y_train, train_digest = patches.load_shards(training_paths(args, args.seed))
     t_render = time.monotonic() - t0
     _log.info("%d training and %d validation patches in %.0f s", len(x_train), len(x_val), t_render)
@@ -364,21 +372,26 @@ def _predict(predict: Predict, img: np.ndarray, views: int) -> tuple[np.ndarray,
 
 
 def recalibrate(
-    out: Path, val: dict[str, np.ndarray], how: tuple[int, int], command: str, val_digest: str
+    out: Path,
+    val: dict[str, np.ndarray],
+    how: tuple[int, int],
+    command: str,
+    val_digest: str,
+    clear_floor: float = 0.0,
 ) -> int:
     """Calibrate the exported model at ``out`` again (``--recalibrate``) with ``how`` = (views,
     rank_views) and rewrite its sidecar."""
     views, rank_views = how
     meta_path = out.with_suffix(".json")
     meta = json.loads(meta_path.read_text())
-    calib = calibrate(_onnx_predict(out.with_suffix(".onnx")), val, views)
+    calib = calibrate(_onnx_predict(out.with_suffix(".onnx")), val, views, clear_floor)
     meta["thresholds"] = calib["thresholds"]
     meta["sim_metrics"] = calib["metrics"]
     meta["input"]["views"] = views
     meta["input"]["rank_views"] = rank_views
     meta["calibration"] = {
         "command": command, "views": views, "rank_views": rank_views, "val_digest": val_digest,
-        "commit": _commit(),
+        "clear_youden": calib["clear_youden"], "clear_floor": clear_floor, "commit": _commit(),
     }  # fmt: skip
     meta_path.write_text(json.dumps(meta, indent=2) + "\n")
     _log.info("recalibrated %s: clear threshold %.4f, sim AUC %.4f", meta_path, calib["thresholds"]["clear"],
@@ -386,11 +399,16 @@ def recalibrate(
     return 0
 
 
-def calibrate(predict: Predict, val: dict[str, np.ndarray], views: int = 1) -> dict[str, Any]:
-    """Thresholds and sim metrics on the validation views (module docstring, 3)."""
+def calibrate(
+    predict: Predict, val: dict[str, np.ndarray], views: int = 1, clear_floor: float = 0.0
+) -> dict[str, Any]:
+    """Thresholds and sim metrics on the validation views (module docstring, 3); the clear threshold is
+    ``clear_floor`` where Youden's is lower (the metrics are those at the threshold kept)."""
     cells, clear = _predict(predict, val["img"], views)
     truth = val["clear"] > 0.5
-    t_clear, j = _youden(clear, truth)
+    youden, _j = _youden(clear, truth)
+    t_clear = max(youden, clear_floor)
+    j = float((clear[truth] >= t_clear).mean() - (clear[~truth] >= t_clear).mean())
     metrics: dict[str, Any] = {
         "clear_auc": round(_auc(clear, truth), 4),
         "clear_positives": int(truth.sum()),
@@ -412,7 +430,10 @@ def calibrate(predict: Predict, val: dict[str, np.ndarray], views: int = 1) -> d
             "f1": round(f1, 4),
             "prevalence": round(float(t.mean()), 4),
         }
-    return {"thresholds": {"clear": round(t_clear, 4), "cells": cell_t}, "metrics": metrics}
+    return {
+        "thresholds": {"clear": round(t_clear, 4), "cells": cell_t}, "metrics": metrics,
+        "clear_youden": round(youden, 4),
+    }  # fmt: skip
 
 
 def _youden(p: np.ndarray, t: np.ndarray) -> tuple[float, float]:

@@ -121,6 +121,10 @@ class Decision:
     binding: bool = False
     # what the onboard tier saw against the site, by kind (``HAZARD_KINDS``); empty from other tiers
     hazards: tuple[str, ...] = ()
+    # the image judgement was unsure (the onboard tier's net: its clear-site probability near its
+    # threshold, or its views disagreeing): the rationale says so, and an accepted site is looked at
+    # again from closer before the full descent step (companion/recovery/machine.py)
+    unsure: bool = False
 
 
 # The kinds of ``Decision.hazards``: what the recovery's least-bad-site policy ranks sites by.

@@ -39,7 +39,7 @@ import json
 import logging
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -139,6 +139,7 @@ class SceneReading:
     counts: tuple[tuple[str, int], ...]  # COUNTED classes: separate groups of cells holding them
     hazard_peak: float = 0.0  # the highest probability of a hazard class in any cell (views averaged)
     bare_p: float | None = None  # probability that nothing stands on the surface (None: no bare head)
+    clear_spread: float = 0.0  # the clear-site probabilities of the views read: highest minus lowest
 
     @property
     def hazard(self) -> float:
@@ -184,6 +185,7 @@ class SceneReading:
             "counts": dict(self.counts),
             "hazard_peak": round(self.hazard_peak, 4),
             "bare_p": None if self.bare_p is None else round(self.bare_p, 4),
+            "clear_spread": round(self.clear_spread, 4),
             "hazard": round(self.hazard, 3),
         }
 
@@ -347,7 +349,9 @@ class LandNet:
         present = p[0] >= self.cell_thresholds[:, None, None]
         peak = float(p[0][self._hazard_rows].max())
         bare = float(_sigmoid(np.asarray(out[2]).reshape(-1)).mean()) if self.has_bare else None
-        return self._reading(img.shape[:2], present, float(clear_p[0]), peak, bare)
+        each = _sigmoid(np.asarray(out[1]).reshape(-1))
+        reading = self._reading(img.shape[:2], present, float(clear_p[0]), peak, bare)
+        return replace(reading, clear_spread=float(each.max() - each.min()))
 
     def _infer(self, img: np.ndarray, views: int) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
         """One image (H, W, 3) uint8 scaled, normalised and run in ``views`` views: the cells'

@@ -36,13 +36,26 @@ from companion.reasoning.image_cues import SITE_WINDOW_CROP, SITE_WINDOW_FRAME, 
 from companion.reasoning.landnet import COUNTED, LandNet, SceneReading
 from companion.reasoning.onboard_params import ConfirmParams, GeometryWeights
 
-__all__ = ["confirm_reading", "rank_readings", "site_window"]
+__all__ = ["confirm_reading", "rank_readings", "site_window", "unsure"]
 
 FRAME_ASPECT = 16.0 / 9.0  # a whole camera frame (the companion's camera), within ASPECT_TOL
 ASPECT_TOL = 0.05
 FRAME_WINDOW = SITE_WINDOW_FRAME
 CROP_WINDOW = SITE_WINDOW_CROP
 MAX_MARKING_SHARE = 0.02  # of the window's cells: a painted line, not one stray cell
+UNSURE_MARGIN = 0.15  # a clear-site probability this close to the threshold is a guess, either way ...
+UNSURE_SPREAD = 0.35  # ... as is one whose mirror-image views differ by this much
+
+
+def unsure(r: SceneReading, threshold: float) -> str:
+    """Why the net's clear-site verdict on ``r`` is a guess (empty: it is not): a probability within
+    ``UNSURE_MARGIN`` of ``threshold``, or views of the image disagreeing by ``UNSURE_SPREAD``."""
+    why = []
+    if abs(r.clear_p - threshold) < UNSURE_MARGIN:
+        why.append(f"clear-site confidence {r.clear_p:.2f} near its threshold {threshold:.2f}")
+    if r.clear_spread >= UNSURE_SPREAD:
+        why.append(f"its views disagree ({r.clear_spread:.2f} apart)")
+    return "unsure: " + " and ".join(why) if why else ""
 
 
 def site_window(h: int, w: int, override: float | None) -> float:

@@ -67,7 +67,7 @@ from companion.perception.surface_id import Candidate
 from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequest, Reasoner
 from companion.reasoning.image_cues import ImageCues, analyse
 from companion.reasoning.landnet import LandNet, SceneReading
-from companion.reasoning.net_judge import confirm_reading, rank_readings
+from companion.reasoning.net_judge import confirm_reading, rank_readings, unsure
 from companion.reasoning.onboard_params import ConfirmParams, GeometryWeights
 
 __all__ = [
@@ -313,7 +313,9 @@ class OnboardReasoner:
         seen = ", ".join(reading.observations()[:3])
         why = f"site clear: {_geometry_phrase(request.check)}; image: {seen}{note}"
         body = {"judge": self.judge, "reading": reading.to_json()}
-        return self._decision(request, t0, vetoes, categorical or street_level, why, body)
+        # the clear-site probability decided (a roof, no binding veto): say how sure it was
+        guess = "" if categorical or street_level else unsure(reading, net.clear_threshold)
+        return self._decision(request, t0, vetoes, categorical or street_level, why, body, guess)
 
     def _level(self, request: ConfirmRequest) -> tuple[bool, bool, str]:
         """(elevated, street level, where in words) of the site. A roof is a surface measured well
@@ -333,6 +335,7 @@ class OnboardReasoner:
         binds: bool,
         clear_why: str,
         body: dict[str, Any],
+        guess: str = "",
     ) -> Decision:
         """The confirm stage's Decision from its vetoes (none: accepted, with ``clear_why``); a
         rejection is binding when ``binds``. Appends the transcript entry (``body`` and the verdict)."""
@@ -343,13 +346,17 @@ class OnboardReasoner:
             why = "rejected: " + "; ".join(text for _kind, text in vetoes)
             if request.check is None:
                 why += " (no LiDAR: judged from the image alone)"
+        if guess:
+            why += f" ({guess})"
         binding = not accept and binds
         kinds = tuple(dict.fromkeys(kind for kind, _text in vetoes))
         if request.transcript is not None:
             request.transcript.append(
-                {"tier": self.name, **body, "accept": accept, "binding": binding, "hazards": kinds}
-            )
-        return Decision(accept, why, self.name, time.perf_counter() - t0, binding=binding, hazards=kinds)
+                {"tier": self.name, **body, "accept": accept, "binding": binding, "hazards": kinds,
+                 "unsure": bool(guess)}
+            )  # fmt: skip
+        spent = time.perf_counter() - t0
+        return Decision(accept, why, self.name, spent, binding=binding, hazards=kinds, unsure=bool(guess))
 
 
 def _lidar_vetoes(check: SiteCheck | None) -> list[tuple[str, str]]:

@@ -190,6 +190,7 @@ class Looking(RecoveryBase):
             {
                 "round": self.round,
                 "accept": decision.accept,
+                "unsure": decision.unsure,
                 "rationale": decision.rationale,
                 "tier": decision.tier,
                 "latency_s": decision.latency_s,

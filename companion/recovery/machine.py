@@ -297,9 +297,11 @@ class Recovery(Searching, SiteChoice, Looking):
                 return await self._land()
             self._set(State.DESCEND)
             self._fault.check("descend", self.round)
-            step_m = self.p.descent_fraction * height_m
+            # an unsure judgement: half the step, so that the next look is from closer
+            step_m = self.p.descent_fraction * height_m * (0.5 if decision.unsure else 1.0)
             new_d = d + step_m
-            self._say(6, f"descending {step_m:.0f} m, {decision.rationale[:80]}")
+            closer = " (unsure: a closer look first)" if decision.unsure else ""
+            self._say(6, f"descending {step_m:.0f} m{closer}, {decision.rationale[:80]}")
             try:
                 await self.ctl.goto(
                     target[0],

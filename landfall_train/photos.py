@@ -1,0 +1,380 @@
+"""Teach a trained LandNet-S what real roofs look like: fine-tune it on labelled photographs and renders.
+
+``python -m landfall_train.photos --member runs/landnet/seed0/landnet-s.onnx --seed 0 --out OUT``
+(``make model`` runs it on each member before merging them) writes ``OUT.onnx`` and its sidecar.
+
+**Why.** A net trained on simbridge's renders alone reads real roofs poorly: corrugated metal, tiles with
+snow hooks and weathered concrete are textures the renders do not have, and it calls many clear real
+roofs cluttered (on ../shared/realimages-train it confirmed 81 %). The labelled photographs are few (a
+hundred and some), far too few to train a net from nothing, and enough to move one that already knows
+what roofs, objects and roads are.
+
+**What it learns from.** Both at once, in every step: ``--render-batch`` randomised render views with
+their full targets (the cells and the clear site, as :mod:`landfall_train.train` trains them), so the
+net keeps what it knows of the simulator's world, and ``--photo-batch`` randomised views of photographs
+with one target, the clear-site output: ``land`` true is 1, false is 0, null (either answer) is not
+read. Photographs come from the folders given (the layout of ../shared/realimages: ``labels.json`` with
+``label``, ``land``, ``source_repo``, ``license``, and ``provenance.json``). Never learnt from:
+
+- photographs whose licence does not allow shipping weights trained on them (:func:`trainable`: a
+  licence naming non-commercial or research-only use: the Semantic Drone Dataset, AeroScapes and UDD
+  crops of ../shared/realimages);
+- the sources named by ``--hold-out`` (default ``Philippines``): they and the licence-barred ones are
+  the source-split validation the sidecar reports (``photos.held_out``), sources the net never saw.
+
+A photograph's source is its repository, and for the OpenAerialMap tiles of hotosm/fAIr-utilities the
+place its provenance names (Kampala, Kathmandu, Zanzibar, Philippines): the same city's roofs look alike.
+
+**How.** The member's ONNX weights are read into :class:`landfall_train.net.LandNetS` (batch norm folded
+into the convolutions, so the norms become fixed affine maps: their statistics do not move, which suits
+batches this small), every weight is trained with AdamW at ``--lr`` for ``--steps`` steps, cosine decay.
+Photograph views: a random crop of 45-100 % of the area, a quarter turn and a mirror image, colour,
+contrast and brightness jitter, sometimes blur or sensor noise, scaled to 128 x 128.
+Then the weights are moved back toward the member's: ``--alpha`` of the way from the member's to the
+fine-tuned ones (weight-space ensembling, Wortsman et al. 2022, "Robust fine-tuning of zero-shot
+models"): both start from the same weights, so the line between them stays a working net, and a point
+on it keeps more of what the renders taught on imagery unlike both. ``python -m landfall_train.folds``
+chooses ``--alpha`` and the steps by source-split cross-validation (docs/evaluation.md).
+Procedural close-ups of gravel, ballast and membrane roofs with and without objects
+(:mod:`landfall_train.closeups`, ``--closeups``; ``--closeup-share`` of each render batch) join the
+renders: the labelled photographs hold no
+such roof seen from 10-20 m up.
+Thresholds stay as ``--recalibrate`` sets them on held-out renders (``make model``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import re
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from landfall_train import patches
+from landfall_train.augment import augment, targets
+from landfall_train.closeups import closeups
+from landfall_train.labels import CLASSES
+from landfall_train.train import (
+    CLEAR_POS_WEIGHT,
+    INPUT_PX,
+    POS_WEIGHT,
+    _commit,
+    _torch_version,
+    add_training_args,
+    add_validation_args,
+    export,
+    normalised,
+    training_paths,
+)
+
+_log = logging.getLogger("landfall_train.photos")
+
+PHOTO_DIRS = (Path("../shared/realimages-train"), Path("../shared/realimages"))
+HOLD_OUT = ("Philippines",)
+NOT_FOR_TRAINING = re.compile(r"non-commercial|research use", re.IGNORECASE)
+PLACES = re.compile(r"\b(Kampala|Kathmandu|Zanzibar|Philippines)\b")
+ALPHA = 0.75
+CLOSEUPS = 400
+CLOSEUP_SHARE = 0.25
+STREAM = 4242  # the photograph views' random stream
+
+
+@dataclass(frozen=True)
+class Photo:
+    path: Path
+    label: str
+    land: bool | None
+    source: str
+    licence: str
+
+
+def trainable(photo: Photo) -> bool:
+    """Whether the photograph's licence allows shipping weights trained on it (module docstring)."""
+    return not NOT_FOR_TRAINING.search(photo.licence)
+
+
+def load_photos(dirs: Sequence[Path]) -> list[Photo]:
+    """Every labelled photograph of ``dirs`` (the layout of ../shared/realimages), with its source.
+
+    Raises:
+        FileNotFoundError: a folder without labels.json.
+    """
+    out = []
+    for d in dirs:
+        labels = json.loads((d / "labels.json").read_text())
+        prov_path = d / "provenance.json"
+        prov = {p["file"]: p for p in json.loads(prov_path.read_text())} if prov_path.is_file() else {}
+        for e in labels:
+            repo = str(e.get("source_repo", d.name))
+            place = PLACES.search(str(prov.get(e["file"], {}).get("imagery", "")))
+            source = place.group(1) if place and repo == "hotosm/fAIr-utilities" else repo.split("/")[-1]
+            out.append(Photo(d / e["file"], e["label"], e["land"], source, str(e.get("license", ""))))
+    return out
+
+
+def read_rgb(path: Path) -> np.ndarray:
+    bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if bgr is None:
+        raise ValueError(f"{path}: not an image OpenCV can read")
+    return np.ascontiguousarray(bgr[:, :, ::-1])
+
+
+def photo_view(rgb: np.ndarray, rng: np.random.Generator, px: int = INPUT_PX) -> np.ndarray:
+    """One randomised ``px`` x ``px`` view of a photograph (module docstring), uint8 RGB."""
+    h, w = rgb.shape[:2]
+    s = math.sqrt(rng.uniform(0.45, 1.0))
+    ch, cw = max(8, int(h * s)), max(8, int(w * s))
+    y, x = int(rng.integers(0, h - ch + 1)), int(rng.integers(0, w - cw + 1))
+    interp = cv2.INTER_AREA if ch > px else cv2.INTER_LINEAR
+    img: np.ndarray = np.asarray(
+        cv2.resize(rgb[y : y + ch, x : x + cw], (px, px), interpolation=interp), np.float32
+    )
+    img = np.rot90(img, int(rng.integers(4)))
+    if rng.random() < 0.5:
+        img = img[:, ::-1]
+    grey = img.mean(axis=2, keepdims=True)
+    img = grey + (img - grey) * rng.uniform(0.6, 1.4)
+    img = img * rng.uniform(0.7, 1.3) * rng.uniform(0.9, 1.1, size=3) + rng.uniform(-25.0, 25.0)
+    if rng.random() < 0.3:
+        img = cv2.GaussianBlur(np.ascontiguousarray(img), (0, 0), rng.uniform(0.3, 1.2))
+    if rng.random() < 0.3:
+        img = img + rng.normal(0.0, rng.uniform(2.0, 8.0), img.shape)
+    return np.asarray(np.clip(img, 0, 255), np.uint8)
+
+
+def from_onnx(spec: str) -> Any:
+    """A :class:`landfall_train.net.LandNetS` in eval mode with the weights of an exported member:
+    ``PATH`` or ``PATH#PREFIX`` (one member of a merged model, e.g. ``landnet-s.onnx#m0/``). Batch norm
+    was folded into the convolutions at export; each norm becomes the identity plus the folded bias."""
+    import onnx
+    import torch
+    from onnx import numpy_helper
+    from torch import nn
+
+    from landfall_train.net import LandNetS
+
+    path, _, prefix = spec.partition("#")
+    model = onnx.load(path)
+    weights = {i.name: numpy_helper.to_array(i) for i in model.graph.initializer}
+    convs = [n for n in model.graph.node if n.op_type == "Conv" and n.output[0].startswith(prefix)]
+    head = next(n for n in convs if n.output[0] == f"{prefix}clear")
+    fused = weights[head.input[1]].shape[1] > 2 * weights[convs[5].input[1]].shape[0]
+    widths = (*(int(weights[convs[k].input[1]].shape[0]) for k in (0, 1, 3, 5)),)
+    net = LandNetS(len(CLASSES), widths, fused=fused)  # type: ignore[arg-type]
+    modules = dict(net.named_modules())
+    mine = [(name, m) for name, m in net.named_modules() if isinstance(m, nn.Conv2d)]
+    if len(mine) != len(convs):
+        raise ValueError(f"{spec}: {len(convs)} convolutions, LandNet-S has {len(mine)}")
+    with torch.no_grad():
+        for (name, conv), node in zip(mine, convs, strict=True):
+            w, b = (torch.from_numpy(weights[k].copy()) for k in node.input[1:3])
+            if conv.weight.shape != w.shape:
+                want = tuple(conv.weight.shape)
+                raise ValueError(f"{spec}: {node.name} has shape {tuple(w.shape)}, not {want}")
+            conv.weight.copy_(w)
+            if conv.bias is not None:
+                conv.bias.copy_(b)
+                continue
+            parent, idx = name.rsplit(".", 1)
+            bn = modules[f"{parent}.{int(idx) + 1}"]
+            bn.weight.fill_(1.0)
+            bn.bias.copy_(b)
+            bn.running_mean.zero_()
+            bn.running_var.fill_(1.0 - bn.eps)
+    return net.eval()
+
+
+def _views(
+    photos: Sequence[Photo], images: dict[Path, np.ndarray], rng: np.random.Generator, n: int
+) -> tuple[np.ndarray, np.ndarray]:
+    pick = rng.integers(0, len(photos), n)
+    imgs = np.stack([photo_view(images[photos[i].path], rng) for i in pick.tolist()])
+    return imgs, np.array([1.0 if photos[i].land else 0.0 for i in pick.tolist()], np.float32)
+
+
+def fine_tune(
+    net: Any,
+    photos: Sequence[Photo],
+    x: np.ndarray,
+    y: np.ndarray,
+    args: argparse.Namespace,
+    first_closeup: int | None = None,
+) -> tuple[Any, float]:
+    """Fine-tune ``net`` on ``photos`` (land true or false only) and the renders ``x``, ``y``, whose
+    entries from ``first_closeup`` on are close-ups (``args.closeup_share`` of each render batch)."""
+    first_closeup = len(x) if first_closeup is None else first_closeup
+    import torch
+
+    torch.manual_seed(args.seed)
+    torch.set_num_threads(args.threads)
+    used = [p for p in photos if p.land is not None]
+    images = {p.path: read_rgb(p.path) for p in used}
+    pos = sum(1 for p in used if p.land)
+    photo_pos_weight = torch.tensor((len(used) - pos) / max(pos, 1))
+    pos_weight = torch.tensor([POS_WEIGHT.get(c, 1.0) for c in CLASSES]).view(1, -1, 1, 1)
+    opt = torch.optim.AdamW(net.parameters(), lr=args.lr, weight_decay=1e-4)
+    sched = torch.optim.lr_scheduler.LambdaLR(
+        opt, lambda s: 0.5 + 0.5 * math.cos(math.pi * min(s, args.steps) / max(args.steps, 1))
+    )
+    t0 = time.monotonic()
+    running = 0.0
+    net.eval()  # the folded norms stay fixed maps (module docstring)
+    for step in range(args.steps):
+        rng = np.random.default_rng([args.seed, STREAM, step])
+        p_img, p_clear = _views(used, images, rng, args.photo_batch)
+        r_img, cells, valid, clear = [], [], [], []
+        closeups_here = round(args.closeup_share * args.render_batch) if len(x) > first_closeup else 0
+        picks = np.concatenate([
+            rng.integers(0, first_closeup, args.render_batch - closeups_here),
+            rng.integers(first_closeup, len(x), closeups_here),
+        ])  # fmt: skip
+        for i in picks.tolist():
+            img, lab = augment(x[i], y[i], rng, INPUT_PX)
+            c, v, s = targets(lab)
+            r_img.append(img)
+            cells.append(c)
+            valid.append(v)
+            clear.append(s)
+        batch = np.concatenate([np.stack(r_img), p_img])
+        blob = torch.from_numpy(normalised(batch))
+        logits, clear_logit = net(blob)
+        n = args.render_batch
+        bce = torch.nn.functional.binary_cross_entropy_with_logits(
+            logits[:n], torch.from_numpy(np.stack(cells)), pos_weight=pos_weight, reduction="none"
+        )
+        v = torch.from_numpy(np.stack(valid))
+        cell_loss = (bce * v[:, None]).sum() / (v.sum() * len(CLASSES)).clamp(min=1.0)
+        render_clear = torch.nn.functional.binary_cross_entropy_with_logits(
+            clear_logit[:n].view(-1), torch.tensor(clear, dtype=torch.float32),
+            pos_weight=torch.tensor(CLEAR_POS_WEIGHT),
+        )  # fmt: skip
+        photo_clear = torch.nn.functional.binary_cross_entropy_with_logits(
+            clear_logit[n:].view(-1), torch.from_numpy(p_clear), pos_weight=photo_pos_weight
+        )
+        loss = cell_loss + render_clear + args.photo_weight * photo_clear
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        sched.step()
+        running = 0.95 * running + 0.05 * float(photo_clear.detach()) if step else float(photo_clear.detach())
+        if step % 50 == 0 or step == args.steps - 1:
+            el = time.monotonic() - t0
+            _log.info("step %d/%d photo loss %.3f (%.0f s, %.2f s/step)", step + 1, args.steps, running, el,
+                      el / (step + 1))  # fmt: skip
+    return net.eval(), time.monotonic() - t0
+
+
+def interpolate(net: Any, start: dict[str, Any], alpha: float) -> Any:
+    """``net`` with its weights moved to ``start + alpha * (weights - start)`` (module docstring)."""
+    import torch
+
+    with torch.no_grad():
+        for name, tensor in net.state_dict().items():
+            if tensor.dtype.is_floating_point:
+                tensor.copy_(start[name] + alpha * (tensor - start[name]))
+    return net
+
+
+def render_set(args: argparse.Namespace) -> tuple[np.ndarray, np.ndarray, str, int]:
+    """The renders (:func:`landfall_train.train.training_paths`), then ``args.closeups`` procedural roof
+    close-ups of seed ``args.seed``: images, class maps, the renders' digest and the first close-up's
+    index."""
+    x, y, digest = patches.load_shards(training_paths(args, args.seed))
+    first = len(x)
+    if args.closeups:
+        cx, cy = closeups(args.seed, args.closeups, x.shape[1])
+        x, y = np.concatenate([x, cx]), np.concatenate([y, cy])
+    return x, y, digest, first
+
+
+def split(photos: Sequence[Photo], hold_out: Sequence[str]) -> tuple[list[Photo], list[Photo]]:
+    """(learnt from, held out): held out are the ``hold_out`` sources and every photograph whose licence
+    bars training (:func:`trainable`)."""
+    learn = [p for p in photos if trainable(p) and p.source not in hold_out]
+    return learn, [p for p in photos if p not in learn]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="python -m landfall_train.photos", description=__doc__.split("\n")[0])
+    p.add_argument("--member", required=True, help="the trained member: X.onnx, or MERGED.onnx#m0/")
+    p.add_argument("--seed", type=int, required=True)
+    p.add_argument("--out", type=Path, required=True, help="where to write OUT.onnx and OUT.json")
+    p.add_argument("--photos", type=Path, nargs="+", default=list(PHOTO_DIRS), help="labelled photo folders")
+    p.add_argument("--hold-out", nargs="*", default=list(HOLD_OUT), help="sources never learnt from")
+    p.add_argument("--steps", type=int, default=300)
+    p.add_argument("--lr", type=float, default=3e-4)
+    p.add_argument("--photo-batch", type=int, default=16)
+    p.add_argument("--render-batch", type=int, default=16)
+    p.add_argument("--photo-weight", type=float, default=1.0, help="weight of the photographs' loss")
+    p.add_argument(
+        "--closeups", type=int, default=CLOSEUPS,
+        help="procedural roof close-ups beside the renders (landfall_train.closeups)",
+    )  # fmt: skip
+    p.add_argument("--closeup-share", type=float, default=CLOSEUP_SHARE, help="of each render batch")
+    p.add_argument("--alpha", type=float, default=ALPHA, help="share of the way to the fine-tuned weights")
+    p.add_argument("--threads", type=int, default=1)
+    add_training_args(p)
+    add_validation_args(p)
+    p.set_defaults(train_cities=8, vignettes=300)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s", stream=sys.stderr)
+    args = build_parser().parse_args(argv)
+    command = "python -m landfall_train.photos " + " ".join(sys.argv[1:] if argv is None else argv)
+    path = Path(args.member.partition("#")[0])
+    meta_path = path.with_suffix(".json")
+    for f in (path, meta_path):
+        if not f.is_file():
+            raise SystemExit(f"{f}: not found (train the member first: python -m landfall_train --seed S)")
+    try:
+        photos = load_photos(args.photos)
+    except (OSError, ValueError, KeyError) as exc:
+        raise SystemExit(
+            f"cannot read the photographs: {exc} (../shared/realimages* beside the repository)"
+        ) from None
+    learn, held = split(photos, args.hold_out)
+    if not any(p.land for p in learn) or not any(p.land is False for p in learn):
+        raise SystemExit("the photographs to learn from need both clear and unclear sites")
+    _log.info("learning from %d photographs (%s); holding out %d", len(learn),
+              ", ".join(sorted({p.source for p in learn})), len(held))  # fmt: skip
+    t0 = time.monotonic()
+    x, y, digest, first_closeup = render_set(args)
+    net = from_onnx(args.member)
+    start = {k: v.clone() for k, v in net.state_dict().items()}
+    net, seconds = fine_tune(net, learn, x, y, args, first_closeup)
+    interpolate(net, start, args.alpha)
+    meta = json.loads(meta_path.read_text())
+    if "members" in meta:  # one member of a merged model: its own sidecar entry
+        k = int(args.member.partition("#")[2].strip("m/") or 0)
+        meta = {key: val for key, val in meta.items() if key != "members"} | meta["members"][k]
+        meta.pop("file", None)
+    meta["name"] = args.out.name
+    meta["photos"] = {
+        "command": command, "from": args.member, "learnt": len(learn),
+        "learnt_sources": sorted({p.source for p in learn}),
+        "held_out_sources": sorted({p.source for p in held}),
+        "steps": args.steps, "lr": args.lr, "photo_batch": args.photo_batch,
+        "render_batch": args.render_batch, "photo_weight": args.photo_weight, "alpha": args.alpha,
+        "closeups": args.closeups, "closeup_share": args.closeup_share,
+        "render_digest": digest,
+        "seconds": round(seconds, 1), "torch": _torch_version(), "commit": _commit(),
+        "render_s": round(time.monotonic() - t0 - seconds, 1),
+    }  # fmt: skip
+    export(net, args.out, meta)
+    _log.info("wrote %s.onnx and .json in %.0f s", args.out, time.monotonic() - t0)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
