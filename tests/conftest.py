@@ -24,6 +24,21 @@ from tests.mavclient import MavClient
 from tests.views import LAUNCH, SCENE, WEATHERS, render, world
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    """Compile simbridge's numba kernels once, before any test worker starts (``cache=True`` keeps them
+    in __pycache__): on a fresh clone every xdist worker and every simulator process would otherwise
+    compile the same kernels at once, two minutes each on two cores. A few seconds once they are cached."""
+    if hasattr(config, "workerinput") or os.environ.get("LANDFALL_NO_WARMUP") == "1":
+        return  # an xdist worker (the controller warmed them), or asked not to
+    import numpy as np
+
+    from tests.views import LEVEL
+
+    w = world("scenario1")
+    render(w, LAUNCH)
+    w.lidar_sweep(LAUNCH, LEVEL, 0.0, np.random.default_rng(0))
+
+
 @pytest.fixture
 def arducopter() -> Path:
     """ArduPilot's SITL build, or a skip saying how to get it (a failure where CI requires it)."""
