@@ -9,11 +9,11 @@ the member once per fold and judges the fold's photographs, which it never learn
 - the ``held-out`` fold: learn from every learnable source, judge the held-out ones (``--hold-out`` and
   the photographs whose licence bars training): what the shipped weights are judged on.
 
-The judgement is the net's part of the companion's (``companion.reasoning.net_judge``): confirm reads
-the middle two thirds in four views and accepts when the clear-site probability reaches the member's
-threshold with no water (over 10 % of the cells) or markings (over 2 %); rank orders by the reading's
-hazard (two views), every (clear roof, cluttered roof) pair of the fold. Pooled over the source folds,
-these are the figures that choose ``--alpha`` and ``--steps``; alpha 0 is the member as trained.
+The judgement is the net's part of the companion's (``companion.reasoning.net_judge.confirm_reading``):
+confirm reads the middle two thirds in four views and accepts when the clear-site probability reaches
+the member's threshold with no water (over 10 % of the cells) or markings (over 2 %); rank orders by the
+reading's hazard (two views), every (clear roof, cluttered roof) pair of the fold. Pooled over the source
+folds, these are the figures that choose ``--alpha`` and ``--steps``; alpha 0 is the member as trained.
 Each fold's model is exported to ONNX and read by :class:`companion.reasoning.landnet.LandNet`, as the
 companion reads it. Folds run in ``--jobs`` processes, one core each.
 """
@@ -31,6 +31,8 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from landfall_train import patches
 from landfall_train.photos import (
     Photo,
@@ -39,6 +41,7 @@ from landfall_train.photos import (
     from_onnx,
     interpolate,
     load_photos,
+    member_sidecar,
     read_rgb,
     render_set,
     split,
@@ -49,31 +52,30 @@ _log = logging.getLogger("landfall_train.folds")
 
 ALPHAS = (0.0, 0.25, 0.5, 0.75, 1.0)
 HELD_OUT = "held-out"
-MAX_WATER = 0.1
-MAX_MARKING = 0.02
 
 
-def judge(model: Path, photos: Sequence[Photo]) -> dict[str, tuple[bool, float]]:
-    """Per photograph (its path): (confirmed, rank score: higher first), as the module docstring says."""
-    return {k: (v["confirmed"], v["rank_score"]) for k, v in readings(model, photos).items()}
-
-
-def readings(model: Path, photos: Sequence[Photo]) -> dict[str, dict[str, Any]]:
-    """Per photograph (its path): the verdicts of :func:`judge` and what they came from (the clear-site
-    probability and the spread of its views, the shares of water, markings and objects, the hazard peak),
-    for choosing thresholds afterwards."""
-    from companion.reasoning.image_cues import SITE_WINDOW_CROP, centre
+def readings(model: Path, images: dict[str, np.ndarray]) -> dict[str, dict[str, Any]]:
+    """Per photograph (its path, in ``images`` with its pixels): whether the companion's net judgement
+    confirms it (:func:`companion.reasoning.net_judge.confirm_reading` on a roof, no LiDAR, the
+    middle two thirds), its rank score (higher first) and what they came from (the
+    clear-site probability and the spread of its views, the shares of water, markings and objects, the
+    hazard peak), for choosing thresholds afterwards."""
+    from companion.reasoning.base import ConfirmRequest
+    from companion.reasoning.image_cues import SITE_WINDOW_CROP
     from companion.reasoning.landnet import LandNet
+    from companion.reasoning.net_judge import confirm_reading
+    from companion.reasoning.onboard_params import ConfirmParams
 
     net = LandNet.load(model, backend="onnxruntime")
+    params = ConfirmParams(site_window=SITE_WINDOW_CROP)  # a crop's window, whatever its shape
     out = {}
-    for p in photos:
-        rgb = read_rgb(p.path)
-        r = net.read(centre(rgb, SITE_WINDOW_CROP))
-        ok = r.clear_p >= net.clear_threshold and r.share("water") <= MAX_WATER
+    for key, rgb in images.items():
+        vetoes, _categorical, _note, r = confirm_reading(
+            net, ConfirmRequest(rgb), params, lidar_vetoes=[], street_level=False, where=""
+        )
         whole = net.read(rgb, net.rank_views)
-        out[str(p.path)] = {
-            "confirmed": ok and r.share("marking") <= MAX_MARKING, "rank_score": -whole.hazard,
+        out[key] = {
+            "confirmed": not vetoes, "rank_score": -whole.hazard,
             "clear_p": round(r.clear_p, 4), "spread": round(r.clear_spread, 4),
             "water": r.share("water"), "marking": r.share("marking"), "object": r.share("object"),
             "objects": r.count("object"), "hazard_peak": round(r.hazard_peak, 4),
@@ -105,17 +107,16 @@ def _fold(job: tuple[str, list[Photo], list[Photo], argparse.Namespace, Sequence
     tuned = {
         k: v.clone() for k, v in fine_tune(net, learn, x, y, args, first_closeup)[0].state_dict().items()
     }
-    meta = json.loads(Path(args.member.partition("#")[0]).with_suffix(".json").read_text())
-    if "members" in meta:
-        meta = meta | meta["members"][int(args.member.partition("#")[2].strip("m/") or 0)]
+    meta = member_sidecar(args.member)
+    images = {str(p.path): read_rgb(p.path) for p in judged}
     out: dict[str, Any] = {"fold": name, "learnt": len(learn), "by_alpha": {}}
     with tempfile.TemporaryDirectory() as tmp:
         for a in alphas:
             net.load_state_dict(tuned)
             interpolate(net, start, a)
             path = Path(tmp) / f"a{a:g}"
-            export(net, path, {k: v for k, v in meta.items() if k != "members"})
-            seen = readings(path.with_suffix(".onnx"), judged)
+            export(net, path, meta)
+            seen = readings(path.with_suffix(".onnx"), images)
             verdicts = {k: (v["confirmed"], v["rank_score"]) for k, v in seen.items()}
             out["by_alpha"][f"{a:g}"] = scores(judged, verdicts) | {"threshold": meta["thresholds"]["clear"]}
             out.setdefault("photos", {})[f"{a:g}"] = seen

@@ -193,6 +193,18 @@ def from_onnx(spec: str) -> Any:
     return net.eval()
 
 
+def member_sidecar(spec: str) -> dict[str, Any]:
+    """The sidecar of the member ``spec`` names (:func:`from_onnx`): its own file's, or for one member of a
+    merged model the merged sidecar with that member's entry over it (no ``members``, no ``file``)."""
+    path, _, prefix = spec.partition("#")
+    meta: dict[str, Any] = json.loads(Path(path).with_suffix(".json").read_text())
+    if "members" in meta:
+        member = meta["members"][int(prefix.strip("m/") or 0)]
+        meta = {k: v for k, v in meta.items() if k not in ("members", "file")} | member
+        meta.pop("file", None)
+    return meta
+
+
 def _views(
     photos: Sequence[Photo], images: dict[Path, np.ndarray], rng: np.random.Generator, n: int
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -227,12 +239,12 @@ def fine_tune(
     )
     t0 = time.monotonic()
     running = 0.0
+    closeups_here = round(args.closeup_share * args.render_batch) if len(x) > first_closeup else 0
     net.eval()  # the folded norms stay fixed maps (module docstring)
     for step in range(args.steps):
         rng = np.random.default_rng([args.seed, STREAM, step])
         p_img, p_clear = _views(used, images, rng, args.photo_batch)
         r_img, cells, valid, clear = [], [], [], []
-        closeups_here = round(args.closeup_share * args.render_batch) if len(x) > first_closeup else 0
         picks = np.concatenate([
             rng.integers(0, first_closeup, args.render_batch - closeups_here),
             rng.integers(first_closeup, len(x), closeups_here),
@@ -354,11 +366,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     start = {k: v.clone() for k, v in net.state_dict().items()}
     net, seconds = fine_tune(net, learn, x, y, args, first_closeup)
     interpolate(net, start, args.alpha)
-    meta = json.loads(meta_path.read_text())
-    if "members" in meta:  # one member of a merged model: its own sidecar entry
-        k = int(args.member.partition("#")[2].strip("m/") or 0)
-        meta = {key: val for key, val in meta.items() if key != "members"} | meta["members"][k]
-        meta.pop("file", None)
+    meta = member_sidecar(args.member)
     meta["name"] = args.out.name
     meta["photos"] = {
         "command": command, "from": args.member, "learnt": len(learn),
