@@ -14,8 +14,9 @@ from landfall_link.mavlink import LinkUrl, LinkUrlError, parse_signing_key
 from simbridge.args import non_negative_seed
 from simbridge.estimate import PRESETS
 from simbridge.geo import GeoOrigin
+from simbridge.px4_sitl import ENV_BINARY as PX4_ENV_BINARY
 from simbridge.scenarios import scenario_names
-from simbridge.sim import AUTOPILOTS, SITL_AUTOPILOT, SimBridge, SimConfig
+from simbridge.sim import AUTOPILOTS, PX4_SITL_AUTOPILOT, SITL_AUTOPILOT, SimBridge, SimConfig
 from simbridge.sitl import ENV_BINARY, SitlError
 from simbridge.wind import WindConfig
 
@@ -61,14 +62,21 @@ def build_parser() -> argparse.ArgumentParser:
         "--autopilot",
         choices=AUTOPILOTS,
         default="px4",
-        help="px4 or ardupilot: the emulation; ardupilot-sitl: real ArduCopter firmware (SITL) as a child "
-        "process, with simbridge as its physics",
+        help="px4 or ardupilot: the emulation; ardupilot-sitl: real ArduCopter firmware (SITL), px4-sitl: "
+        "real PX4 firmware (SITL), each as a child process with simbridge as its physics",
     )
     p.add_argument(
         "--sitl",
         metavar="PATH",
         help=f"ArduCopter SITL binary for --autopilot ardupilot-sitl (default: ${ENV_BINARY}, else "
         "../shared/sitl/ardupilot/arducopter beside the repository)",
+    )
+    p.add_argument(
+        "--px4",
+        metavar="PATH",
+        help=f"PX4 SITL binary (bin/px4 of a px4_sitl_default build, its ROMFS the etc/ beside bin/) for "
+        f"--autopilot px4-sitl (default: ${PX4_ENV_BINARY}, else ../shared/sitl/px4/bin/px4 beside the "
+        "repository)",
     )
     p.add_argument(
         "--scenario",
@@ -159,8 +167,10 @@ def config_from_args(args: argparse.Namespace) -> SimConfig:
             key = parse_signing_key(args.signing_key)
         except ValueError as exc:
             raise ValueError(f"--signing-key: {exc}") from None
-    if args.sitl and args.autopilot != "ardupilot-sitl":
+    if args.sitl and args.autopilot != SITL_AUTOPILOT:
         raise ValueError("--sitl: only with --autopilot ardupilot-sitl")
+    if args.px4 and args.autopilot != PX4_SITL_AUTOPILOT:
+        raise ValueError("--px4: only with --autopilot px4-sitl")
     known = scenario_names()
     if args.scenario not in known and not args.scenario.endswith(".toml"):
         names = ", ".join(known)
@@ -194,18 +204,23 @@ def config_from_args(args: argparse.Namespace) -> SimConfig:
         sensors=sensors,
         launch=args.launch,
         sitl=args.sitl,
+        px4=args.px4,
         ekf_error=args.ekf_error,
         battery_pct=args.battery,
     )
 
 
 def make_bridge(config: SimConfig, logger: logging.Logger | None = None) -> SimBridge:
-    """The bridge for ``config.autopilot``: the emulation, or real ArduCopter SITL (which subclasses it,
-    so it is chosen here, above both)."""
+    """The bridge for ``config.autopilot``: the emulation, or real ArduCopter or PX4 SITL (which subclass
+    it, so it is chosen here, above them)."""
     if config.autopilot == SITL_AUTOPILOT:
         from simbridge.sitl_bridge import SitlBridge
 
         return SitlBridge(config, logger)
+    if config.autopilot == PX4_SITL_AUTOPILOT:
+        from simbridge.px4_bridge import Px4SitlBridge
+
+        return Px4SitlBridge(config, logger)
     return SimBridge(config, logger)
 
 

@@ -30,7 +30,9 @@ from simbridge.wind import WindConfig, WindModel
 
 _MAX_BATCH_STEPS = 6  # physics steps between two looks at the socket (50 ms simulated)
 SITL_AUTOPILOT = "ardupilot-sitl"  # real ArduCopter firmware (simbridge.sitl_bridge)
-AUTOPILOTS = ("px4", "ardupilot", SITL_AUTOPILOT)
+PX4_SITL_AUTOPILOT = "px4-sitl"  # real PX4 firmware (simbridge.px4_bridge)
+FIRMWARE_AUTOPILOTS = (SITL_AUTOPILOT, PX4_SITL_AUTOPILOT)
+AUTOPILOTS = ("px4", "ardupilot", SITL_AUTOPILOT, PX4_SITL_AUTOPILOT)
 
 
 @dataclass(frozen=True, slots=True)
@@ -52,6 +54,7 @@ class SimConfig:
     sensors: tuple[str, int] | None = None  # serve sensor frames on this TCP endpoint
     launch: tuple[float, ...] | None = None  # (north, east[, height above ground]) override
     sitl: str | None = None  # ArduCopter SITL binary (autopilot "ardupilot-sitl"; default: find_arducopter)
+    px4: str | None = None  # PX4 SITL binary (autopilot "px4-sitl"; default: simbridge.px4_sitl.find_px4)
     ekf_error: str = "off"  # the emulation's estimator errors (simbridge.estimate.PRESETS)
     battery_pct: float = 100.0  # the pack's charge at the start (a low-battery alarm's flight)
 
@@ -61,20 +64,21 @@ class SimConfig:
         if self.autopilot not in AUTOPILOTS:
             raise ValueError(f"--autopilot must be one of {', '.join(AUTOPILOTS)}, got {self.autopilot!r}")
         estimate_preset(self.ekf_error)  # raises ValueError naming the flag
-        if self.autopilot == SITL_AUTOPILOT:
+        if self.autopilot in FIRMWARE_AUTOPILOTS:
+            name = self.autopilot
             if self.battery_pct != 100.0:
                 raise ValueError("--battery: real firmware simulates its own battery (leave it at 100)")
             if self.ekf_error != "off":
                 raise ValueError("--ekf-error: real firmware has its own estimator (leave it off)")
             if self.signing_key is not None:
                 raise ValueError(
-                    "--signing-key: not with ardupilot-sitl (real firmware takes its key over MAVLink, "
+                    f"--signing-key: not with {name} (real firmware takes its key over MAVLink, "
                     "SETUP_SIGNING; simbridge does not set it up yet)"
                 )
             if not self.mavlink.startswith("udpout:"):
                 raise ValueError(
-                    f"--mavlink {self.mavlink}: ardupilot-sitl sends to a companion (udpout:HOST:PORT, "
-                    "SITL's udpclient serial port); it cannot listen"
+                    f"--mavlink {self.mavlink}: {name} sends to a companion (udpout:HOST:PORT: "
+                    "the firmware's own MAVLink port sends there); it cannot listen"
                 )
         if not self.speed > 0:
             raise ValueError(f"--speed must be > 0, got {self.speed}")

@@ -127,6 +127,28 @@ class SitlProtocolError(SitlError):
     """A datagram that is not a servo frame, or a frame count that went backwards (SITL restarted)."""
 
 
+def find_binary(
+    explicit: str | os.PathLike[str] | None, flag: str, env: str, shared: Path, what: str, how: str
+) -> Path:
+    """A firmware binary: ``explicit`` (given as ``flag``), else ``$env``, else ``shared`` (the rig
+    beside the repository).
+
+    Raises:
+        SitlNotFound: saying where it looked and ``how`` to get one.
+    """
+    for source, value in ((flag, explicit), (env, os.environ.get(env))):
+        if value:
+            path = Path(value).expanduser()
+            if not path.is_file():
+                raise SitlNotFound(f"{source}: {path} is not a file; {how}")
+            if not os.access(path, os.X_OK):
+                raise SitlNotFound(f"{source}: {path} is not executable")
+            return path
+    if shared.is_file() and os.access(shared, os.X_OK):
+        return shared
+    raise SitlNotFound(f"no {what} binary found: {how}")
+
+
 def find_arducopter(explicit: str | os.PathLike[str] | None = None) -> Path:
     """The ArduCopter SITL binary: ``explicit``, else ``$LANDFALL_ARDUCOPTER``, else the shared rig.
 
@@ -137,17 +159,7 @@ def find_arducopter(explicit: str | os.PathLike[str] | None = None) -> Path:
         f"pass --sitl PATH, set {ENV_BINARY}, or put ArduPilot's SITL build at {SHARED_BINARY} "
         "(how to build it: that folder's README.md)"
     )
-    for source, value in (("--sitl", explicit), (ENV_BINARY, os.environ.get(ENV_BINARY))):
-        if value:
-            path = Path(value).expanduser()
-            if not path.is_file():
-                raise SitlNotFound(f"{source}: {path} is not a file; {how}")
-            if not os.access(path, os.X_OK):
-                raise SitlNotFound(f"{source}: {path} is not executable")
-            return path
-    if SHARED_BINARY.is_file() and os.access(SHARED_BINARY, os.X_OK):
-        return SHARED_BINARY
-    raise SitlNotFound(f"no ArduCopter SITL binary found: {how}")
+    return find_binary(explicit, "--sitl", ENV_BINARY, SHARED_BINARY, "ArduCopter SITL", how)
 
 
 # ---------------------------------------------------------------------------------------------- wire format
@@ -221,7 +233,93 @@ def claim_instance(host: str = "127.0.0.1") -> tuple[int, socket.socket]:
     )
 
 
-class SitlProcess:
+class FirmwareProcess:
+    """A firmware build run as simbridge's child: its output kept (the last lines go into every error),
+    killed with simbridge (PR_SET_PDEATHSIG), stopped with ``stop_signal`` then SIGKILL, its temporary
+    working directory removed. Subclasses build the command in ``start()`` and call :meth:`_spawn`."""
+
+    name = "firmware"
+    stop_signal = signal.SIGINT
+    stop_wait_s = 2.0
+
+    def __init__(self, binary: Path, instance: int, logger: logging.Logger | None) -> None:
+        self.binary = binary
+        self.instance = instance
+        self.log = logger or logging.getLogger("simbridge.sitl")
+        self.workdir: Path | None = None
+        self._proc: subprocess.Popen[bytes] | None = None
+        self._tail: collections.deque[str] = collections.deque(maxlen=_TAIL_LINES)
+        self._reader: threading.Thread | None = None
+
+    def _spawn(self, cmd: list[str], cwd: Path, env: dict[str, str] | None = None) -> None:
+        self.log.info("starting %s instance %d: %s", self.name, self.instance, " ".join(cmd))
+        try:
+            self._proc = subprocess.Popen(
+                cmd, cwd=cwd, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT, start_new_session=True, preexec_fn=_die_with_parent,
+            )  # fmt: skip
+        except OSError as exc:
+            self._cleanup()
+            raise SitlNotFound(f"cannot run {self.binary}: {exc}") from exc
+        self._reader = threading.Thread(target=self._read, name=f"{self.name}-output", daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        proc = self._proc
+        assert proc is not None
+        assert proc.stdout is not None
+        for raw in proc.stdout:
+            line = raw.decode("utf-8", "replace").rstrip()
+            self._tail.append(line)
+            self.log.debug("%s: %s", self.name, line)
+            self._on_line(line)
+
+    def _on_line(self, line: str) -> None:
+        """Each line the firmware prints (its output thread)."""
+
+    def tail(self) -> str:
+        return "\n".join(self._tail)
+
+    def returncode(self) -> int | None:
+        return None if self._proc is None else self._proc.poll()
+
+    @property
+    def pid(self) -> int | None:
+        return None if self._proc is None else self._proc.pid
+
+    def close(self) -> None:
+        """``stop_signal``, ``stop_wait_s``, then SIGKILL to its process group; the directory goes."""
+        proc = self._proc
+        if proc is not None and proc.poll() is None:
+            with contextlib.suppress(ProcessLookupError):
+                proc.send_signal(self.stop_signal)
+            try:
+                proc.wait(timeout=self.stop_wait_s)
+            except subprocess.TimeoutExpired:
+                with contextlib.suppress(ProcessLookupError, PermissionError):
+                    os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait(timeout=5.0)
+        if self._reader is not None:
+            self._reader.join(timeout=2.0)
+        self._cleanup()
+
+    def _cleanup(self) -> None:
+        if self.workdir is not None:
+            shutil.rmtree(self.workdir, ignore_errors=True)
+            self.workdir = None
+
+    def __enter__(self) -> FirmwareProcess:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def start(self) -> None:
+        raise NotImplementedError
+
+
+class SitlProcess(FirmwareProcess):
     """``arducopter --model JSON`` as a child process (module docstring). ``start()``, then ``close()``.
 
     Args:
@@ -234,6 +332,8 @@ class SitlProcess:
         serial1: the same for SERIAL1 (simbridge's own link), or None.
         sysid: MAV_SYSID.
     """
+
+    name = "ArduCopter SITL"  # SIGINT: SITL ignores SIGTERM while it waits for physics
 
     def __init__(
         self,
@@ -248,19 +348,13 @@ class SitlProcess:
         params: dict[str, float] | None = None,
         logger: logging.Logger | None = None,
     ) -> None:
-        self.binary = binary
-        self.instance = instance
+        super().__init__(binary, instance, logger)
         self.home = home
         self.speedup = speedup
         self.serial0 = serial0
         self.serial1 = serial1
         self.sysid = sysid
         self.params = dict(PARAMS if params is None else params)
-        self.log = logger or logging.getLogger("simbridge.sitl")
-        self.workdir: Path | None = None
-        self._proc: subprocess.Popen[bytes] | None = None
-        self._tail: collections.deque[str] = collections.deque(maxlen=_TAIL_LINES)
-        self._reader: threading.Thread | None = None
 
     def command(self, workdir: Path) -> list[str]:
         ap = self.binary.parent
@@ -281,72 +375,56 @@ class SitlProcess:
         self.workdir = Path(tempfile.mkdtemp(prefix=f"landfall-sitl-{self.instance}-"))
         lines = [f"{k} {v:g}" for k, v in self.params.items()]
         (self.workdir / "landfall-sitl.parm").write_text("\n".join(lines) + "\n")
-        cmd = self.command(self.workdir)
-        self.log.info("starting ArduCopter SITL instance %d: %s", self.instance, " ".join(cmd))
-        try:
-            self._proc = subprocess.Popen(
-                cmd, cwd=self.workdir, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                stderr=subprocess.STDOUT, start_new_session=True, preexec_fn=_die_with_parent,
-            )  # fmt: skip
-        except OSError as exc:
-            self._cleanup()
-            raise SitlNotFound(f"cannot run {self.binary}: {exc}") from exc
-        self._reader = threading.Thread(target=self._read, name="sitl-output", daemon=True)
-        self._reader.start()
-
-    def _read(self) -> None:
-        proc = self._proc
-        assert proc is not None
-        assert proc.stdout is not None
-        for raw in proc.stdout:
-            line = raw.decode("utf-8", "replace").rstrip()
-            self._tail.append(line)
-            self.log.debug("SITL: %s", line)
-
-    def tail(self) -> str:
-        return "\n".join(self._tail)
-
-    def returncode(self) -> int | None:
-        return None if self._proc is None else self._proc.poll()
-
-    @property
-    def pid(self) -> int | None:
-        return None if self._proc is None else self._proc.pid
-
-    def close(self) -> None:
-        """SIGINT (SITL ignores SIGTERM while it waits for physics), 2 s, then SIGKILL; the directory goes."""
-        proc = self._proc
-        if proc is not None and proc.poll() is None:
-            with contextlib.suppress(ProcessLookupError):
-                proc.send_signal(signal.SIGINT)
-            try:
-                proc.wait(timeout=2.0)
-            except subprocess.TimeoutExpired:
-                with contextlib.suppress(ProcessLookupError):
-                    proc.kill()
-                proc.wait(timeout=5.0)
-        if self._reader is not None:
-            self._reader.join(timeout=2.0)
-        self._cleanup()
-
-    def _cleanup(self) -> None:
-        if self.workdir is not None:
-            shutil.rmtree(self.workdir, ignore_errors=True)
-            self.workdir = None
-
-    def __enter__(self) -> SitlProcess:
-        self.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+        self._spawn(self.command(self.workdir), self.workdir)
 
 
 # ---------------------------------------------------------------------------------------------- lock step
 StateHook = Callable[[VehicleState], None]
 
 
-class LockStep:
+class LockStepThread:
+    """Serves the firmware's physics exchange from a thread of its own: ``start()``, ``stop()``; ``done``
+    is set when it ends, stopped or failed, and ``error`` then says why. Subclasses give ``_serve``."""
+
+    thread_name = "lockstep"
+
+    def __init__(self, vehicle: Vehicle, process: FirmwareProcess) -> None:
+        self.vehicle = vehicle
+        self.process = process
+        self.error: SitlError | None = None
+        self.done = threading.Event()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._t0_s = vehicle.state.t_s
+
+    def start(self) -> None:
+        self._thread = threading.Thread(target=self._run, name=self.thread_name, daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+
+    def sim_time_s(self) -> float:
+        """Simulated seconds since the lock step began (the firmware's clock, up to a constant)."""
+        return self.vehicle.state.t_s - self._t0_s
+
+    def _run(self) -> None:
+        try:
+            self._serve()
+        except SitlError as exc:
+            self.error = exc
+        except Exception as exc:  # a bug here must still end the run with a clear error
+            self.error = SitlError(f"{self.process.name} lock step failed: {exc!r}", self.process.tail())
+        finally:
+            self.done.set()
+
+    def _serve(self) -> None:
+        raise NotImplementedError
+
+
+class LockStep(LockStepThread):
     """Answers SITL's servo frames from a thread of its own (module docstring).
 
     Args:
@@ -357,6 +435,8 @@ class LockStep:
         on_state: called in the lock-step thread after every physics step (keep it cheap).
     """
 
+    thread_name = "sitl-lockstep"
+
     def __init__(
         self,
         sock: socket.socket,
@@ -365,44 +445,15 @@ class LockStep:
         process: SitlProcess,
         on_state: StateHook | None = None,
     ) -> None:
+        super().__init__(vehicle, process)
         self.sock = sock
-        self.vehicle = vehicle
         self.home_ned_m = home_ned_m
-        self.process = process
         self.on_state = on_state
-        self.error: SitlError | None = None
         self.frames = 0
         self.resent = 0
         self.skipped = 0
         self.first_frame_wall_s: float | None = None
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
         self._range_m = RANGE_MAX_M
-        self._t0_s = vehicle.state.t_s
-        self.done = threading.Event()  # set when the thread ends, stopped or failed
-
-    def start(self) -> None:
-        self._thread = threading.Thread(target=self._run, name="sitl-lockstep", daemon=True)
-        self._thread.start()
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=5.0)
-
-    def sim_time_s(self) -> float:
-        """Simulated seconds since SITL's first frame (the reply timestamps' clock)."""
-        return self.vehicle.state.t_s - self._t0_s
-
-    def _run(self) -> None:
-        try:
-            self._serve()
-        except SitlError as exc:
-            self.error = exc
-        except Exception as exc:  # a bug here must still end the run with a clear error
-            self.error = SitlError(f"lock step failed: {exc!r}", self.process.tail())
-        finally:
-            self.done.set()
 
     def _serve(self) -> None:
         sock = self.sock

@@ -65,12 +65,22 @@ class TouchdownWatch:
         return False
 
 
-class SitlBridge(SimBridge):
-    """:class:`SimBridge` with real ArduCopter SITL in place of the emulation (module docstring)."""
+class FirmwareBridge(SimBridge):
+    """:class:`SimBridge` with real firmware in place of the emulation: what ArduCopter SITL
+    (:class:`SitlBridge`) and PX4 SITL (:class:`simbridge.px4_bridge.Px4SitlBridge`) share: the vehicle
+    resting at the launch point where the firmware's home is, the episode log fed from the lock step,
+    touchdowns on the world's truth, ``ready`` once the firmware holds the launch pose (air start) or
+    could arm (ground start), and a clear error when the firmware dies or stops answering.
+
+    Subclasses give ``firmware`` (its name in logs), :meth:`_find_binary`, :meth:`_start_firmware`
+    (start it, its lock step and simbridge's pilot link; returns the pilot and the lock step),
+    :meth:`_estimator_ready` and :meth:`_stop_fields`."""
+
+    firmware = "firmware"
 
     def _init_autopilot(self) -> None:
         cfg = self.config
-        self.binary = find_arducopter(cfg.sitl)
+        self._find_binary()
         self.target = LinkUrl.parse(cfg.mavlink)
         sc = self.scenario
         n, e, d = self.home_ned_m
@@ -81,16 +91,28 @@ class SitlBridge(SimBridge):
         self.touchdown.armed_watch = cfg.start == "ground"
         self.boot_offset_ms: float | None = None
         self.pilot: SitlPilot | None = None
-        self.lockstep: LockStep | None = None
+        self.lockstep: Any = None
         self.ready = asyncio.Event()
         self.failure: SitlError | None = None
+
+    def _find_binary(self) -> None:
+        raise NotImplementedError
+
+    async def _start_firmware(self, stack: contextlib.AsyncExitStack) -> tuple[SitlPilot, Any]:
+        raise NotImplementedError
+
+    def _estimator_ready(self, pilot: SitlPilot) -> bool:
+        raise NotImplementedError
+
+    def _stop_fields(self) -> dict[str, Any]:
+        raise NotImplementedError
 
     # ------------------------------------------------------------------ clocks
     def sim_time_s(self) -> float:
         return self.lockstep.sim_time_s() if self.lockstep is not None else 0.0
 
     def time_boot_ms(self, t_s: float) -> int:
-        """SITL's boot clock: the lock step's timestamps plus the offset seen in its SYSTEM_TIME."""
+        """The firmware's boot clock: the lock step's clock plus the offset seen in its messages."""
         offset = self.boot_offset_ms if self.boot_offset_ms is not None else 0.0
         return round((t_s - self.vehicle_t0_s) * 1000 + offset)
 
@@ -129,43 +151,19 @@ class SitlBridge(SimBridge):
         if cfg.sensors is not None:
             self._warm_up_sensors()
         self.vehicle_t0_s = self.vehicle.state.t_s
-        instance, sock = claim_instance()
         wall0 = time.monotonic()
-        lat, lon, alt = self.config.origin.to_geodetic(*self.rest_ned_m)
-        home = (lat, lon, alt, heading_deg(self.scenario.launch_yaw_rad))
         try:
             async with contextlib.AsyncExitStack() as stack:
-                pilot = SitlPilot(cfg.system_id, self._on_event, self.sim_time_s, logger=self.log)
-                await stack.enter_async_context(pilot)
-                self.pilot = pilot
-                pilot.on_boot_time = self._on_boot_time
-                proc = SitlProcess(
-                    self.binary, instance, home, speedup=cfg.speed,
-                    serial0=(self.target.host, self.target.port), serial1=("127.0.0.1", pilot.port),
-                    sysid=cfg.system_id, logger=self.log,
-                )  # fmt: skip
-                self.process = proc
-                lock = LockStep(sock, self.vehicle, self.rest_ned_m, proc, on_state=self._on_state)
-                self.lockstep = lock
-                proc.start()
-                stack.callback(proc.close)
-                lock.start()
-                stack.callback(lock.stop)
+                pilot, lock = await self._start_firmware(stack)
                 if cfg.sensors is not None:
                     await stack.enter_async_context(self._sensor_server(*cfg.sensors))
-                self.log.info(
-                    "simbridge ardupilot-sitl (instance %d, pid %s) to %s: scenario %s, seed %d, "
-                    "speed %.1fx, start %s", instance, proc.pid, cfg.mavlink, cfg.scenario, cfg.seed,
-                    cfg.speed, cfg.start,
-                )  # fmt: skip
                 await self._supervise(pilot, lock)
         finally:
-            sock.close()
             self.wall_elapsed_s = time.monotonic() - wall0
             self._write_stop()
 
-    async def _supervise(self, pilot: SitlPilot, lock: LockStep) -> None:
-        """Bring the firmware to ``ready``, then run until stopped, the duration, or a SITL failure."""
+    async def _supervise(self, pilot: SitlPilot, lock: Any) -> None:
+        """Bring the firmware to ``ready``, then run until stopped, the duration, or a firmware failure."""
         start = asyncio.ensure_future(self._get_ready(pilot))
         stop = asyncio.ensure_future(self._stop.wait())
         try:
@@ -186,16 +184,16 @@ class SitlBridge(SimBridge):
             await pilot.fly_to_launch(self.scenario.launch_height_m, self._at_launch)
             self.touchdown.armed_watch = True
         else:
-            await pilot.wait_estimator(lambda: _ekf_ready(pilot.view.ekf_flags, pilot.view.gps_fix))
+            await pilot.wait_estimator(lambda: self._estimator_ready(pilot))
         fields = self.ready_fields()
         fields["sim_s_to_ready"] = round(self.sim_time_s(), 2)
-        self.log.info("SITL boot clock = lock-step clock + %.1f ms", self.boot_offset_ms or 0.0)
+        self.log.info("%s boot clock = lock-step clock + %.1f ms", self.firmware, self.boot_offset_ms or 0.0)
         self._on_event("ready", fields)
         self.ready.set()
 
     def _on_boot_time(self, time_boot_ms: int) -> None:
-        """SITL's clock is the reply timestamps plus a constant: a message stamped ``time_boot_ms`` was
-        sent at or before the lock step's present, so the largest difference seen is the offset."""
+        """The firmware's clock is the lock step's plus a constant: a message stamped ``time_boot_ms``
+        was sent at or before the lock step's present, so the largest difference seen is the offset."""
         sample = time_boot_ms - 1000.0 * self.sim_time_s()
         if self.boot_offset_ms is None or sample > self.boot_offset_ms:
             self.boot_offset_ms = sample
@@ -204,26 +202,68 @@ class SitlBridge(SimBridge):
         s = self.vehicle.state
         lock = self.lockstep
         st = self.pilot.link.stats if self.pilot is not None else None
-        self.episode.event(
-            s.t_s,
-            "stop",
-            {
-                "wall_s": round(self.wall_elapsed_s, 3),
-                "frames": lock.frames if lock else 0,
-                "resent": lock.resent if lock else 0,
-                "skipped": lock.skipped if lock else 0,
-                "pilot_received": st.received if st else 0,
-                "error": str(lock.error).splitlines()[0] if lock and lock.error else None,
-            },
-        )
+        fields: dict[str, Any] = {"wall_s": round(self.wall_elapsed_s, 3)}
+        fields.update(self._stop_fields())
+        fields["pilot_received"] = st.received if st else 0
+        fields["error"] = str(lock.error).splitlines()[0] if lock and lock.error else None
+        self.episode.event(s.t_s, "stop", fields)
         self.episode.close()
         rtf = s.t_s / max(self.wall_elapsed_s, 1e-9)
-        self.log.info("simbridge (ardupilot-sitl) stopped at t=%.1f s after %.1f s wall (%.1fx)", s.t_s,
-                      self.wall_elapsed_s, rtf)  # fmt: skip
+        self.log.info("simbridge (%s) stopped at t=%.1f s after %.1f s wall (%.1fx)", self.config.autopilot,
+                      s.t_s, self.wall_elapsed_s, rtf)  # fmt: skip
+
+
+class SitlBridge(FirmwareBridge):
+    """Real ArduCopter SITL in place of the emulation (module docstring)."""
+
+    firmware = "ArduCopter SITL"
+
+    def _find_binary(self) -> None:
+        self.binary = find_arducopter(self.config.sitl)
+
+    async def _start_firmware(self, stack: contextlib.AsyncExitStack) -> tuple[SitlPilot, LockStep]:
+        cfg = self.config
+        instance, sock = claim_instance()
+        stack.callback(sock.close)
+        lat, lon, alt = cfg.origin.to_geodetic(*self.rest_ned_m)
+        home = (lat, lon, alt, heading_deg(self.scenario.launch_yaw_rad))
+        pilot = SitlPilot(cfg.system_id, self._on_event, self.sim_time_s, logger=self.log)
+        await stack.enter_async_context(pilot)
+        self.pilot = pilot
+        pilot.on_boot_time = self._on_boot_time
+        proc = SitlProcess(
+            self.binary, instance, home, speedup=cfg.speed,
+            serial0=(self.target.host, self.target.port), serial1=("127.0.0.1", pilot.port),
+            sysid=cfg.system_id, logger=self.log,
+        )  # fmt: skip
+        self.process = proc
+        lock = LockStep(sock, self.vehicle, self.rest_ned_m, proc, on_state=self._on_state)
+        self.lockstep = lock
+        proc.start()
+        stack.callback(proc.close)
+        lock.start()
+        stack.callback(lock.stop)
+        self.log.info(
+            "simbridge ardupilot-sitl (instance %d, pid %s) to %s: scenario %s, seed %d, speed %.1fx, "
+            "start %s",
+            instance, proc.pid, cfg.mavlink, cfg.scenario, cfg.seed, cfg.speed, cfg.start,
+        )  # fmt: skip
+        return pilot, lock
+
+    def _estimator_ready(self, pilot: SitlPilot) -> bool:
+        return _ekf_ready(pilot.view.ekf_flags, pilot.view.gps_fix)
+
+    def _stop_fields(self) -> dict[str, Any]:
+        lock = self.lockstep
+        return {
+            "frames": lock.frames if lock else 0,
+            "resent": lock.resent if lock else 0,
+            "skipped": lock.skipped if lock else 0,
+        }
 
 
 def _ekf_ready(flags: int, gps_fix: int) -> bool:
     return gps_fix >= 3 and flags & _EKF_GOOD == _EKF_GOOD and not flags & _EKF_CONST_POS
 
 
-__all__ = ["SitlBridge", "SitlNotReady", "TouchdownWatch"]
+__all__ = ["FirmwareBridge", "SitlBridge", "SitlNotReady", "TouchdownWatch"]

@@ -83,12 +83,16 @@ Clock = Callable[[], float]
 
 class SitlPilot:
     """Owns the link to SITL's SERIAL1 (``udpin`` on loopback, any free port: ``port`` after open).
+    Subclassed for PX4 (:class:`simbridge.px4_pilot.Px4Pilot`): ``firmware``, :meth:`mode_name`,
+    :meth:`_ask_streams` and :meth:`fly_to_launch` are what differ.
 
     Args:
         sysid: the vehicle's MAV_SYSID.
         on_event: (name, fields) for the episode log.
         sim_time: simulated seconds now (the lock step's clock).
     """
+
+    firmware = "ArduCopter SITL"
 
     def __init__(
         self, sysid: int, on_event: Events, sim_time: Clock, logger: logging.Logger | None = None
@@ -135,7 +139,7 @@ class SitlPilot:
                 self.on_boot_time(v.time_boot_ms)
         if kind == "HEARTBEAT" and msg.get_srcComponent() == 1:
             armed = bool(msg.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
-            mode = mode_name(int(msg.custom_mode))
+            mode = self.mode_name(int(msg.custom_mode))
             if mode != v.mode:
                 self.on_event("mode", {"mode": mode})
             if armed != v.armed:
@@ -157,10 +161,13 @@ class SitlPilot:
         elif kind == "STATUSTEXT":
             text = msg.text.rstrip("\x00") if isinstance(msg.text, str) else msg.text.decode(errors="replace")
             self.texts.append(text)
-            self.log.info("SITL says: %s", text)
+            self.log.info("%s says: %s", self.firmware, text)
         elif kind == "COMMAND_ACK":
             self._acks[int(msg.command)] = int(msg.result)
         self._changed.set()
+
+    def mode_name(self, custom_mode: int) -> str:
+        return mode_name(custom_mode)
 
     def _ask_streams(self) -> None:
         self._streams_asked = True
@@ -177,7 +184,7 @@ class SitlPilot:
             if self.sim_time() > deadline_s:
                 said = "; ".join(self.texts) or "nothing"
                 raise SitlNotReady(
-                    f"ArduCopter SITL did not {what} by {deadline_s:.0f} s simulated (it said: {said})"
+                    f"{self.firmware} did not {what} by {deadline_s:.0f} s simulated (it said: {said})"
                 )
             self._changed.clear()
             with contextlib.suppress(TimeoutError):
@@ -188,14 +195,16 @@ class SitlPilot:
         await self._wait(ready, self.sim_time() + READY_TIMEOUT_S, "get a position estimate")
 
     # ------------------------------------------------------------------ the air start
-    async def fly_to_launch(self, height_m: float, at_launch: Callable[[], bool]) -> None:
-        """GUIDED, arm, take off to ``height_m`` over home and hold (module docstring) until
-        ``at_launch()`` (the simulator's truth: within ``READY_POS_M`` and ``READY_SPEED_M_S`` of the
-        launch pose) has held for ``READY_HOLD_S``.
+    hold_mode = "GUIDED"  # the mode the firmware holds the launch pose in, the companion takes over from
 
-        One loop, not a sequence of steps: the firmware may undo a step (its RC flight-mode channel
-        sets the mode once RC input appears, about 2 s after boot), so each pass asks for whatever
-        is missing first, once a simulated second at most."""
+    async def fly_to_launch(self, height_m: float, at_launch: Callable[[], bool]) -> None:
+        """Arm, take off to ``height_m`` over home and hold (module docstring) until ``at_launch()``
+        (the simulator's truth: within ``READY_POS_M`` and ``READY_SPEED_M_S`` of the launch pose)
+        has held for ``READY_HOLD_S`` in ``hold_mode``.
+
+        One loop, not a sequence of steps: the firmware may undo a step (ArduCopter's RC flight-mode
+        channel sets the mode once RC input appears, about 2 s after boot), so each pass asks for
+        whatever is missing first (:meth:`_ask_next`), once a simulated second at most."""
         deadline = self.sim_time() + READY_TIMEOUT_S
         v = self.view
         next_try = -math.inf
@@ -204,22 +213,31 @@ class SitlPilot:
         def step() -> bool:
             nonlocal next_try, held_since
             now = self.sim_time()
-            if not v.heartbeat:
+            if not v.heartbeat or not self.can_start():
                 return False
-            if v.armed and v.mode == "GUIDED" and at_launch():
+            if v.armed and v.mode == self.hold_mode and at_launch():
                 held_since = now if held_since is None else held_since
                 return now - held_since >= READY_HOLD_S
             held_since = None
             if now < next_try:
                 return False
             next_try = now + RETRY_S
-            if v.mode != "GUIDED":
-                self.command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, COPTER_GUIDED)
-            elif not v.armed:
-                self.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
-            elif v.landed_state in (M.MAV_LANDED_STATE_ON_GROUND, M.MAV_LANDED_STATE_UNDEFINED):
-                self.command(M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, 0, 0, height_m)
+            self._ask_next(height_m)
             return False
 
         await self._wait(step, deadline, f"take off and hold at {height_m:.0f} m over the launch point")
-        self.log.info("SITL holds at the launch pose at %.1f s simulated", self.sim_time())
+        self.log.info("%s holds at the launch pose at %.1f s simulated", self.firmware, self.sim_time())
+
+    def can_start(self) -> bool:
+        """Whether the firmware could arm now (ArduCopter: its refusals are retried instead)."""
+        return True
+
+    def _ask_next(self, height_m: float) -> None:
+        """ArduCopter: GUIDED, then arm, then NAV_TAKEOFF to ``height_m``."""
+        v = self.view
+        if v.mode != "GUIDED":
+            self.command(M.MAV_CMD_DO_SET_MODE, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, COPTER_GUIDED)
+        elif not v.armed:
+            self.command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+        elif v.landed_state in (M.MAV_LANDED_STATE_ON_GROUND, M.MAV_LANDED_STATE_UNDEFINED):
+            self.command(M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, 0, 0, height_m)

@@ -29,6 +29,7 @@ MAV_MODE_FLAG_AUTO_ENABLED = 4
 MAV_MODE_FLAG_GUIDED_ENABLED = 8
 MAV_MODE_FLAG_STABILIZE_ENABLED = 16
 MAV_MODE_FLAG_SAFETY_ARMED = 128
+_PREARM_CHECK = 0x10000000  # MAV_SYS_STATUS_PREARM_CHECK
 _SENSORS = (
     1
     | 2
@@ -191,11 +192,14 @@ class Telemetry:
         )
 
     def sys_status(self) -> Any:
+        """Sensor health, and the pre-arm check bit as PX4 and ArduPilot set it (what MAVSDK's
+        ``Health.is_armable`` reads): healthy while the mode allows arming."""
         b = self.ap.vehicle.battery
+        prearm = _PREARM_CHECK if self.ap.mode.armable else 0
         return self._mav.sys_status_encode(
-            _SENSORS,
-            _SENSORS,
-            _SENSORS,
+            _SENSORS | _PREARM_CHECK,
+            _SENSORS | _PREARM_CHECK,
+            _SENSORS | prearm,
             250,
             int(b.voltage_v * 1000),
             int(b.current_a * 100),

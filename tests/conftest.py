@@ -52,6 +52,21 @@ def arducopter() -> Path:
         pytest.skip(f"real ArduCopter SITL not available: {exc}")
 
 
+@pytest.fixture
+def px4() -> Path:
+    """PX4's SITL build (px4_sitl_default), or a skip saying how to get it (a failure where CI
+    requires it)."""
+    from simbridge.px4_sitl import find_px4
+    from simbridge.sitl import SitlNotFound
+
+    try:
+        return find_px4()
+    except SitlNotFound as exc:
+        if os.environ.get("LANDFALL_REQUIRE_SITL") == "1":
+            pytest.fail(f"LANDFALL_REQUIRE_SITL=1 but {exc}")
+        pytest.skip(f"real PX4 SITL not available: {exc}")
+
+
 def free_udp_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))

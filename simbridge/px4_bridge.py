@@ -1,0 +1,78 @@
+"""``simbridge --autopilot px4-sitl``: the same world, sensors, episode log and grading, flown by real PX4
+firmware (SITL) instead of the emulation (issue 33).
+
+simbridge starts PX4 as its child (:class:`simbridge.px4_sitl.Px4Process`: airframe 10016 ``none_iris``,
+instance ``-i N``, a working directory of its own) and is the simulator it connects to
+(:class:`simbridge.px4_sitl.HilLockStep`, TCP 4560 + N, lock step). The vehicle starts on the ground at
+the launch point, where PX4 boots and sets its home from the first GPS fix, so its local frame's origin
+is the launch point (a companion gets its local frame from the autopilot, as on a real vehicle).
+PX4's own MAVLink instances: the companion's (``--mavlink udpout:HOST:PORT``), the API/offboard link
+(MAVSDK on 14540 + N) and the ground-station link, which goes to simbridge's watcher
+(:mod:`simbridge.px4_pilot`): modes and arming for the episode log and, with ``--start air``, the flight to
+the launch pose before the episode's ``ready`` event. Touchdowns are detected on the world's truth, as
+with ArduCopter SITL, and graded the same.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from typing import Any
+
+import numpy as np
+
+from simbridge.px4_pilot import Px4Pilot
+from simbridge.px4_sitl import HilLockStep, Px4Process, claim_px4_instance, find_px4
+from simbridge.sitl_bridge import FirmwareBridge
+from simbridge.sitl_pilot import SitlPilot
+
+__all__ = ["Px4SitlBridge"]
+
+
+class Px4SitlBridge(FirmwareBridge):
+    """Real PX4 SITL in place of the emulation (module docstring)."""
+
+    firmware = "PX4 SITL"
+
+    def _find_binary(self) -> None:
+        self.binary = find_px4(self.config.px4)
+
+    async def _start_firmware(self, stack: contextlib.AsyncExitStack) -> tuple[SitlPilot, HilLockStep]:
+        cfg = self.config
+        instance, server = claim_px4_instance()
+        stack.callback(server.close)
+        pilot = Px4Pilot(cfg.system_id, self._on_event, self.sim_time_s, logger=self.log)
+        await stack.enter_async_context(pilot)
+        self.pilot = pilot
+        pilot.on_boot_time = self._on_boot_time
+        proc = Px4Process(
+            self.binary, instance, companion=(self.target.host, self.target.port), pilot_port=pilot.port,
+            logger=self.log,
+        )  # fmt: skip
+        # PX4 sets MAV_SYS_ID to the instance + 1 before these: --sysid wins
+        proc.params.update(MAV_SYS_ID=cfg.system_id, MIS_TAKEOFF_ALT=round(self.scenario.launch_height_m, 2))
+        self.process = proc
+        pilot.ready = proc.ready_for_takeoff.is_set
+        lock = HilLockStep(
+            server, self.vehicle, cfg.origin, proc, np.random.default_rng(cfg.seed + 7), speed=cfg.speed,
+            on_state=self._on_state,
+        )  # fmt: skip
+        self.lockstep = lock
+        proc.start()
+        stack.callback(proc.close)
+        lock.start()
+        stack.callback(lock.stop)
+        self.log.info(
+            "simbridge px4-sitl (instance %d, pid %s) to %s: scenario %s, seed %d, speed %.1fx, start %s",
+            instance, proc.pid, cfg.mavlink, cfg.scenario, cfg.seed, cfg.speed, cfg.start,
+        )  # fmt: skip
+        return pilot, lock
+
+    def _estimator_ready(self, pilot: SitlPilot) -> bool:
+        return pilot.can_start() and pilot.view.heartbeat
+
+    def _stop_fields(self) -> dict[str, Any]:
+        lock = self.lockstep
+        return {
+            "frames": lock.steps if lock else 0,
+            "actuator_msgs": lock.actuator_msgs if lock else 0,
+        }
