@@ -45,7 +45,8 @@ __all__ = ["SCHEMA", "load_results", "main", "save_results"]
 SCHEMA = "landfall-bench/1"
 CONTEXTS = ("crop", "pad20", "pad30", "pad40", "pad50", "pad60", "full")
 WEATHERS = ("clear", "fog", "rain")
-AUTOPILOTS = ("px4", "ardupilot", "ardupilot-sitl")
+AUTOPILOTS = ("px4", "ardupilot", "ardupilot-sitl", "px4-sitl")
+FIRMWARE = ("ardupilot-sitl", "px4-sitl")  # real firmware, simbridge its physics
 RESULTS = "results.json"
 IMAGE_CONTEXTS = ("crop", "full")  # landfall_eval.images.CONTEXTS, without importing it for every command
 
@@ -143,12 +144,18 @@ def build_parser() -> argparse.ArgumentParser:
     )
     flying.add_argument(
         "--autopilot", choices=AUTOPILOTS, default="px4",
-        help="px4 or ardupilot: simbridge's emulation; ardupilot-sitl: real ArduCopter firmware (SITL)",
+        help="px4 or ardupilot: simbridge's emulation; ardupilot-sitl: real ArduCopter firmware (SITL); "
+        "px4-sitl: real PX4 firmware (SITL)",
     )  # fmt: skip
     flying.add_argument(
         "--sitl", type=Path, metavar="PATH",
         help="ArduCopter SITL binary for --autopilot ardupilot-sitl "
         "(default: $LANDFALL_ARDUCOPTER, else ../shared/sitl/ardupilot/arducopter)",
+    )  # fmt: skip
+    flying.add_argument(
+        "--px4", type=Path, metavar="PATH",
+        help="PX4 SITL binary (bin/px4 of a px4_sitl_default build) for --autopilot px4-sitl "
+        "(default: $LANDFALL_PX4, else ../shared/sitl/px4/bin/px4)",
     )  # fmt: skip
     _ekf_error_option(flying, "episodes (the emulation only)")
     flying.add_argument(
@@ -238,7 +245,9 @@ def episode_specs(args: argparse.Namespace) -> list[EpisodeSpec]:
     """The episodes a curated or city command asks for, in order."""
     if args.sitl is not None and args.autopilot != "ardupilot-sitl":
         raise ValueError("--sitl goes with --autopilot ardupilot-sitl")
-    if args.ekf_error != "off" and args.autopilot == "ardupilot-sitl":
+    if getattr(args, "px4", None) is not None and args.autopilot != "px4-sitl":
+        raise ValueError("--px4 goes with --autopilot px4-sitl")
+    if args.ekf_error != "off" and args.autopilot in FIRMWARE:
         raise ValueError("--ekf-error: real firmware has its own estimator (leave it off)")
     base = dict(
         reasoner=args.reasoner, context=args.context, autopilot=args.autopilot, ekf_error=args.ekf_error,
@@ -291,15 +300,17 @@ def _line(entry: dict[str, Any]) -> str:
 
 
 def resolve_sitl(args: argparse.Namespace) -> Path | None:
-    """The ArduCopter binary an ``ardupilot-sitl`` run flies (None for the emulation), found once so a
-    missing one is a bad argument, not an error in every episode. Raises ValueError saying where it
-    looked."""
-    if getattr(args, "autopilot", None) != "ardupilot-sitl":
+    """The firmware binary an ``ardupilot-sitl`` or ``px4-sitl`` run flies (None for the emulation),
+    found once so a missing one is a bad argument, not an error in every episode. Raises ValueError
+    saying where it looked."""
+    autopilot = getattr(args, "autopilot", None)
+    if autopilot not in FIRMWARE:
         return None
+    from simbridge.px4_sitl import find_px4
     from simbridge.sitl import SitlNotFound, find_arducopter
 
     try:
-        return find_arducopter(args.sitl)
+        return find_arducopter(args.sitl) if autopilot == "ardupilot-sitl" else find_px4(args.px4)
     except SitlNotFound as exc:
         raise ValueError(str(exc)) from None
 

@@ -10,7 +10,7 @@ directory: ``episode.jsonl`` (simbridge), ``companion.log``, ``record/``.
 
 The alarm goes out only once simbridge's episode log says ``ready`` (the vehicle holds at its launch
 pose): at once with the emulated autopilots, after 80-90 simulated seconds of initialisation and
-take-off with real ArduCopter (``--autopilot ardupilot-sitl``).
+take-off with real ArduCopter (``--autopilot ardupilot-sitl``), about 40 with real PX4 (``px4-sitl``).
 
 Times are simulated seconds from simbridge's episode log: ``time_to_touchdown_s`` runs from the moment
 the companion took control (the vehicle's switch to OFFBOARD or GUIDED after ``ready``, milliseconds
@@ -83,7 +83,7 @@ class EpisodeSpec:
     reasoner: str = "onboard"
     context: str = "crop"
     weather: str = "clear"
-    autopilot: str = "px4"  # px4 | ardupilot (the emulation) | ardupilot-sitl (real ArduCopter)
+    autopilot: str = "px4"  # px4 | ardupilot (the emulation) | ardupilot-sitl | px4-sitl (real firmware)
     launch: tuple[float, float, float] | None = None
     launch_index: int | None = None
     run: int | None = None
@@ -273,7 +273,7 @@ def simbridge_command(
 ) -> list[str]:
     """The ``simbridge`` command line that flies ``spec``: MAVLink to ``udp_port`` on loopback, the
     sensor stream on ``sensors_port``, the episode log at ``episode_log``, ``speed`` x real time;
-    ``sitl`` the ArduCopter binary for ``ardupilot-sitl`` (None: simbridge's own default)."""
+    ``sitl`` the firmware binary for ``ardupilot-sitl`` or ``px4-sitl`` (None: simbridge's own default)."""
     cmd = [
         sys.executable, "-m", "simbridge", "--scenario", spec.scenario, "--seed", str(spec.seed),
         "--autopilot", spec.autopilot, "--weather", spec.weather, "--speed", f"{speed:g}",
@@ -282,6 +282,8 @@ def simbridge_command(
     ]  # fmt: skip
     if spec.autopilot == "ardupilot-sitl" and sitl is not None:
         cmd += ["--sitl", str(sitl)]
+    if spec.autopilot == "px4-sitl" and sitl is not None:
+        cmd += ["--px4", str(sitl)]
     if spec.city_seed is not None:
         cmd += ["--city-seed", str(spec.city_seed)]
     if spec.ekf_error != "off":
@@ -363,7 +365,8 @@ def run_episode(
     process that dies, an alarm that is refused or a landing that never comes is an ``outcome`` of
     ``error`` or ``timeout`` with the ``error`` text, and ``last_state`` says where the companion and
     the vehicle stood at the end. ``city_seed`` and ``world_digest`` come from simbridge's episode log:
-    the world it flew. ``sitl``: the ArduCopter binary when ``spec.autopilot`` is ``ardupilot-sitl``.
+    the world it flew. ``sitl``: the firmware binary when ``spec.autopilot`` is ``ardupilot-sitl`` or
+    ``px4-sitl``.
     """
     times = times or EpisodeTimes()
     workdir.mkdir(parents=True, exist_ok=True)

@@ -89,6 +89,7 @@ GPS_EVERY = 25  # 10 Hz
 TRUTH_EVERY = 5  # ground truth, barometer, magnetometer and rangefinder at 50 Hz
 CONNECT_S = 60.0  # wall seconds from start to PX4's TCP connection
 STALL_S = 15.0  # wall seconds without an actuator message once they have started
+MAX_LAG_S = 0.05  # wall seconds the lock step may fall behind --speed before it drops the lag
 BOOT_PACE_S = 1.0 / SENSOR_HZ  # wall pacing of sensor steps before PX4's controllers answer
 _TAIL_LINES = 60
 
@@ -406,6 +407,10 @@ class HilLockStep(LockStepThread):
             ahead = (t_s / self.speed) - (time.monotonic() - wall0)
             if ahead > 0.002:
                 time.sleep(ahead)
+            elif ahead < -MAX_LAG_S:
+                # behind the pace (a busy machine): carry on from here, never race to catch up, which
+                # would squeeze simulated seconds into a blink of wall time for the companion
+                wall0 -= -ahead - MAX_LAG_S
             s = vehicle.step_esc(self._controls)
             if self.on_state is not None:
                 self.on_state(s)

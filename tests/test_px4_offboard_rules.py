@@ -16,6 +16,7 @@ pytestmark = pytest.mark.slow
 MAV = mavutil.mavlink
 TEMPORARILY_REJECTED = 1
 PX4_LOITER = (4 << 16) | (3 << 24)
+PX4_POSCTL = 3 << 16
 PX4_LAND = (4 << 16) | (6 << 24)
 PX4_OFFBOARD = 6 << 16
 
@@ -47,7 +48,7 @@ def _enter_offboard(c: MavClient, n: float, e: float, d: float) -> None:
     assert c.set_mode_px4("OFFBOARD") == MAV_RESULT_ACCEPTED
 
 
-def test_offboard_loss_failsafe_holds_by_default(
+def test_offboard_loss_failsafe_holds_by_default_and_setpoints_bring_offboard_back(
     start_sim: Callable[..., SimProcess], client_for: Callable[..., MavClient]
 ) -> None:
     sim = start_sim("--start", "air", "--speed", "4")
@@ -59,14 +60,21 @@ def test_offboard_loss_failsafe_holds_by_default(
     text = c.statustext("Failsafe", timeout_s=10)
     assert "offboard" in text.text.lower()
     hb = c.heartbeat()
-    assert hb.custom_mode == PX4_LOITER
+    assert hb.custom_mode == PX4_POSCTL  # COM_OBL_RC_ACT 0 (position), as real PX4 1.15 does with no RC
     assert hb.system_status == MAV_STATE_CRITICAL
     for _ in range(20):  # about 4 s simulated of position samples: still holding
         p = c.position()
         assert math.dist((p.x, p.y, p.z), (5.0, 0.0, -100.0)) < 0.6
     failsafes = sim.events("failsafe")
     assert failsafes
-    assert failsafes[0]["action"] == "AUTO.LOITER"
+    assert failsafes[0]["action"] == "POSCTL"
+    # setpoints again, nobody having changed the mode meanwhile: PX4 goes back to OFFBOARD by itself
+    c.stream_position(5.0, 0.0, -100.0, wall_s=1.0)
+    cleared = sim.events("failsafe_cleared")
+    assert cleared
+    assert cleared[0]["mode"] == "OFFBOARD"
+    modes = [e["mode"] for e in sim.events("mode")]
+    assert modes[modes.index("POSCTL") + 1] == "OFFBOARD", modes
 
 
 MAV_STATE_CRITICAL = 5

@@ -318,3 +318,51 @@ def test_the_companion_lands_real_px4_on_the_clear_roof(px4: Path, start_rig: Ca
     assert "OFFBOARD" in [m for _, m in modes], modes
     # the touchdown is the firmware's AUTO.LAND (PX4 changes mode again as it disarms)
     assert [m for t, m in modes if t <= td["t_s"]][-1] == "AUTO.LAND", modes
+
+
+@pytest.mark.slow
+@pytest.mark.sitl
+def test_a_lost_companion_link_hands_real_px4_to_its_own_failsafe_then_the_companion_lands(
+    px4: Path, start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """The MAVLink link between real PX4 and the companion goes dead for 5 s during the first descent
+    step. PX4's own offboard-loss failsafe (COM_OF_LOSS_T 1 s, COM_OBL_RC_ACT 0: position, which with
+    no RC holds) takes the vehicle out of OFFBOARD into POSCTL; the companion sees the silence and
+    keeps its target; once the link is back PX4 takes OFFBOARD again as the setpoints arrive, and the
+    companion confirms the same site again and lands on it through AUTO.LAND: the checks the
+    emulation's PX4 passes in tests/test_companion_e2e.py."""
+    from tests.test_companion_e2e import _clean_relay, _events, _via
+
+    relays: list[Any] = []
+    record = tmp_path / "record"
+    try:
+        rig = start_rig(
+            ["--autopilot", "px4-sitl", "--px4", str(px4), "--scenario", "scenario1", "--speed", "4"],
+            ["--record", str(record)],
+            mavlink_via=_via(relays, _clean_relay),
+        )
+        _wait_event(rig.sim, "ready", 240)
+        rig.wait_log("sensor stream connected", timeout_s=60)
+        out = rig.alarm_accepted("--reason", "GPS spoofing detected", "--criticality", "high")
+        assert out.returncode == 0, out.stdout + out.stderr
+        rig.wait_log("m, site clear", timeout_s=300)  # "descending 70 m, site clear: ...": the first step
+        relays[0].blackout()
+        time.sleep(5.0)
+        relays[0].restore()
+        td = _wait_event(rig.sim, "touchdown", 400)
+        log = rig.wait_log("recovery ended: landed", timeout_s=120)
+    finally:
+        for r in relays:
+            r.close()
+    assert td["surface"] == "rooftop_clear", (td, rig.log_text()[-3000:])
+    assert td["safe"] is True
+    assert relays[0].counts["blacked_out"] > 0
+    assert "link to the autopilot lost" in log
+    assert "link back after" in log
+    modes = [e["mode"] for e in rig.sim.events("mode")]
+    taken = modes.index("OFFBOARD")
+    assert modes[taken : taken + 3] == ["OFFBOARD", "POSCTL", "OFFBOARD"], modes  # PX4's own hold
+    assert "AUTO.LAND" in modes[taken + 3 :], modes
+    kinds = [e["kind"] for e in _events(record)]
+    restored = kinds.index("link_restored")
+    assert "confirm" in kinds[restored:]

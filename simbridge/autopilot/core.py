@@ -103,6 +103,7 @@ class Autopilot:
         self._external: Setpoint | None = None
         self._external_is_velocity = False
         self._external_at_s = -math.inf
+        self._offboard_lost_to: ModeSpec | None = None  # the offboard-loss failsafe's mode, while in it
         self._last_reject = ("", -math.inf)
         self._apply_limits()
 
@@ -291,6 +292,7 @@ class Autopilot:
         return self._fly(s)
 
     def _fly(self, s: VehicleState) -> Setpoint | None:
+        self._offboard_back(s)
         nav = self.mode.nav
         if nav is Nav.EXTERNAL:
             return self._fly_external(s)
@@ -400,13 +402,30 @@ class Autopilot:
             return self._hold.pos_ne_m
         return (s.pos_ned_m[0], s.pos_ned_m[1])
 
+    def _offboard_back(self, s: VehicleState) -> None:
+        """PX4 (1.15, seen in SITL): once setpoints flow again after an offboard-loss failsafe, and
+        nobody has changed the mode since, the vehicle goes back to OFFBOARD by itself: the failsafe
+        clears and the user's choice of mode stands again."""
+        lost_to = self._offboard_lost_to
+        if lost_to is None:
+            return
+        if self.mode != lost_to or not self.armed:
+            self._offboard_lost_to = None  # a new choice of mode (or the ground) ends it
+            return
+        if self._stream_ok():
+            self._offboard_lost_to = None
+            self.failsafe = False
+            self._set_mode(self.flavour.mode("OFFBOARD"), s, announce=False)
+            self._emit_event("failsafe_cleared", {"reason": "offboard_loss", "mode": "OFFBOARD"})
+
     def _fly_external(self, s: VehicleState) -> Setpoint | None:
         t = self.tun
         age = s.t_s - self._external_at_s
         if t.offboard_loss_s is not None and age > t.offboard_loss_s and self._external_at_s > -math.inf:
-            mode_name = t.offboard_loss_mode or "AUTO.LOITER"
+            mode_name = t.offboard_loss_mode or "POSCTL"
             self.failsafe = True
             self._set_mode(self.flavour.mode(mode_name), s, announce=False)
+            self._offboard_lost_to = self.mode
             self._emit_event("failsafe", {"reason": "offboard_loss", "action": mode_name})
             self._emit_text(SEV_CRITICAL, f"Failsafe: offboard lost, {mode_name}")
             return self._fly(s)
@@ -454,6 +473,7 @@ class Autopilot:
         self._external = None
         self._external_at_s = -math.inf
         self.failsafe = False
+        self._offboard_lost_to = None
         self._emit_event("disarmed", {"reason": why})
         self._emit_text(SEV_INFO, f"Disarmed ({why})" if self._px4 else "Disarming motors")
         # ArduCopter stays in its mode (LAND after a landing); PX4 falls back to its ground mode

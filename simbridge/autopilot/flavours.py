@@ -155,9 +155,10 @@ class Px4Flavour(Flavour):
     offboard_needs_stream = True
     param_bytewise = True
 
-    # COM_OBL_RC_ACT: 0 position, 1 altitude, 2 manual, 3 return, 4 land, 5 hold; without RC
-    # sticks the manual-ish choices degrade to hold, as PX4 does.
-    _OBL_ACTIONS: ClassVar[dict[int, str]] = {3: "AUTO.RTL", 4: "AUTO.LAND"}
+    # COM_OBL_RC_ACT: 0 position, 1 altitude, 2 manual, 3 return, 4 land, 5 hold. Real PX4 1.15 in
+    # SITL with no RC switches to POSCTL for 0 (and holds there: the sticks rest centred); the other
+    # manual-ish choices hold too, here.
+    _OBL_ACTIONS: ClassVar[dict[int, str]] = {0: "POSCTL", 3: "AUTO.RTL", 4: "AUTO.LAND"}
     _MANUAL_MAIN: ClassVar[dict[int, str]] = {
         1: "MANUAL",
         2: "ALTCTL",
