@@ -7,7 +7,10 @@ first setpoint, the hold where the alarm found the vehicle); the hold setpoint's
 The baseline in the same run is the companion's answer time to the alarm command (its COMMAND_ACK).
 The companion's RSS is sampled every 0.2 s through the whole landing.
 
-Usage: python benchmarks/bench_companion.py [--runs 3] [--speed 4]
+``--autopilot px4-sitl`` (or ``ardupilot-sitl``) flies real firmware: the alarm goes out once simbridge's
+episode log says ``ready`` (the firmware holds at the launch pose).
+
+Usage: python benchmarks/bench_companion.py [--runs 3] [--speed 4] [--autopilot px4|px4-sitl|...]
 """
 
 from __future__ import annotations
@@ -75,7 +78,7 @@ class Relay(asyncio.DatagramProtocol):
             self.transport.sendto(data, self.companion_addr)
 
 
-async def one_run(speed: float) -> tuple[float, float, float, float, str]:
+async def one_run(speed: float, autopilot: str = "px4") -> tuple[float, float, float, float, str]:
     comp_port, relay_port, sensors = (
         _port(socket.SOCK_DGRAM),
         _port(socket.SOCK_DGRAM),
@@ -88,6 +91,7 @@ async def one_run(speed: float) -> tuple[float, float, float, float, str]:
         episode = Path(tmp) / "ep.jsonl"
         sim = await asyncio.create_subprocess_exec(
             sys.executable, "-m", "simbridge", "--scenario", "scenario1", "--speed", str(speed),
+            "--autopilot", autopilot,
             "--mavlink", f"udpout:127.0.0.1:{relay_port}", "--sensors", f"127.0.0.1:{sensors}",
             "--episode-log", str(episode), "--log-level", "WARNING", cwd=ROOT,
         )  # fmt: skip
@@ -101,6 +105,8 @@ async def one_run(speed: float) -> tuple[float, float, float, float, str]:
             # another process writes the log: polling the file is the only signal there is
             while "sensor stream connected" not in log.read_text():  # noqa: ASYNC110
                 await asyncio.sleep(0.1)
+            while not (episode.exists() and '"ready"' in episode.read_text()):  # noqa: ASYNC110
+                await asyncio.sleep(0.2)  # real firmware takes off to the launch pose first
             await asyncio.sleep(2.0)  # a couple of seconds of telemetry, as a vehicle in flight has
             alarm = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             alarm.bind(("127.0.0.1", 0))
@@ -136,10 +142,11 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--speed", type=float, default=4.0)
+    ap.add_argument("--autopilot", choices=("px4", "ardupilot", "px4-sitl", "ardupilot-sitl"), default="px4")
     args = ap.parse_args()
     rows = []
     for k in range(args.runs):
-        first, hold, ack, rss, verdict = asyncio.run(one_run(args.speed))
+        first, hold, ack, rss, verdict = asyncio.run(one_run(args.speed, args.autopilot))
         rows.append((first, ack, rss, hold))
         print(
             f"run {k + 1}/{args.runs}: alarm->first setpoint toward the site {first * 1e3:.1f} ms "
@@ -152,7 +159,7 @@ def main() -> int:
     rss = max(r[2] for r in rows)
     hold = statistics.median(r[3] for r in rows)
     print(
-        f"\nmedian of {args.runs} landings: alarm -> hold setpoint {hold * 1e3:.1f} ms, "
+        f"\nmedian of {args.runs} landings ({args.autopilot}): alarm -> hold setpoint {hold * 1e3:.1f} ms, "
         f"-> first setpoint toward the site {first * 1e3:.1f} ms "
         f"(goal <= 500 ms; {first / ack:.1f}x the alarm acknowledgement, {ack * 1e3:.1f} ms)"
     )

@@ -207,24 +207,6 @@ def _verdicts(out: Path) -> list[tuple[Any, ...]]:
     return [(e["id"], e["outcome"], e["safe"], e["surface"], e["attempts"]) for e in eps]
 
 
-@pytest.mark.slow
-@pytest.mark.timeout(600)
-def test_ray_tasks_give_the_verdicts_the_local_executor_gives(tmp_path: Path) -> None:
-    """The same two curated episodes through the local executor and through a local Ray instance with
-    2 CPUs: the same episodes, outcomes, verdicts and surfaces."""
-    pytest.importorskip("ray", reason="the campaign extra: pip install 'landfall[campaign]'")
-    common = ("curated", "--scenario", "scenario1", "--runs", "2", "--workers", "2", "--quiet")
-    local = bench(*common, "--out", str(tmp_path / "local"))
-    assert local.returncode == 0, local.stderr[-3000:]
-    ray = bench(*common, "--executor", "ray", "--out", str(tmp_path / "ray"))
-    assert ray.returncode == 0, ray.stderr[-3000:]
-    assert _verdicts(tmp_path / "ray") == _verdicts(tmp_path / "local")
-    assert [v[2] for v in _verdicts(tmp_path / "ray")] == [True, True]
-    results = json.loads((tmp_path / "ray" / "results.json").read_text())
-    assert results["config"]["executor"] == "ray"
-    assert (tmp_path / "ray" / "episodes" / "scenario1-r1-onboard-crop-clear-px4" / "episode.jsonl").exists()
-
-
 def _ours(pid: int) -> list[int]:
     """Processes whose parent is ``pid`` (from /proc)."""
     kids = []
@@ -250,16 +232,16 @@ def _alive(pid: int) -> bool:
 @pytest.mark.timeout(600)
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="reads child processes from /proc (Linux)")
 def test_a_campaign_killed_outright_loses_nothing_and_resumes(tmp_path: Path) -> None:
-    """``kill -9`` once the first of three episodes is in results.json: the file holds it whole, the
-    episodes in flight die with the campaign (no simbridge or companion left behind), and the same
-    command with --resume flies the other two only."""
+    """``kill -9`` once the first of two episodes is in results.json: the file holds it whole, the
+    episode in flight dies with the campaign (no simbridge or companion left behind), and the same
+    command with --resume flies the other one only."""
     out = tmp_path / "campaign"
     argv = (
         "curated",
         "--scenario",
         "scenario1",
         "--runs",
-        "3",
+        "2",
         "--workers",
         "1",
         "--quiet",
@@ -293,9 +275,9 @@ def test_a_campaign_killed_outright_loses_nothing_and_resumes(tmp_path: Path) ->
 
     again = bench(*argv, "--resume")
     assert again.returncode == 0, again.stderr[-3000:]
-    assert "resuming: 1 of 3 episodes" in again.stderr
+    assert "resuming: 1 of 2 episodes" in again.stderr
     episodes = json.loads(results.read_text())["episodes"]
-    assert [e["id"] for e in episodes] == [f"scenario1-r{k}-onboard-crop-clear-px4" for k in range(3)]
+    assert [e["id"] for e in episodes] == [f"scenario1-r{k}-onboard-crop-clear-px4" for k in range(2)]
     assert [e for e in episodes if e["id"] == first[0]["id"]] == first  # kept as it was
     assert all(e["safe"] for e in episodes), [e["reasons"] for e in episodes]
 

@@ -1,8 +1,10 @@
 """The fail-safe for the companion's own defects, end to end (issue 17): every stage of a recovery made
-to raise (the test-only fault hook, companion/faults.py, turned on through ``LANDFALL_TEST_FAULT``),
-with PX4's and ArduPilot's flavours. Every time, the defect is announced to the ground station as a
-critical STATUSTEXT, recorded with its traceback, and the vehicle still comes down: a touchdown that
-simbridge grades, never a hover in the autopilot's hold until the battery decides."""
+to raise (the test-only fault hook, companion/faults.py, turned on through ``LANDFALL_TEST_FAULT``).
+Every time, the defect is announced to the ground station as a critical STATUSTEXT, recorded with its
+traceback, and the vehicle still comes down: a touchdown that simbridge grades, never a hover in the
+autopilot's hold until the battery decides. One flight per stage (the behaviour), the stages taking
+PX4's and ArduPilot's flavours in turn (``FLAVOUR_OF``), so both land through each kind of stage: before
+a site is measured and after."""
 
 from __future__ import annotations
 
@@ -99,12 +101,21 @@ def _fly_with_fault(
         gcs.close()
 
 
-@pytest.mark.parametrize("autopilot", ["px4", "ardupilot"])
+FLAVOUR_OF = {stage: ("px4", "ardupilot")[k % 2] for k, stage in enumerate(STAGES)}
+
+
+def test_the_stages_take_both_flavours_before_and_after_a_site() -> None:
+    for flavour in ("px4", "ardupilot"):
+        mine = {stage for stage, f in FLAVOUR_OF.items() if f == flavour}
+        assert mine & set(AFTER_A_SITE)
+        assert mine - set(AFTER_A_SITE)
+
+
 @pytest.mark.parametrize("stage", STAGES)
 def test_a_defect_in_any_stage_still_ends_in_a_graded_touchdown(
-    start_rig: Callable[..., Rig], tmp_path: Path, autopilot: str, stage: str
+    start_rig: Callable[..., Rig], tmp_path: Path, stage: str
 ) -> None:
-    td, rig, gcs, events = _fly_with_fault(start_rig, tmp_path, autopilot, stage)
+    td, rig, gcs, events = _fly_with_fault(start_rig, tmp_path, FLAVOUR_OF[stage], stage)
     log = rig.log_text()
     # graded: simbridge's ground truth says what it landed on and whether that was safe
     assert isinstance(td["safe"], bool), td

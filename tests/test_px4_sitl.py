@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import signal
 import socket
 import subprocess
 import sys
@@ -38,7 +39,8 @@ from simbridge.sim import SimConfig
 from simbridge.sitl import SitlDied, SitlNotFound, SitlProtocolError
 from simbridge.terrain import FlatTerrain
 from simbridge.vehicle import Vehicle
-from tests.conftest import Rig
+from tests.conftest import Rig, SimProcess
+from tests.mavclient import MavClient
 from tests.test_sitl import _wait_event
 
 M = mavlink2
@@ -296,6 +298,52 @@ def test_a_px4_that_exits_is_reported(hil: tuple[HilLockStep, _StandInPx4, _Fake
 
 
 # ---------------------------------------------------------------------------------------------- real firmware
+def _px4_children(pid: int) -> list[int]:
+    out = subprocess.run(["ps", "-eo", "pid,ppid,comm"], capture_output=True, text=True).stdout
+    rows = [line.split() for line in out.splitlines()[1:]]
+    return [int(r[0]) for r in rows if len(r) >= 3 and r[2] == "px4" and int(r[1]) == pid]
+
+
+@pytest.mark.slow
+@pytest.mark.sitl
+def test_real_px4_takes_off_holds_and_lands_on_the_world(
+    px4: Path, start_sim: Callable[..., SimProcess]
+) -> None:
+    """``--start air``: real PX4 initialises on the ground, arms, climbs to the launch pose and holds in
+    AUTO.LOITER (``ready``); a ground station on the companion's port (PX4's own MAVLink instance)
+    switches it to AUTO.LAND: it lands on the world's ground, the touchdown is graded, PX4's land
+    detector disarms it; SIGTERM ends simbridge and PX4 with it."""
+    sim = start_sim("--autopilot", "px4-sitl", "--px4", str(px4), "--scenario", "flat", "--start", "air",
+                    "--speed", "8")  # fmt: skip
+    client = MavClient(sim.port)
+    try:
+        hb = client.wait_heartbeat(60, ask=False)
+        assert hb.autopilot == 12  # MAV_AUTOPILOT_PX4: the real firmware on the companion's port
+        ready = _wait_event(sim, "ready", 240)
+        pos = ready["pos_ned_m"]
+        assert isinstance(pos, list)
+        assert math.hypot(pos[0], pos[1]) < 0.5
+        children = _px4_children(sim.proc.pid)
+        assert len(children) == 1
+        assert client.set_mode_px4("AUTO.LAND") == 0
+        touchdown = _wait_event(sim, "touchdown", 120)
+        assert touchdown["safe"] is True
+        assert touchdown["surface"]
+        _wait_event(sim, "disarmed", 60)
+        modes = [e["mode"] for e in sim.events("mode")]
+        assert modes[modes.index("AUTO.TAKEOFF") :][:3] == ["AUTO.TAKEOFF", "AUTO.LOITER", "AUTO.LAND"]
+    finally:
+        client.close()
+    sim.proc.send_signal(signal.SIGTERM)
+    assert sim.proc.wait(timeout=30) == 0
+    stop = sim.events("stop")[0]
+    assert stop["error"] is None
+    assert isinstance(stop["frames"], int)
+    assert stop["frames"] > 5_000  # 250 Hz lock step: over 20 s simulated
+    deadline = time.monotonic() + 10
+    while any(Path(f"/proc/{c}").exists() for c in children) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not [c for c in children if Path(f"/proc/{c}").exists()], "PX4 outlived simbridge"
 
 
 @pytest.mark.slow
