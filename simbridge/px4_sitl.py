@@ -411,7 +411,8 @@ class HilLockStep(LockStepThread):
                 # behind the pace (a busy machine): carry on from here, never race to catch up, which
                 # would squeeze simulated seconds into a blink of wall time for the companion
                 wall0 -= -ahead - MAX_LAG_S
-            s = vehicle.step_esc(self._controls)
+            with self.gate:
+                s = vehicle.step_esc(self._controls)
             if self.on_state is not None:
                 self.on_state(s)
 

@@ -393,6 +393,9 @@ class LockStepThread:
         self.process = process
         self.error: SitlError | None = None
         self.done = threading.Event()
+        # held by whoever must see the world stand still (a sensor frame being rendered): the lock
+        # step takes it for every physics step, so simulated time does not pass meanwhile
+        self.gate = threading.Lock()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._t0_s = vehicle.state.t_s
@@ -502,7 +505,8 @@ class LockStep(LockStepThread):
             dt = 1.0 / frame.frame_rate_hz
             if abs(dt - physics.dt_s) > 1e-12:
                 physics.set_dt(dt)
-            s = vehicle.step_esc(esc_from_pwm(frame.pwm_us))
+            with self.gate:
+                s = vehicle.step_esc(esc_from_pwm(frame.pwm_us))
             self.frames += 1
             if self.frames % RANGE_EVERY == 1:
                 self._range_m = physics.terrain.rangefinder_m(s.pos_ned_m, s.quat, RANGE_MAX_M)

@@ -116,6 +116,21 @@ class FirmwareBridge(SimBridge):
         offset = self.boot_offset_ms if self.boot_offset_ms is not None else 0.0
         return round((t_s - self.vehicle_t0_s) * 1000 + offset)
 
+    async def _capture(self, want: set[str]) -> Any:
+        """A sensor frame rendered with the world standing still: the lock step's physics waits
+        (``LockStepThread.gate``) from the pose taken to the frame done, as a lock-step simulator
+        renders within its step. Otherwise the firmware's clock runs on while the renderer shares
+        the processor with the lock step, and at --speed 4 a frame 50 ms in the making arrived up to
+        4.5 simulated seconds old, older than the companion accepts (sensors.max_frame_age_s)."""
+        lock = self.lockstep
+        if lock is None:
+            return await super()._capture(want)
+        await asyncio.get_running_loop().run_in_executor(None, lock.gate.acquire)
+        try:
+            return await super()._capture(want)
+        finally:
+            lock.gate.release()
+
     # ------------------------------------------------------------------ lock-step hook (its thread)
     def _on_state(self, s: VehicleState) -> None:
         pilot = self.pilot
