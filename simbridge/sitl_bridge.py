@@ -125,7 +125,10 @@ class FirmwareBridge(SimBridge):
         lock = self.lockstep
         if lock is None:
             return await super()._capture(want)
-        await asyncio.get_running_loop().run_in_executor(None, lock.gate.acquire)
+        # the lock step holds the gate for one physics step at a time (about 0.1 ms): poll it, never a
+        # blocking acquire in a worker thread, which a cancelled capture would leave holding the gate
+        while not lock.gate.acquire(blocking=False):  # noqa: ASYNC110 - a threading lock has no event
+            await asyncio.sleep(0.0005)
         try:
             return await super()._capture(want)
         finally:

@@ -36,7 +36,7 @@ from simbridge.px4_sitl import (
     find_px4,
 )
 from simbridge.sim import SimConfig
-from simbridge.sitl import SitlDied, SitlNotFound, SitlProtocolError
+from simbridge.sitl import SitlDied, SitlNotAnswering, SitlNotFound, SitlProtocolError
 from simbridge.terrain import FlatTerrain
 from simbridge.vehicle import Vehicle
 from tests.conftest import Rig, SimProcess
@@ -414,3 +414,23 @@ def test_a_lost_companion_link_hands_real_px4_to_its_own_failsafe_then_the_compa
     kinds = [e["kind"] for e in _events(record)]
     restored = kinds.index("link_restored")
     assert "confirm" in kinds[restored:]
+
+
+def test_a_px4_that_never_connects_is_an_error_not_a_hang(monkeypatch: pytest.MonkeyPatch) -> None:
+    import simbridge.px4_sitl as px4_sitl
+
+    monkeypatch.setattr(px4_sitl, "CONNECT_S", 0.5)
+    server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    server.bind(("127.0.0.1", 0))
+    server.listen(1)
+    v = Vehicle(GeoOrigin(), FlatTerrain())
+    lock = HilLockStep(server, v, GeoOrigin(), _FakeProcess(), np.random.default_rng(0))  # type: ignore[arg-type]
+    lock.start()
+    try:
+        assert lock.done.wait(5.0)
+        assert isinstance(lock.error, SitlNotAnswering)
+        assert "did not connect" in str(lock.error)
+        assert "stand-in PX4 output" in str(lock.error)
+    finally:
+        lock.stop()
+        server.close()
