@@ -10,7 +10,9 @@ binding "no"s.
 **Confirm.** The net reads the site window: the middle ``FRAME_WINDOW`` of each side of a whole camera
 frame (16:9, ``FRAME_ASPECT``), else the middle ``CROP_WINDOW`` of a close-up cut around the site (or
 ``ConfirmParams.site_window``). Water over ``max_water`` of the window's cells, or painted markings over
-``MAX_MARKING_SHARE`` (any at street level), veto it bindingly, as the cues' water and lane markings do.
+``MAX_MARKING_SHARE`` (any at street level), veto it bindingly, as the cues' water and lane markings do;
+so does a tree's crown above street level (:func:`canopy_share` over ``MAX_CANOPY_SHARE``: green and
+textured, measured on the pixels, since the net's tree cells miss real canopy).
 Otherwise the site is accepted when the net's clear-site probability reaches the sidecar's threshold
 (calibrated on simbridge renders). That probability means a clear *roof*, which a surface Surface ID
 measured at street level is not: there the window's road *and* roof-like cells count as paving (a plain
@@ -31,6 +33,9 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import cv2
+import numpy as np
+
 from companion.reasoning.base import ConfirmRequest, RankRequest
 from companion.reasoning.image_cues import SITE_WINDOW_CROP, SITE_WINDOW_FRAME, centre, check_rgb
 from companion.reasoning.landnet import COUNTED, LandNet, SceneReading
@@ -43,6 +48,10 @@ ASPECT_TOL = 0.05
 FRAME_WINDOW = SITE_WINDOW_FRAME
 CROP_WINDOW = SITE_WINDOW_CROP
 MAX_MARKING_SHARE = 0.02  # of the window's cells: a painted line, not one stray cell
+MAX_CANOPY_SHARE = 0.4  # of the window's pixels green and textured: a tree's crown, not a roof
+CANOPY_EXG = 0.06  # excess green (2G - R - B) / (R + G + B) above which a pixel is vegetation ...
+CANOPY_TEXTURE = 8.0  # ... and the grey levels' standard deviation over 7 x 7 pixels above which it is leaves
+CANOPY_SIDE_PX = 192  # the window is judged at this size
 UNSURE_MARGIN = 0.15  # a clear-site probability this close to the threshold is a guess, either way ...
 UNSURE_SPREAD = 0.35  # ... as is one whose mirror-image views differ by this much
 
@@ -56,6 +65,22 @@ def unsure(r: SceneReading, threshold: float) -> str:
     if r.clear_spread >= UNSURE_SPREAD:
         why.append(f"its views disagree ({r.clear_spread:.2f} apart)")
     return "unsure: " + " and ".join(why) if why else ""
+
+
+def canopy_share(window: np.ndarray) -> float:
+    """Share of an RGB window that is green and textured: leaves. A tree's crown measured from above
+    is an elevated surface like a roof, and on real photographs the net's tree cells miss it (a dense
+    canopy read as "roof surface 100 %, clear-site confidence 0.89" on a held-out tile), so colour and
+    texture say it: excess green over ``CANOPY_EXG`` where the grey levels vary over
+    ``CANOPY_TEXTURE`` (a green metal roof is green but smooth: 9 % of its pixels)."""
+    side = (CANOPY_SIDE_PX, CANOPY_SIDE_PX)
+    small = cv2.resize(window, side, interpolation=cv2.INTER_AREA).astype(np.float32)
+    r, g, b = small[..., 0], small[..., 1], small[..., 2]
+    exg = (2 * g - r - b) / (r + g + b + 1.0)
+    grey = 0.299 * r + 0.587 * g + 0.114 * b
+    mean = cv2.blur(grey, (7, 7))
+    sd = np.sqrt(np.maximum(cv2.blur(grey * grey, (7, 7)) - mean * mean, 0.0))
+    return float(((exg > CANOPY_EXG) & (sd > CANOPY_TEXTURE)).mean())
 
 
 def site_window(h: int, w: int, override: float | None) -> float:
@@ -82,9 +107,14 @@ def confirm_reading(
         ValueError: an image that is not a non-empty (H, W, 3) uint8 array.
     """
     image = check_rgb(request.image)
-    r = net.read(centre(image, site_window(image.shape[0], image.shape[1], p.site_window)))
+    window = centre(image, site_window(image.shape[0], image.shape[1], p.site_window))
+    r = net.read(window)
     vetoes = list(lidar_vetoes)
     categorical = False
+    canopy = 0.0 if street_level else canopy_share(window)
+    if canopy > MAX_CANOPY_SHARE:  # at street level the vegetation limits below judge lawns and parks
+        vetoes.append(("canopy", f"tree canopy ({canopy:.0%} of the site green and textured)"))
+        categorical = True
     if r.share("water") > p.max_water:
         vetoes.append(("water", f"{r.phrase('water')} on the site"))
         categorical = True
