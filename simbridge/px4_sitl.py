@@ -410,7 +410,7 @@ class HilLockStep(LockStepThread):
             elif ahead < -MAX_LAG_S:
                 # behind the pace (a busy machine): carry on from here, never race to catch up, which
                 # would squeeze simulated seconds into a blink of wall time for the companion
-                wall0 -= -ahead - MAX_LAG_S
+                wall0 += -ahead - MAX_LAG_S
             with self.gate:
                 s = vehicle.step_esc(self._controls)
             if self.on_state is not None:

@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink2
 
+import simbridge.px4_sitl as px4_sitl
 from simbridge.geo import GeoOrigin
 from simbridge.physics import GEAR_HEIGHT_M
 from simbridge.px4_pilot import px4_mode_name
@@ -433,4 +434,37 @@ def test_a_px4_that_never_connects_is_an_error_not_a_hang(monkeypatch: pytest.Mo
         assert "stand-in PX4 output" in str(lock.error)
     finally:
         lock.stop()
+        server.close()
+
+
+def test_the_lock_step_keeps_to_its_speed_and_does_not_race_after_a_stall() -> None:
+    """``--speed`` caps simulated seconds per wall second; after PX4 stalls (no answer for a while)
+    the lock step carries on at that pace rather than racing to make up the lost time. An upper bound
+    only: a slower machine can only make it slower."""
+    server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    server.bind(("127.0.0.1", 0))
+    server.listen(1)
+    v = Vehicle(GeoOrigin(), FlatTerrain())
+    v.reset((0.0, 0.0, -GEAR_HEIGHT_M), 0.0)
+    lock = HilLockStep(server, v, GeoOrigin(), _FakeProcess(), np.random.default_rng(0), speed=2.0)  # type: ignore[arg-type]
+    lock.start()
+    px4 = _StandInPx4(server.getsockname()[1])
+    try:
+
+        def answer_for(wall_s: float) -> float:
+            """Answer every sensor message for ``wall_s``; the simulated seconds that passed."""
+            t0, sim0 = time.monotonic(), lock.sim_time_s()
+            while time.monotonic() - t0 < wall_s:
+                px4.until("HIL_SENSOR")
+                px4.answer((0.0, 0.0, 0.0, 0.0))
+            return lock.sim_time_s() - sim0
+
+        assert answer_for(1.0) <= 2.0 * (1.0 + px4_sitl.MAX_LAG_S) + 0.1
+        time.sleep(0.5)  # PX4 stalls: no answers
+        assert (
+            answer_for(1.0) <= 2.0 * (1.0 + px4_sitl.MAX_LAG_S) + 0.1
+        )  # not 2 x 1.5 s: the stall is not made up
+    finally:
+        lock.stop()
+        px4.sock.close()
         server.close()
