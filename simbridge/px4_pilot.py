@@ -48,15 +48,14 @@ class Px4Pilot(SitlPilot):
     """:class:`SitlPilot` for PX4 (module docstring)."""
 
     firmware = "PX4 SITL"
+    hold_mode = "AUTO.LOITER"
+    ready: Callable[[], bool] | None = None  # set by the bridge: PX4 said "Ready for takeoff!"
 
     def mode_name(self, custom_mode: int) -> str:
         return px4_mode_name(custom_mode)
 
     def _ask_streams(self) -> None:
         self._streams_asked = True  # PX4 streams on its ground-station link unasked
-
-    hold_mode = "AUTO.LOITER"
-    ready: Callable[[], bool] | None = None  # set by the bridge: PX4 said "Ready for takeoff!"
 
     def can_start(self) -> bool:
         return self.ready() if self.ready is not None else True
