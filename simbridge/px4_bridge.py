@@ -40,31 +40,19 @@ class Px4SitlBridge(FirmwareBridge):
         cfg = self.config
         instance, server = claim_px4_instance()
         stack.callback(server.close)
-        pilot = Px4Pilot(cfg.system_id, self._on_event, self.sim_time_s, logger=self.log)
-        await stack.enter_async_context(pilot)
-        self.pilot = pilot
-        pilot.on_boot_time = self._on_boot_time
+        pilot = await self._open_pilot(stack, Px4Pilot)
         proc = Px4Process(
             self.binary, instance, companion=(self.target.host, self.target.port), pilot_port=pilot.port,
             logger=self.log,
         )  # fmt: skip
         # PX4 sets MAV_SYS_ID to the instance + 1 before these: --sysid wins
         proc.params.update(MAV_SYS_ID=cfg.system_id, MIS_TAKEOFF_ALT=round(self.scenario.launch_height_m, 2))
-        self.process = proc
         pilot.ready = proc.ready_for_takeoff.is_set
         lock = HilLockStep(
             server, self.vehicle, cfg.origin, proc, np.random.default_rng(cfg.seed + 7), speed=cfg.speed,
             on_state=self._on_state,
         )  # fmt: skip
-        self.lockstep = lock
-        proc.start()
-        stack.callback(proc.close)
-        lock.start()
-        stack.callback(lock.stop)
-        self.log.info(
-            "simbridge px4-sitl (instance %d, pid %s) to %s: scenario %s, seed %d, speed %.1fx, start %s",
-            instance, proc.pid, cfg.mavlink, cfg.scenario, cfg.seed, cfg.speed, cfg.start,
-        )  # fmt: skip
+        self._launch(stack, proc, lock, instance)
         return pilot, lock
 
     def _estimator_ready(self, pilot: SitlPilot) -> bool:

@@ -477,7 +477,6 @@ class HilLockStep(LockStepThread):
                 r + bg[2] + GYRO_NOISE * n[5], mx, my, mz, abs_p, 0.0, alt, temp, fields, 0,
             ).pack(mav)
         ]  # fmt: skip
-        lat, lon, alt_true = self.origin.to_geodetic(*s.pos_ned_m)
         vn, ve, vd = s.vel_ned_m_s
         if step % GPS_EVERY == 0:
             g = rng.normal(0.0, 1.0, 6)
@@ -494,7 +493,8 @@ class HilLockStep(LockStepThread):
                     round(cog * 100), 16,
                 ).pack(mav)
             )  # fmt: skip
-        if step % TRUTH_EVERY == 1:
+        if step % TRUTH_EVERY == 1:  # ground truth at 50 Hz: the geodetic conversion only then
+            lat, lon, alt_true = self.origin.to_geodetic(*s.pos_ned_m)
             ax_n = rotate_body_to_ned(s.quat, (ax, ay, az))
             out.append(
                 mav.hil_state_quaternion_encode(

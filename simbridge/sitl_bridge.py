@@ -18,14 +18,23 @@ import contextlib
 import math
 import signal
 import time
-from typing import Any
+from typing import Any, TypeVar
 
 from landfall_link.mavlink import LinkUrl
 from simbridge.physics import CONTACT_MARGIN_M, GEAR_HEIGHT_M, VehicleState
 from simbridge.sim import SimBridge
-from simbridge.sitl import LockStep, SitlError, SitlProcess, claim_instance, find_arducopter, heading_deg
+from simbridge.sitl import (
+    FirmwareProcess,
+    LockStep,
+    SitlError,
+    SitlProcess,
+    claim_instance,
+    find_arducopter,
+    heading_deg,
+)
 from simbridge.sitl_pilot import READY_POS_M, READY_SPEED_M_S, SitlNotReady, SitlPilot
 
+P = TypeVar("P", bound=SitlPilot)
 _LANDED_CONFIRM_S = 0.3
 _AIRBORNE_M = 0.25
 _EKF_GOOD = 0x33F  # attitude, velocities, positions (rel/abs, vertical), predicted positions
@@ -103,6 +112,29 @@ class FirmwareBridge(SimBridge):
 
     def _estimator_ready(self, pilot: SitlPilot) -> bool:
         raise NotImplementedError
+
+    async def _open_pilot(self, stack: contextlib.AsyncExitStack, kind: type[P]) -> P:
+        """simbridge's own link to the firmware (``kind``: its pilot class), closed with ``stack``."""
+        pilot = kind(self.config.system_id, self._on_event, self.sim_time_s, logger=self.log)
+        await stack.enter_async_context(pilot)
+        self.pilot = pilot
+        pilot.on_boot_time = self._on_boot_time
+        return pilot
+
+    def _launch(
+        self, stack: contextlib.AsyncExitStack, proc: FirmwareProcess, lock: Any, instance: int
+    ) -> None:
+        """Start the firmware and its lock step, each ended when ``stack`` closes, and say so."""
+        cfg = self.config
+        self.process, self.lockstep = proc, lock
+        proc.start()
+        stack.callback(proc.close)
+        lock.start()
+        stack.callback(lock.stop)
+        self.log.info(
+            "simbridge %s (instance %d, pid %s) to %s: scenario %s, seed %d, speed %.1fx, start %s",
+            cfg.autopilot, instance, proc.pid, cfg.mavlink, cfg.scenario, cfg.seed, cfg.speed, cfg.start,
+        )  # fmt: skip
 
     def _stop_fields(self) -> dict[str, Any]:
         raise NotImplementedError
@@ -245,27 +277,14 @@ class SitlBridge(FirmwareBridge):
         stack.callback(sock.close)
         lat, lon, alt = cfg.origin.to_geodetic(*self.rest_ned_m)
         home = (lat, lon, alt, heading_deg(self.scenario.launch_yaw_rad))
-        pilot = SitlPilot(cfg.system_id, self._on_event, self.sim_time_s, logger=self.log)
-        await stack.enter_async_context(pilot)
-        self.pilot = pilot
-        pilot.on_boot_time = self._on_boot_time
+        pilot = await self._open_pilot(stack, SitlPilot)
         proc = SitlProcess(
             self.binary, instance, home, speedup=cfg.speed,
             serial0=(self.target.host, self.target.port), serial1=("127.0.0.1", pilot.port),
             sysid=cfg.system_id, logger=self.log,
         )  # fmt: skip
-        self.process = proc
         lock = LockStep(sock, self.vehicle, self.rest_ned_m, proc, on_state=self._on_state)
-        self.lockstep = lock
-        proc.start()
-        stack.callback(proc.close)
-        lock.start()
-        stack.callback(lock.stop)
-        self.log.info(
-            "simbridge ardupilot-sitl (instance %d, pid %s) to %s: scenario %s, seed %d, speed %.1fx, "
-            "start %s",
-            instance, proc.pid, cfg.mavlink, cfg.scenario, cfg.seed, cfg.speed, cfg.start,
-        )  # fmt: skip
+        self._launch(stack, proc, lock, instance)
         return pilot, lock
 
     def _estimator_ready(self, pilot: SitlPilot) -> bool:
