@@ -62,13 +62,36 @@ class MavClient:
                 return m
         raise TimeoutError(f"no {msg_type} within {timeout_s} s")
 
+    def drop_backlog(self) -> int:
+        """Drop every datagram waiting in the socket unread; returns how many. A client that has not read
+        for minutes has a full receive buffer of old telemetry (the kernel then drops what arrives next,
+        an answer included), and parsing that backlog can take longer than the answer is worth waiting."""
+        sock = self.conn.port  # pymavlink's UDP socket, non-blocking
+        dropped = 0
+        try:
+            while True:
+                sock.recv(65536)
+                dropped += 1
+        except (BlockingIOError, InterruptedError):
+            pass
+        return dropped
+
     def command(self, command: int, *params: float, timeout_s: float = 5.0, target_system: int = 1,
-                target_component: int = 1) -> int:  # fmt: skip
-        """COMMAND_LONG; returns the COMMAND_ACK result."""
+                target_component: int = 1, attempts: int = 3) -> int:  # fmt: skip
+        """COMMAND_LONG; returns the COMMAND_ACK result. As the MAVLink command protocol has it, a command
+        that gets no ACK is sent again with ``confirmation`` one higher (``attempts`` in all, ``timeout_s``
+        each); before a second try the backlog is drained, so the answer is among the next things read."""
         p = list(params) + [0.0] * (7 - len(params))
-        self.mav.command_long_send(target_system, target_component, command, 0, *p)
-        ack = self.recv("COMMAND_ACK", timeout_s, cond=lambda m: m.command == command)
-        return int(ack.result)
+        for confirmation in range(attempts):
+            if confirmation:
+                self.drop_backlog()
+            self.mav.command_long_send(target_system, target_component, command, confirmation, *p)
+            try:
+                ack = self.recv("COMMAND_ACK", timeout_s, cond=lambda m: m.command == command)
+            except TimeoutError:
+                continue
+            return int(ack.result)
+        raise TimeoutError(f"no COMMAND_ACK for command {command} after {attempts} tries of {timeout_s} s")
 
     def set_mode_px4(self, name: str) -> int:
         main, sub = PX4_MAIN[name]
