@@ -202,11 +202,6 @@ def bench(*args: str, timeout: float = 600) -> subprocess.CompletedProcess[str]:
     )  # fmt: skip
 
 
-def _verdicts(out: Path) -> list[tuple[Any, ...]]:
-    eps = json.loads((out / "results.json").read_text())["episodes"]
-    return [(e["id"], e["outcome"], e["safe"], e["surface"], e["attempts"]) for e in eps]
-
-
 def _ours(pid: int) -> list[int]:
     """Processes whose parent is ``pid`` (from /proc)."""
     kids = []

@@ -350,37 +350,18 @@ def test_real_px4_takes_off_holds_and_lands_on_the_world(
 
 @pytest.mark.slow
 @pytest.mark.sitl
-def test_the_companion_lands_real_px4_on_the_clear_roof(px4: Path, start_rig: Callable[..., Rig]) -> None:
-    """The product unchanged on real PX4: OFFBOARD position setpoints through the firmware's own entry
-    rules, the descent, AUTO.LAND, PX4's land detector and disarm; the world grades the touchdown."""
-    rig = start_rig(["--autopilot", "px4-sitl", "--px4", str(px4), "--scenario", "scenario1", "--speed", "4"])
-    ready = _wait_event(rig.sim, "ready", 240)
-    assert ready["autopilot"] == "px4-sitl"
-    rig.wait_log("sensor stream connected", timeout_s=60)
-    out = rig.alarm_accepted("--reason", "GPS spoofing detected", "--criticality", "high")
-    assert out.returncode == 0, out.stdout + out.stderr
-    td = _wait_event(rig.sim, "touchdown", 400)
-    assert td["surface"] == "rooftop_clear", (td, rig.log_text()[-3000:])
-    assert td["safe"] is True
-    rig.wait_log("recovery ended: landed", timeout_s=120)
-    _wait_event(rig.sim, "disarmed", 60)
-    modes = [(e["t_s"], e["mode"]) for e in rig.sim.events("mode")]
-    assert "OFFBOARD" in [m for _, m in modes], modes
-    # the touchdown is the firmware's AUTO.LAND (PX4 changes mode again as it disarms)
-    assert [m for t, m in modes if t <= td["t_s"]][-1] == "AUTO.LAND", modes
-
-
-@pytest.mark.slow
-@pytest.mark.sitl
 def test_a_lost_companion_link_hands_real_px4_to_its_own_failsafe_then_the_companion_lands(
     px4: Path, start_rig: Callable[..., Rig], tmp_path: Path
 ) -> None:
-    """The MAVLink link between real PX4 and the companion goes dead for 5 s during the first descent
-    step. PX4's own offboard-loss failsafe (COM_OF_LOSS_T 1 s, COM_OBL_RC_ACT 0: position, which with
-    no RC holds) takes the vehicle out of OFFBOARD into POSCTL; the companion sees the silence and
-    keeps its target; once the link is back PX4 takes OFFBOARD again as the setpoints arrive, and the
-    companion confirms the same site again and lands on it through AUTO.LAND: the checks the
-    emulation's PX4 passes in tests/test_companion_e2e.py."""
+    """The product unchanged on real PX4, and the firmware's own failsafe in the middle of it (one flight
+    for both: the suite flies each behaviour once). An alarm: OFFBOARD position setpoints through the
+    firmware's own entry rules, the descent. Then the MAVLink link between real PX4 and the companion
+    goes dead for 5 s during the first descent step. PX4's own offboard-loss failsafe (COM_OF_LOSS_T 1
+    s, COM_OBL_RC_ACT 0: position, which with no RC holds) takes the vehicle out of OFFBOARD into
+    POSCTL; the companion sees the silence and keeps its target; once the link is back PX4 takes
+    OFFBOARD again as the setpoints arrive, and the companion confirms the same site again and lands on
+    it through AUTO.LAND, PX4's land detector and disarm; the world grades the touchdown: the checks
+    the emulation's PX4 passes in tests/test_companion_e2e.py."""
     from tests.test_companion_e2e import _clean_relay, _events, _via
 
     relays: list[Any] = []
@@ -391,7 +372,8 @@ def test_a_lost_companion_link_hands_real_px4_to_its_own_failsafe_then_the_compa
             ["--record", str(record)],
             mavlink_via=_via(relays, _clean_relay),
         )
-        _wait_event(rig.sim, "ready", 240)
+        ready = _wait_event(rig.sim, "ready", 240)
+        assert ready["autopilot"] == "px4-sitl"
         rig.wait_log("sensor stream connected", timeout_s=60)
         out = rig.alarm_accepted("--reason", "GPS spoofing detected", "--criticality", "high")
         assert out.returncode == 0, out.stdout + out.stderr
@@ -409,10 +391,14 @@ def test_a_lost_companion_link_hands_real_px4_to_its_own_failsafe_then_the_compa
     assert relays[0].counts["blacked_out"] > 0
     assert "link to the autopilot lost" in log
     assert "link back after" in log
-    modes = [e["mode"] for e in rig.sim.events("mode")]
+    _wait_event(rig.sim, "disarmed", 60)
+    timed = [(e["t_s"], e["mode"]) for e in rig.sim.events("mode")]
+    modes = [m for _, m in timed]
     taken = modes.index("OFFBOARD")
     assert modes[taken : taken + 3] == ["OFFBOARD", "POSCTL", "OFFBOARD"], modes  # PX4's own hold
     assert "AUTO.LAND" in modes[taken + 3 :], modes
+    # the touchdown is the firmware's AUTO.LAND (PX4 changes mode again as it disarms)
+    assert [m for t, m in timed if t <= td["t_s"]][-1] == "AUTO.LAND", timed
     kinds = [e["kind"] for e in _events(record)]
     restored = kinds.index("link_restored")
     assert "confirm" in kinds[restored:]

@@ -314,39 +314,17 @@ def test_real_arducopter_takes_off_holds_and_lands_on_the_world(
 
 @pytest.mark.slow
 @pytest.mark.sitl
-def test_the_companion_lands_real_arducopter_on_the_clear_roof(
-    arducopter: Path, start_rig: Callable[..., Rig]
-) -> None:
-    """The product unchanged on real firmware: the companion asks ArduCopter for its telemetry, places
-    every frame with the autopilot's estimate in the autopilot's own frame (EKF origin at the launch
-    point, not the scenario's origin), flies GUIDED targets, descends, LANDs; the world grades it."""
-    rig = start_rig(["--autopilot", "ardupilot-sitl", "--sitl", str(arducopter), "--scenario", "scenario2",
-                     "--launch", "12,8", "--speed", "4"])  # fmt: skip
-    ready = _wait_event(rig.sim, "ready", 240)
-    start = rig.sim.events("start")[0]
-    home = start["home_ned_m"]
-    assert isinstance(home, list)
-    assert math.hypot(home[0], home[1]) > 5
-    assert ready["autopilot"] == "ardupilot-sitl"
-    rig.wait_log("sensor stream connected", timeout_s=60)
-    out = rig.alarm_accepted("--reason", "GPS spoofing detected", "--criticality", "high")
-    assert out.returncode == 0, out.stdout + out.stderr
-    td = _wait_event(rig.sim, "touchdown", 400)
-    assert td["surface"] == "rooftop_clear", (td, rig.log_text()[-3000:])
-    assert td["safe"] is True
-    rig.wait_log("recovery ended: landed", timeout_s=120)
-    _wait_event(rig.sim, "disarmed", 60)
-
-
-@pytest.mark.slow
-@pytest.mark.sitl
 def test_a_five_second_link_loss_on_real_arducopter_holds_then_lands_on_the_same_roof(
     arducopter: Path, start_rig: Callable[..., Rig]
 ) -> None:
-    """The MAVLink link between real ArduCopter and the companion goes dead for 5 s during the first
-    descent step. The firmware's GUIDED holds the last target (no failsafe of its own: the companion is
-    no ground station); the companion notices the silence, keeps its target, and once the link is back
-    confirms the same site again and lands on it through LAND."""
+    """The product unchanged on real firmware, and a link loss in the middle of it (one flight for both:
+    the suite flies each behaviour once). The companion asks ArduCopter for its telemetry, places every
+    frame with the autopilot's estimate in the autopilot's own frame (EKF origin at the launch point,
+    not the scenario's origin), flies GUIDED targets and descends. The MAVLink link between real
+    ArduCopter and the companion goes dead for 5 s during the first descent step: the firmware's
+    GUIDED holds the last target (no failsafe of its own: the companion is no ground station); the
+    companion notices the silence, keeps its target, and once the link is back confirms the same site
+    again and lands on it through LAND; the firmware disarms; the world grades the touchdown."""
     from tests.test_companion_e2e import _clean_relay, _via
 
     relays: list[Any] = []
@@ -357,7 +335,11 @@ def test_a_five_second_link_loss_on_real_arducopter_holds_then_lands_on_the_same
              "--launch", "12,8", "--speed", "4"],
             mavlink_via=via,
         )  # fmt: skip
-        _wait_event(rig.sim, "ready", 240)
+        ready = _wait_event(rig.sim, "ready", 240)
+        assert ready["autopilot"] == "ardupilot-sitl"
+        home = rig.sim.events("start")[0]["home_ned_m"]
+        assert isinstance(home, list)
+        assert math.hypot(home[0], home[1]) > 5  # the EKF origin is the launch point, not the scenario's
         rig.wait_log("sensor stream connected", timeout_s=60)
         out = rig.alarm_accepted("--reason", "GPS spoofing detected", "--criticality", "high")
         assert out.returncode == 0, out.stdout + out.stderr
@@ -375,6 +357,7 @@ def test_a_five_second_link_loss_on_real_arducopter_holds_then_lands_on_the_same
     assert relays[0].counts["blacked_out"] > 0
     assert "link to the autopilot lost" in log
     assert "link back after" in log
+    _wait_event(rig.sim, "disarmed", 60)
     modes = [e.get("mode") for e in rig.sim.events("mode")]
     assert "LAND" in modes, modes  # the end of the descent is the firmware's LAND
     assert not {"RTL", "SMART_RTL", "BRAKE"} & set(modes), modes  # no failsafe of the firmware's own
