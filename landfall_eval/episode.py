@@ -60,7 +60,6 @@ __all__ = [
     "touchdown_to_site_m",
 ]
 
-ROOT = Path(__file__).resolve().parent.parent
 # resolved once here: the child of a fork runs ``_die_with_parent`` with nothing to import or look up
 _PRCTL = ctypes.CDLL(None, use_errno=True).prctl if sys.platform == "linux" else None
 TRAJECTORY_STEP_S = 1.0  # one trajectory point per simulated second
@@ -250,13 +249,15 @@ def send_alarm(
     udp_port: int, reason: str, criticality: str, deadline: float
 ) -> subprocess.CompletedProcess[str]:
     """``trigger_alarm.py`` to the companion on ``udp_port``, again every 0.5 s until it is accepted or
-    ``deadline`` (monotonic) has passed; the last try's result."""
+    ``deadline`` (monotonic) has passed; the last try's result. Run as ``python -m
+    companion.alarm_cli`` (the module behind the ``trigger_alarm.py`` and ``trigger-alarm`` commands):
+    the same interpreter, from a checkout or an installed wheel alike."""
     cmd = [
-        sys.executable, str(ROOT / "trigger_alarm.py"), "--mavlink", f"udpout:127.0.0.1:{udp_port}",
+        sys.executable, "-m", "companion.alarm_cli", "--mavlink", f"udpout:127.0.0.1:{udp_port}",
         "--reason", reason, "--criticality", criticality,
     ]  # fmt: skip
     while True:  # the first telemetry may still be on its way: "refused for now" until it is in
-        res = subprocess.run(cmd, capture_output=True, text=True, timeout=30, cwd=ROOT)
+        res = subprocess.run(cmd, capture_output=True, text=True, timeout=30)
         if res.returncode == 0 or time.monotonic() > deadline or STOPPING.is_set():
             return res
         time.sleep(0.5)
@@ -408,11 +409,11 @@ def run_episode(
     t_wall = time.monotonic()
     sim_err = (workdir / "simbridge.log").open("wb")
     sim = subprocess.Popen(
-        sim_cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=sim_err, preexec_fn=_die_with_parent
+        sim_cmd, stdout=subprocess.DEVNULL, stderr=sim_err, preexec_fn=_die_with_parent
     )
     with comp_log.open("wb") as fh:
         comp = subprocess.Popen(
-            comp_cmd, cwd=ROOT, env=env, stdout=fh, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent
+            comp_cmd, env=env, stdout=fh, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent
         )
     with _RUNNING_LOCK:
         _RUNNING.update((sim, comp))
