@@ -38,6 +38,17 @@ def build_parser() -> argparse.ArgumentParser:
         "config; the onboard tier always answers when the others cannot",
     )
     p.add_argument("--sensors", metavar="HOST:PORT", help="sensor stream endpoint (simbridge --sensors)")
+    p.add_argument(
+        "--camera",
+        metavar="URL",
+        help="video camera for the image: udp://[HOST]:PORT (RTP/H.264, e.g. udp://:5600), rtsp://..., "
+        "/dev/videoN or a video file (camera.url; needs --camera-info)",
+    )
+    p.add_argument(
+        "--camera-info",
+        metavar="FILE",
+        help="the camera's calibration: ROS camera_info or OpenCV calibration YAML (camera.info)",
+    )
     p.add_argument("--record", type=Path, metavar="DIR", help="keep a flight record of every round here")
     p.add_argument("--log-level", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
     return p
@@ -116,6 +127,20 @@ def _ground_feed(cfg: CompanionConfig) -> GroundFeed | None:
     )
 
 
+def _camera(cfg: CompanionConfig) -> Any:
+    """The video camera of ``[camera]``, its calibration read and its undistortion maps built now: a bad
+    file is an error at start, never a wrong geometry in flight."""
+    c = cfg.camera
+    if c.url is None:
+        return None
+    from companion.camera import CameraStream, mount_rotation, parse_camera_url
+    from landfall_link.camera_info import load_camera_info
+
+    assert c.info is not None  # CameraConfig requires it with a url
+    info = load_camera_info(c.info)
+    return CameraStream(parse_camera_url(c.url), info.undistorter(mount_rotation(*c.mount_rpy_deg)))
+
+
 def build_companion(cfg: CompanionConfig) -> Companion:
     from landfall_link.sensorstream import parse_endpoint
 
@@ -134,6 +159,9 @@ def build_companion(cfg: CompanionConfig) -> Companion:
         sensors=parse_endpoint(cfg.sensors.endpoint),
         frame_timeout_s=cfg.sensors.frame_timeout_s,
         max_frame_age_s=cfg.sensors.max_frame_age_s,
+        camera=_camera(cfg),
+        camera_latency_s=cfg.camera.latency_ms / 1000.0,
+        camera_offset_frd_m=cfg.camera.offset_frd_m,
         reasoner=reasoner,
         params=params_from(cfg),
         record=record,
@@ -155,6 +183,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         for key, value in (
             ("mavlink.url", args.mavlink),
             ("sensors.endpoint", args.sensors),
+            ("camera.url", args.camera),
+            ("camera.info", args.camera_info),
             ("reasoner.name", args.reasoner),
             ("record.dir", args.record),
             ("log.level", args.log_level),

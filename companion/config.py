@@ -1,6 +1,6 @@
 """Daemon configuration: defaults < TOML file < ``LANDFALL_*`` environment < command-line flags.
 
-Every option lives in one section (``[mavlink]``, ``[sensors]``, ``[recovery]``, ``[alarms]``,
+Every option lives in one section (``[mavlink]``, ``[sensors]``, ``[camera]``, ``[recovery]``, ``[alarms]``,
 ``[reasoner]``, ``[record]``, ``[log]``); ``deploy/companion.toml`` lists them all with units and defaults.
 The environment variable for ``section.key`` is ``LANDFALL_<SECTION>_<KEY>`` in upper case, e.g.
 ``LANDFALL_RECOVERY_MAX_ROUNDS=6``. Environment values are text and are parsed to the option's type:
@@ -31,6 +31,7 @@ that names them in errors; a section read apart from the loader's rules would no
 from __future__ import annotations
 
 import logging
+import math
 import re
 import tomllib
 from collections.abc import Mapping
@@ -174,6 +175,44 @@ class SensorsConfig(_Section):
     @classmethod
     def _check_endpoint(cls, endpoint: str) -> str:
         return _host_port(endpoint)
+
+
+class CameraConfig(_Section):
+    """A video camera (``companion --camera URL``, module companion.camera): the image comes from it; a
+    LiDAR stays on the sensor stream, the rangefinder comes from the autopilot's DISTANCE_SENSOR."""
+
+    url: str | None = None  # udp://[HOST]:PORT (RTP/H.264), rtsp://..., /dev/videoN or a video file
+    info: Path | None = Field(default=None, strict=False)  # calibration: ROS camera_info or OpenCV YAML
+    latency_ms: float = Field(default=100.0, ge=0, le=5000)  # capture to decoded, this computer's clock
+    mount_rpy_deg: tuple[float, float, float] = Field(default=(0.0, 0.0, 0.0), strict=False)
+    offset_frd_m: tuple[float, float, float] = Field(default=(0.0, 0.0, 0.0), strict=False)
+
+    @field_validator("url")
+    @classmethod
+    def _check_url(cls, url: str | None) -> str | None:
+        if url is None or url == "":
+            return None
+        from companion.camera import parse_camera_url
+
+        parse_camera_url(url)  # CameraError (a ValueError) says what is wrong
+        return url
+
+    @field_validator("info", mode="before")
+    @classmethod
+    def _empty_is_none(cls, info: object) -> object:
+        return None if info == "" else info
+
+    @model_validator(mode="after")
+    def _needs_calibration(self) -> CameraConfig:
+        if self.url is not None and self.info is None:
+            raise ValueError(
+                "a camera needs its calibration: camera.info (--camera-info FILE), a ROS camera_info or "
+                "OpenCV calibration YAML file"
+            )
+        for name in ("mount_rpy_deg", "offset_frd_m"):
+            if not all(math.isfinite(v) for v in getattr(self, name)):
+                raise ValueError(f"{name} must be finite numbers")
+        return self
 
 
 class _ByCriticality(_Section):
@@ -374,6 +413,7 @@ class CompanionConfig(_Section):
 
     mavlink: MavlinkConfig = MavlinkConfig()
     sensors: SensorsConfig = SensorsConfig()
+    camera: CameraConfig = CameraConfig()
     recovery: RecoveryConfig = RecoveryConfig()
     perception: PerceptionConfig = PerceptionConfig()
     alarms: AlarmsConfig = AlarmsConfig()

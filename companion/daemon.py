@@ -8,12 +8,16 @@ import asyncio
 import contextlib
 import dataclasses
 import logging
+import math
 import time
 from typing import Any
+
+import numpy as np
 
 from companion.alarms import ALARM_TEXT_PREFIX, MAV_CMD_USER_1, Alarm, Criticality, ReasonCode
 from companion.control import VehicleController
 from companion.ground import GroundFeed, TeeRecord, telemetry_snapshot
+from companion.guidance.frames import quat_to_matrix
 from companion.reasoning.base import Reasoner
 from companion.reasoning.cascade import Cascade
 from companion.reasoning.onboard import OnboardReasoner
@@ -56,6 +60,9 @@ class Companion:
         sensors: tuple[str, int] | None = None,
         frame_timeout_s: float = 10.0,
         max_frame_age_s: float = 2.0,
+        camera: Any = None,
+        camera_latency_s: float = 0.0,
+        camera_offset_frd_m: tuple[float, float, float] = (0.0, 0.0, 0.0),
         reasoner: Reasoner | None = None,
         params: RecoveryParams | None = None,
         record: Record | None = None,
@@ -91,6 +98,12 @@ class Companion:
         self._sensors = sensors
         self._frame_timeout_s = frame_timeout_s
         self._max_frame_age_s = max_frame_age_s
+        # a video camera (companion.camera.CameraStream): the image comes from it, the LiDAR (if any)
+        # from the sensor stream, each placed with the autopilot's pose at its own capture time
+        self._camera = camera
+        self._camera_latency_s = camera_latency_s
+        self._camera_offset = np.asarray(camera_offset_frd_m, dtype=np.float64)
+        self._camera_frames_used = 0
         self._watch_battery_pct = watch_battery_pct
         self._watch_failsafe = watch_failsafe_text
         self._watch_gps = watch_gps
@@ -194,8 +207,9 @@ class Companion:
         if s.on_ground:
             self.log.warning("alarm %r refused: the vehicle is not flying", alarm.reason)
             return RESULT_DENIED
-        if self._client is None:
-            self.log.warning("alarm %r refused: no sensor stream", alarm.reason)
+        if self._client is None and (self._camera is None or self._camera.latest() is None):
+            self.log.warning("alarm %r refused: no sensor stream%s", alarm.reason,
+                             "" if self._camera is None else " and no camera frame yet")  # fmt: skip
             return RESULT_TEMP_REJECTED
         self.recovery = Recovery(
             alarm,
@@ -244,6 +258,8 @@ class Companion:
         """A fresh frame for the recovery, or ``FrameUnavailable`` saying why there is none."""
         from landfall_link.sensorstream import SensorStreamError
 
+        if self._camera is not None:
+            return await self._camera_frame()
         if self._client is None:
             raise FrameUnavailable("sensor stream not connected")
         try:
@@ -256,6 +272,88 @@ class Companion:
                 f"frame captured {age_s:.1f} s ago (sensors.max_frame_age_s {self._max_frame_age_s:g})"
             )
         return await self._posed(frame)
+
+    async def _camera_frame(self) -> Any:
+        """The newest video frame, its capture time on the autopilot's clock (the moment it was decoded,
+        on the autopilot's clock fitted from telemetry, less the stream's latency), the LiDAR sweep from
+        the sensor stream when there is one (re-expressed in the body frame at the image's capture), the
+        downward rangefinder from the autopilot's DISTANCE_SENSOR (or the sweep's); placed with the
+        autopilot's pose at the capture time, the camera's offset from the body origin applied."""
+        from landfall_link.sensorstream import SensorFrame, SensorStreamError
+
+        cam = self._camera
+        video = cam.latest()
+        if video is None:
+            why = f" ({cam.last_error})" if cam.last_error else ""
+            raise FrameUnavailable(f"no camera frame yet from {cam.spec.url}{why}")
+        boot = self.tm.clock.boot_at(video.decoded_s)
+        rate = self.tm.clock.rate
+        if boot is None or rate is None:
+            raise FrameUnavailable("the autopilot's clock is not known yet (too little telemetry)")
+        t_cap = boot - self._camera_latency_s * rate
+        age_s = self.tm.state.t_boot_s - t_cap
+        if age_s > self._max_frame_age_s:
+            raise FrameUnavailable(
+                f"newest camera frame captured {age_s:.1f} s ago (sensors.max_frame_age_s "
+                f"{self._max_frame_age_s:g}){f'; {cam.last_error}' if cam.last_error else ''}"
+            )
+        lidar, sweep_range = None, math.nan
+        if self._client is not None:
+            try:
+                sweep = await self._client.frame(want=("lidar",))
+            except SensorStreamError as exc:
+                self.log.warning("camera frame without LiDAR: %s", exc)
+            else:
+                lidar = self._lidar_at(sweep, t_cap)
+                sweep_range = sweep.rangefinder_m
+        fresh = self.tm.age_s("rangefinder") < 1.0 and math.isfinite(self.tm.state.rangefinder_m)
+        rangefinder = self.tm.state.rangefinder_m if fresh else sweep_range
+        if not math.isfinite(rangefinder):
+            raise FrameUnavailable(
+                "no distance to the ground for the camera frame: no downward DISTANCE_SENSOR from the "
+                "autopilot and no LiDAR sweep"
+            )
+        u = cam.intrinsics
+        frame = SensorFrame(
+            t_s=t_cap, time_boot_ms=max(0, round(t_cap * 1000)), pos_ned_m=(0.0, 0.0, 0.0),
+            quat_wxyz=(1.0, 0.0, 0.0, 0.0), rangefinder_m=rangefinder, image_rgb=video.image_rgb,
+            depth_m=None, lidar_frd=lidar, fx=u.fx, fy=u.fy, cx=u.cx, cy=u.cy, width=u.width,
+            height=u.height, weather="clear",  # the simulator's field: nothing in the companion reads it
+        )  # fmt: skip
+        posed = await self._posed(frame)
+        if self._camera_offset.any():  # the camera's centre, not the body origin, is where the view is from
+            r = quat_to_matrix(posed.quat_wxyz)
+            pos = tuple(float(v) for v in np.asarray(posed.pos_ned_m) + r @ self._camera_offset)
+            pts = posed.lidar_frd
+            if pts is not None:
+                pts = pts.copy()
+                pts[:, :3] -= self._camera_offset.astype(pts.dtype)
+            posed = dataclasses.replace(posed, pos_ned_m=pos, lidar_frd=pts)
+        self._camera_frames_used += 1
+        if self.record is not None:
+            self.record.record_event("camera_frame", {
+                "frame_seq": video.seq, "pts_s": video.pts_s, "decoded_s": round(video.decoded_s, 4),
+                "capture_boot_s": round(t_cap, 4),
+                "clock_rate": round(rate, 5), "latency_s": self._camera_latency_s,
+                "age_s": round(age_s, 3), "lidar": lidar is not None,
+            })  # fmt: skip
+        return posed
+
+    def _lidar_at(self, sweep: Any, t_cap: float) -> Any:
+        """The sweep's points (body FRD at the sweep's capture) in the body frame at ``t_cap``, by the
+        autopilot's poses at both times; as they are when either pose is unknown."""
+        pts = sweep.lidar_frd
+        if pts is None:
+            return None
+        then, now = self.tm.poses.at(sweep.time_boot_ms / 1000.0), self.tm.poses.at(t_cap)
+        if then is None or now is None:
+            return pts
+        r_then, r_now = quat_to_matrix(then.quat_wxyz), quat_to_matrix(now.quat_wxyz)
+        shift = np.asarray(then.pos_ned_m) - np.asarray(now.pos_ned_m)
+        out = np.array(pts, dtype=np.float32, copy=True)
+        world = pts[:, :3].astype(np.float64) @ r_then.T + shift
+        out[:, :3] = world @ r_now
+        return out
 
     async def _posed(self, frame: Any) -> Any:
         """The frame placed with the autopilot's estimate at its capture time (module telemetry):
@@ -384,6 +482,9 @@ class Companion:
             ]
             if self._sensors is not None:
                 tasks.append(asyncio.create_task(self._connect_sensors(stack, SensorClient), name="sensors"))
+            if self._camera is not None:
+                self._camera.start()
+                stack.callback(self._camera.close)
             if self._resume_alarm is not None:
                 tasks.append(asyncio.create_task(self._resume(self._resume_alarm), name="resume"))
             if self.ground is not None:

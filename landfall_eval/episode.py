@@ -408,9 +408,7 @@ def run_episode(
     }
     t_wall = time.monotonic()
     sim_err = (workdir / "simbridge.log").open("wb")
-    sim = subprocess.Popen(
-        sim_cmd, stdout=subprocess.DEVNULL, stderr=sim_err, preexec_fn=_die_with_parent
-    )
+    sim = subprocess.Popen(sim_cmd, stdout=subprocess.DEVNULL, stderr=sim_err, preexec_fn=_die_with_parent)
     with comp_log.open("wb") as fh:
         comp = subprocess.Popen(
             comp_cmd, env=env, stdout=fh, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent

@@ -90,6 +90,24 @@ def build_parser() -> argparse.ArgumentParser:
         help="serve camera/LiDAR/rangefinder frames on this TCP endpoint (docs/sensor-stream.md)",
     )
     p.add_argument(
+        "--camera-stream",
+        metavar="udp://HOST:PORT",
+        help="also send the camera as H.264 over RTP to this UDP endpoint, as Gazebo cameras do "
+        "(companion --camera udp://:PORT); the emulated autopilots only",
+    )
+    p.add_argument(
+        "--camera-fps",
+        type=float,
+        default=5.0,
+        help="--camera-stream frames per simulated second (default 5)",
+    )
+    p.add_argument(
+        "--camera-info-out",
+        type=Path,
+        metavar="FILE",
+        help="write the camera's calibration as a ROS camera_info YAML (companion --camera-info)",
+    )
+    p.add_argument(
         "--launch",
         type=_launch,
         metavar="N,E[,HEIGHT]",
@@ -183,6 +201,11 @@ def config_from_args(args: argparse.Namespace) -> SimConfig:
             sensors = parse_endpoint(args.sensors)
         except ValueError as exc:
             raise ValueError(f"--sensors: {exc}") from None
+    camera_stream = None
+    if args.camera_stream:
+        from simbridge.camera_stream import parse_stream_url
+
+        camera_stream = parse_stream_url(args.camera_stream)
     origin = GeoOrigin(*args.home) if args.home else GeoOrigin()
     if args.gusts < 0:
         raise ValueError(f"--gusts must be >= 0, got {args.gusts}")
@@ -207,6 +230,9 @@ def config_from_args(args: argparse.Namespace) -> SimConfig:
         px4=args.px4,
         ekf_error=args.ekf_error,
         battery_pct=args.battery,
+        camera_stream=camera_stream,
+        camera_fps=args.camera_fps,
+        camera_info_out=args.camera_info_out,
     )
 
 

@@ -12,6 +12,7 @@ import math
 import os
 from collections.abc import Iterator
 from dataclasses import dataclass
+from pathlib import Path
 
 import jsbsim
 
@@ -81,8 +82,11 @@ class F450Physics:
         self.origin = origin
         self.terrain = terrain
         self.wind = wind
+        # the data beside the module that is imported (jsbsim's own default looks in the interpreter's
+        # site-packages folders only, which misses an install on PYTHONPATH or in another environment)
+        root = Path(jsbsim.__file__).parent
         with _quiet_fds():
-            fdm = jsbsim.FGFDMExec(None)
+            fdm = jsbsim.FGFDMExec(str(root) if (root / "aircraft").is_dir() else None)
             fdm.set_debug_level(0)
             if not fdm.load_model("F450"):
                 raise RuntimeError("JSBSim could not load its bundled F450 model")

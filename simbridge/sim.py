@@ -57,6 +57,9 @@ class SimConfig:
     px4: str | None = None  # PX4 SITL binary (autopilot "px4-sitl"; default: simbridge.px4_sitl.find_px4)
     ekf_error: str = "off"  # the emulation's estimator errors (simbridge.estimate.PRESETS)
     battery_pct: float = 100.0  # the pack's charge at the start (a low-battery alarm's flight)
+    camera_stream: tuple[str, int] | None = None  # send the camera as H.264 over RTP to this UDP endpoint
+    camera_fps: float = 5.0  # the stream's frames per simulated second
+    camera_info_out: Path | None = None  # write the camera's calibration (ROS camera_info YAML) here
 
     def __post_init__(self) -> None:
         if not 0.0 < self.battery_pct <= 100.0:
@@ -68,6 +71,14 @@ class SimConfig:
             name = self.autopilot
             if self.battery_pct != 100.0:
                 raise ValueError("--battery: real firmware simulates its own battery (leave it at 100)")
+            if self.camera_stream is not None:
+                raise ValueError(
+                    f"--camera-stream: with the emulated autopilots (px4, ardupilot) only, not {name} yet"
+                )
+        if not 0.2 <= self.camera_fps <= 30.0:
+            raise ValueError(
+                f"--camera-fps must be in [0.2, 30] frames per simulated second, got {self.camera_fps}"
+            )
             if self.ekf_error != "off":
                 raise ValueError("--ekf-error: real firmware has its own estimator (leave it off)")
             if self.signing_key is not None:
@@ -214,13 +225,84 @@ class SimBridge:
             with contextlib.suppress(NotImplementedError, RuntimeError):  # not the main thread
                 loop.add_signal_handler(sig, self._stop.set)
         cfg = self.config
-        if cfg.sensors is not None:
+        if cfg.camera_info_out is not None:
+            self.write_camera_info(cfg.camera_info_out)
+        if cfg.sensors is not None or cfg.camera_stream is not None:
             self._warm_up_sensors()
         async with contextlib.AsyncExitStack() as stack:
             await stack.enter_async_context(self.link)
             if cfg.sensors is not None:
                 await stack.enter_async_context(self._sensor_server(*cfg.sensors))
+            if cfg.camera_stream is not None:
+                task = asyncio.create_task(self._stream_camera(*cfg.camera_stream), name="camera-stream")
+                stack.push_async_callback(_cancelled, task)
             await self._loop(loop)
+
+    def _live_world(self, flag: str) -> Any:
+        from simbridge.world.live import LiveWorld
+
+        terrain = self.scenario.terrain
+        if not isinstance(terrain, LiveWorld):
+            raise ValueError(f"{flag} needs a world with a camera; scenario {self.scenario.name!r} has none")
+        return terrain
+
+    def write_camera_info(self, path: Path) -> None:
+        """The camera's calibration as a ROS camera_info YAML (an ideal pinhole: no distortion)."""
+        from landfall_link.camera_info import CameraInfo
+
+        cam = self._live_world("--camera-info-out").camera
+        cx, cy = cam.principal_px
+        info = CameraInfo.pinhole(
+            cam.width_px, cam.height_px, cam.focal_px, cam.focal_px, cx, cy, "simbridge"
+        )
+        path.write_text(info.to_ros_yaml())
+        self.log.info("camera calibration written to %s", path)
+
+    async def _stream_camera(self, host: str, port: int) -> None:
+        """Render the camera every 1 / camera_fps simulated seconds at the vehicle's pose then and send it
+        (simbridge.camera_stream); a frame that would fall behind is skipped, not queued."""
+        from simbridge.camera_stream import CameraStreamer
+
+        world = self._live_world("--camera-stream")
+        cam = world.camera
+        fps = self.config.camera_fps
+        loop = asyncio.get_running_loop()
+        streamer = await loop.run_in_executor(
+            None, CameraStreamer, host, port, cam.width_px, cam.height_px, fps
+        )
+        self.log.info(
+            "camera: H.264 over RTP to udp://%s:%d, %g frames per simulated second", host, port, fps
+        )
+        rng = np.random.default_rng(
+            self.config.seed + 2
+        )  # its own: the sensor stream's noise stays as seeded
+        weather = self.config.weather
+        period = 1.0 / fps
+        index, next_t = 0, self.vehicle.state.t_s
+        try:
+            while not self._stop.is_set():
+                wait = (next_t - self.vehicle.state.t_s) / self.config.speed
+                if wait > 0:
+                    await asyncio.sleep(wait)
+                    continue
+                s = self.vehicle.state
+                stamp = self.time_boot_ms(s.t_s)
+
+                def render_and_send(s: Any = s, index: int = index) -> float:
+                    frame = world.camera_frame(s.pos_ned_m, s.quat, s.t_s, weather, rng)
+                    streamer.send(frame.rgb, index * period)
+                    return time.monotonic()
+
+                sent = await loop.run_in_executor(None, render_and_send)
+                self.episode.event(s.t_s, "camera_frame", {
+                    "index": index, "pts_s": round(index * period, 4), "time_boot_ms": stamp,
+                    "pos_ned_m": [round(v, 4) for v in s.pos_ned_m],
+                    "quat_wxyz": [round(v, 6) for v in s.quat], "sent_monotonic_s": round(sent, 4),
+                })  # fmt: skip
+                index += 1
+                next_t = max(next_t + period, self.vehicle.state.t_s)
+        finally:
+            await loop.run_in_executor(None, streamer.close)
 
     def _warm_up_sensors(self) -> None:
         """Render one camera frame and one sweep before the link opens. The ray caster and the shader
@@ -243,13 +325,8 @@ class SimBridge:
 
     def _sensor_server(self, host: str, port: int) -> contextlib.AbstractAsyncContextManager[object]:
         from landfall_link.sensorstream import SensorStreamServer
-        from simbridge.world.live import LiveWorld
 
-        terrain = self.scenario.terrain
-        if not isinstance(terrain, LiveWorld):
-            raise ValueError(
-                f"--sensors needs a world with a camera; scenario {self.scenario.name!r} has none"
-            )
+        terrain = self._live_world("--sensors")
         cam, lidar = terrain.camera, terrain.lidar
         info = {
             "simulator": "simbridge", "scenario": self.scenario.name, "weather": self.config.weather,
@@ -364,3 +441,9 @@ class SimBridge:
                 self.vehicle.state.t_s / max(self.wall_elapsed_s, 1e-9),
                 st,
             )
+
+
+async def _cancelled(task: asyncio.Task[Any]) -> None:
+    task.cancel()
+    with contextlib.suppress(asyncio.CancelledError):
+        await task

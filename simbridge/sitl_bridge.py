@@ -198,6 +198,8 @@ class FirmwareBridge(SimBridge):
             with contextlib.suppress(NotImplementedError, RuntimeError):
                 loop.add_signal_handler(sig, self._stop.set)
         cfg = self.config
+        if cfg.camera_info_out is not None:
+            self.write_camera_info(cfg.camera_info_out)
         if cfg.sensors is not None:
             self._warm_up_sensors()
         self.vehicle_t0_s = self.vehicle.state.t_s

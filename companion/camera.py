@@ -1,0 +1,254 @@
+"""A video camera as the companion's eyes: ``companion --camera URL`` (configuration ``[camera]``).
+
+What a real vehicle's camera sends, decoded by FFmpeg through PyAV (the ``camera`` extra) or, for a
+V4L2 device, by OpenCV:
+
+- ``udp://[HOST]:PORT``: H.264 over RTP on UDP (payload type 96), what PX4's and ArduPilot's Gazebo
+  cameras, many gimbal cameras and QGroundControl use (port 5600 by convention; ``HOST`` is the address
+  to listen on, any when left out). FFmpeg reads raw RTP through a session description, which is written
+  for the port given.
+- ``rtsp://...``: an IP camera or gimbal (RTP over TCP, the most robust over a radio link).
+- ``/dev/videoN``: a V4L2 device on the onboard computer.
+- any other path: a video file, replayed at its own frame rate (for tests and replays).
+
+A thread decodes; the newest frame is kept with the moment it was decoded (this computer's monotonic
+clock). The daemon maps that moment to the autopilot's boot clock (``companion.telemetry.BootClock``)
+and subtracts the stream's latency (``camera.latency_ms``) to get the capture time, then takes the
+autopilot's pose at that time, as for the sensor stream. A stream that stops or cannot be opened is
+logged and opened again every second; frames then grow old and are refused by age, as sensor frames are.
+
+Lens distortion and the camera's mounting come from a calibration file (``camera.info``:
+:mod:`landfall_link.camera_info`) and the configuration; each frame is undistorted and turned to the
+nominal nadir view (image top toward the nose) in one remap before anything reads it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+import re
+import tempfile
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["CameraError", "CameraSpec", "CameraStream", "VideoFrame", "mount_rotation", "parse_camera_url"]
+
+REOPEN_S = 1.0
+READ_TIMEOUT_S = 5.0
+RTP_PAYLOAD_TYPE = 96
+
+
+class CameraError(ValueError):
+    """A camera URL or set-up that cannot be used (at start)."""
+
+
+@dataclass(frozen=True, slots=True)
+class CameraSpec:
+    """A parsed ``--camera`` URL. ``kind``: ``rtp``, ``rtsp``, ``v4l2`` or ``file``."""
+
+    kind: str
+    url: str
+    host: str = ""
+    port: int = 0
+
+
+def parse_camera_url(text: str) -> CameraSpec:
+    """``udp://[HOST]:PORT``, ``rtsp://...``, ``/dev/videoN`` or a video file; a clear error otherwise."""
+    text = text.strip()
+    if text.startswith("udp://"):
+        m = re.fullmatch(r"udp://(?:\[?([^\]/@]*?)\]?)?:(\d{1,5})/?", text)
+        if m is None or not 1 <= int(m.group(2)) <= 65535:
+            raise CameraError(f"camera {text!r}: expected udp://[HOST]:PORT (RTP/H.264), e.g. udp://:5600")
+        return CameraSpec("rtp", text, m.group(1) or "0.0.0.0", int(m.group(2)))
+    if text.startswith(("rtsp://", "rtsps://")):
+        if len(text.split("://", 1)[1]) < 1:
+            raise CameraError(f"camera {text!r}: expected rtsp://HOST[:PORT]/PATH")
+        return CameraSpec("rtsp", text)
+    if re.fullmatch(r"/dev/video\d+", text):
+        return CameraSpec("v4l2", text)
+    if "://" in text:
+        raise CameraError(
+            f"camera {text!r}: unsupported scheme; use udp://[HOST]:PORT (RTP/H.264), rtsp://..., "
+            "/dev/videoN or a video file"
+        )
+    if not Path(text).is_file():
+        raise CameraError(f"camera {text!r}: no such video file (or use udp://, rtsp:// or /dev/videoN)")
+    return CameraSpec("file", text)
+
+
+def mount_rotation(roll_deg: float, pitch_deg: float, yaw_deg: float) -> np.ndarray:
+    """The rotation (3, 3) that turns a raw image into the nominal nadir view, for a camera mounted turned
+    by roll, pitch and yaw (ZYX, about the body's axes) from the nominal mount (looking down the body's
+    +z axis, image top toward the nose): ``cv2.initUndistortRectifyMap``'s ``R``."""
+    from companion.guidance.frames import CAMERA_TO_BODY
+
+    r, p, y = (math.radians(v) for v in (roll_deg, pitch_deg, yaw_deg))
+    rx = np.array([[1, 0, 0], [0, math.cos(r), -math.sin(r)], [0, math.sin(r), math.cos(r)]])
+    ry = np.array([[math.cos(p), 0, math.sin(p)], [0, 1, 0], [-math.sin(p), 0, math.cos(p)]])
+    rz = np.array([[math.cos(y), -math.sin(y), 0], [math.sin(y), math.cos(y), 0], [0, 0, 1]])
+    turned = rz @ ry @ rx  # the mounted camera's axes from the nominal ones, in body FRD
+    out: np.ndarray = CAMERA_TO_BODY.T @ turned @ CAMERA_TO_BODY
+    return out
+
+
+@dataclass(frozen=True, slots=True)
+class VideoFrame:
+    """One decoded, undistorted frame.
+
+    Attributes:
+        image_rgb: (H, W, 3) uint8, the nominal nadir view.
+        decoded_s: this computer's monotonic clock when it was decoded.
+        seq: frames decoded since start (1 = the first).
+        pts_s: the stream's presentation time of the frame (the sender's clock, for the record), or None.
+    """
+
+    image_rgb: np.ndarray
+    decoded_s: float
+    seq: int
+    pts_s: float | None
+
+
+def _sdp(host: str, port: int) -> str:
+    """A session description for H.264 in RTP on ``port``, as FFmpeg needs to read raw RTP."""
+    addr = "0.0.0.0" if host in ("", "0.0.0.0") else host
+    return (
+        "v=0\n"
+        f"o=- 0 0 IN IP4 {addr}\n"
+        "s=Landfall camera\n"
+        f"c=IN IP4 {addr}\n"
+        "t=0 0\n"
+        f"m=video {port} RTP/AVP {RTP_PAYLOAD_TYPE}\n"
+        f"a=rtpmap:{RTP_PAYLOAD_TYPE} H264/90000\n"
+        f"a=fmtp:{RTP_PAYLOAD_TYPE} packetization-mode=1\n"
+    )
+
+
+class CameraStream:
+    """Decodes ``spec`` in a thread and keeps the newest frame (:meth:`latest`)."""
+
+    def __init__(self, spec: CameraSpec, undistort: Any, log: logging.Logger | None = None) -> None:
+        """``undistort``: a :class:`landfall_link.camera_info.Undistorter`; its intrinsics are the frames'."""
+        if spec.kind != "v4l2":
+            try:
+                import av  # noqa: F401
+            except ImportError:
+                raise CameraError(
+                    f"camera {spec.url}: decoding video needs PyAV: pip install 'landfall[camera]'"
+                ) from None
+        self.spec = spec
+        self._undistort = undistort
+        self.intrinsics = undistort  # fx, fy, cx, cy, width, height of every frame handed out
+        self.log = log or logging.getLogger("companion.camera")
+        self._latest: VideoFrame | None = None
+        self._lock = threading.Lock()
+        self._closed = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.frames = 0
+        self.errors = 0
+        self.last_error: str | None = None
+        self._tmp: tempfile.TemporaryDirectory[str] | None = None
+
+    def start(self) -> None:
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._run, name="camera", daemon=True)
+            self._thread.start()
+
+    def close(self) -> None:
+        self._closed.set()
+        if self._thread is not None:
+            self._thread.join(READ_TIMEOUT_S + 1.0)
+        if self._tmp is not None:
+            self._tmp.cleanup()
+
+    def latest(self) -> VideoFrame | None:
+        with self._lock:
+            return self._latest
+
+    def _publish(self, rgb: np.ndarray, pts_s: float | None) -> None:
+        image = self._undistort(rgb)
+        image.flags.writeable = False
+        with self._lock:
+            self.frames += 1
+            self._latest = VideoFrame(image, time.monotonic(), self.frames, pts_s)
+        if self.frames == 1:
+            self.log.info("camera: first frame from %s (%d x %d)", self.spec.url, rgb.shape[1], rgb.shape[0])
+
+    def _run(self) -> None:
+        failing = False
+        while not self._closed.is_set():
+            try:
+                if self.spec.kind == "v4l2":
+                    self._read_v4l2()
+                else:
+                    self._read_av()
+                if self.spec.kind == "file":
+                    self.log.info("camera: end of %s after %d frames", self.spec.url, self.frames)
+                    return
+            except Exception as exc:  # a decoder or network error: say it once, open the stream again
+                self.errors += 1
+                self.last_error = f"{type(exc).__name__}: {exc}"
+                if not failing:
+                    self.log.warning(
+                        "camera %s: %s; opening it again every %g s", self.spec.url, exc, REOPEN_S
+                    )
+                failing = True
+            else:
+                failing = False
+            self._closed.wait(REOPEN_S)
+
+    def _open_av(self) -> Any:
+        import av
+
+        if self.spec.kind == "rtp":
+            if self._tmp is None:
+                self._tmp = tempfile.TemporaryDirectory(prefix="landfall-camera-")
+            sdp = Path(self._tmp.name) / "camera.sdp"
+            sdp.write_text(_sdp(self.spec.host, self.spec.port))
+            options = {"protocol_whitelist": "file,udp,rtp", "fflags": "nobuffer", "flags": "low_delay",
+                       "reorder_queue_size": "0"}  # fmt: skip
+            return av.open(str(sdp), format="sdp", options=options, timeout=(READ_TIMEOUT_S, READ_TIMEOUT_S))
+        if self.spec.kind == "rtsp":
+            options = {"rtsp_transport": "tcp", "fflags": "nobuffer", "flags": "low_delay"}
+            return av.open(self.spec.url, options=options, timeout=(READ_TIMEOUT_S, READ_TIMEOUT_S))
+        return av.open(self.spec.url)
+
+    def _read_av(self) -> None:
+        container = self._open_av()
+        try:
+            stream = container.streams.video[0]
+            stream.thread_type = "AUTO"
+            t0: float | None = None
+            for frame in container.decode(stream):
+                if self._closed.is_set():
+                    return
+                pts_s = (
+                    float(frame.pts * frame.time_base) if frame.pts is not None and frame.time_base else None
+                )
+                if self.spec.kind == "file" and pts_s is not None:  # replay at the file's own rate
+                    t0 = time.monotonic() - pts_s if t0 is None else t0
+                    self._closed.wait(max(0.0, t0 + pts_s - time.monotonic()))
+                self._publish(frame.to_ndarray(format="rgb24"), pts_s)
+        finally:
+            with contextlib.suppress(Exception):
+                container.close()
+
+    def _read_v4l2(self) -> None:
+        import cv2
+
+        cap = cv2.VideoCapture(self.spec.url, cv2.CAP_V4L2)
+        try:
+            if not cap.isOpened():
+                raise OSError(f"cannot open {self.spec.url} as a V4L2 camera")
+            while not self._closed.is_set():
+                ok, bgr = cap.read()
+                if not ok:
+                    raise OSError(f"{self.spec.url} stopped giving frames")
+                self._publish(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), None)
+        finally:
+            cap.release()

@@ -1,0 +1,131 @@
+"""The companion's video camera input (issue 34): URLs, the mount rotation, a video file replayed through
+the decoder thread, the autopilot's clock fitted from telemetry."""
+
+from __future__ import annotations
+
+import fractions
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from companion.camera import CameraError, CameraStream, mount_rotation, parse_camera_url
+from companion.guidance.frames import CAMERA_TO_BODY
+from companion.telemetry import BootClock
+from landfall_link.camera_info import CameraInfo
+
+
+@pytest.mark.parametrize(
+    ("url", "kind", "host", "port"),
+    [("udp://:5600", "rtp", "0.0.0.0", 5600), ("udp://127.0.0.1:5601", "rtp", "127.0.0.1", 5601),
+     ("rtsp://192.168.1.10:8554/main", "rtsp", "", 0), ("/dev/video2", "v4l2", "", 0)],
+)  # fmt: skip
+def test_camera_urls_are_parsed(url: str, kind: str, host: str, port: int) -> None:
+    spec = parse_camera_url(url)
+    assert (spec.kind, spec.host, spec.port) == (kind, host, port)
+
+
+@pytest.mark.parametrize(
+    ("url", "says"),
+    [("udp://:0", "expected udp://[HOST]:PORT"), ("udp://host", "expected udp://[HOST]:PORT"),
+     ("http://cam/stream.mjpg", "unsupported scheme"), ("/no/such/video.mp4", "no such video file")],
+)  # fmt: skip
+def test_bad_camera_urls_are_refused_saying_why(url: str, says: str) -> None:
+    with pytest.raises(CameraError, match=says.replace("[", r"\[").replace("]", r"\]")):
+        parse_camera_url(url)
+
+
+def test_the_mount_rotation_turns_a_rotated_view_back_to_the_nominal_one() -> None:
+    """A camera mounted yawed 90 degrees right: a point ahead of the vehicle appears on its image's
+    left; turned back, it sits toward the image top, where the nominal mount shows it."""
+    r = mount_rotation(0.0, 0.0, 90.0)
+    assert np.allclose(r @ r.T, np.eye(3))
+    ahead_body = np.array([1.0, 0.0, 1.0])  # ahead and below
+    yaw90 = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    raw_cam = (yaw90 @ CAMERA_TO_BODY).T @ ahead_body  # in the mounted camera's axes
+    assert raw_cam[0] < 0  # left of its image centre
+    nominal = r @ raw_cam
+    assert np.allclose(nominal, CAMERA_TO_BODY.T @ ahead_body)  # the nominal camera's view
+    assert nominal[1] < 0  # toward the image top
+    assert np.allclose(mount_rotation(0.0, 0.0, 0.0), np.eye(3))
+
+
+def _video(path: Path, frames: int, fps: int) -> None:
+    import av
+
+    with av.open(str(path), mode="w") as out:
+        stream = out.add_stream("libx264", rate=fps)
+        stream.width, stream.height, stream.pix_fmt = 64, 48, "yuv420p"
+        stream.codec_context.time_base = fractions.Fraction(1, fps)
+        for i in range(frames):
+            rgb = np.zeros((48, 64, 3), np.uint8)
+            rgb[:, : 8 * (i + 1)] = 200  # a bar growing to the right, one step a frame
+            frame = av.VideoFrame.from_ndarray(rgb, format="rgb24")
+            frame.pts = i
+            for packet in stream.encode(frame):
+                out.mux(packet)
+        for packet in stream.encode():
+            out.mux(packet)
+
+
+def test_a_video_file_is_replayed_at_its_own_rate_and_undistorted(tmp_path: Path) -> None:
+    pytest.importorskip("av", reason="the camera extra: pip install 'landfall[camera]'")
+    path = tmp_path / "clip.mp4"
+    _video(path, frames=8, fps=20)
+    und = CameraInfo.pinhole(64, 48, 50.0, 50.0, 32.0, 24.0).undistorter()
+    cam = CameraStream(parse_camera_url(str(path)), und)
+    t0 = time.monotonic()
+    cam.start()
+    deadline = time.monotonic() + 20
+    seen = []
+    while time.monotonic() < deadline:
+        f = cam.latest()
+        if f is not None and (not seen or f.seq != seen[-1].seq):
+            seen.append(f)
+        if f is not None and f.seq == 8:
+            break
+        time.sleep(0.005)
+    cam.close()
+    assert seen[-1].seq == 8, [f.seq for f in seen]
+    assert seen[-1].decoded_s - t0 >= 0.3  # 8 frames at 20 fps: 0.35 s of video, not all at once
+    last = seen[-1]
+    assert last.image_rgb.shape == (48, 64, 3)
+    assert not last.image_rgb.flags.writeable
+    assert last.pts_s == pytest.approx(7 / 20)
+    assert int(last.image_rgb[24, 60].mean()) > 150  # the bar reached the right edge
+    assert (cam.intrinsics.fx, cam.intrinsics.cx) == (50.0, 32.0)
+    assert cam.errors == 0
+
+
+def test_a_stream_that_cannot_be_opened_is_retried_and_its_error_kept(tmp_path: Path) -> None:
+    pytest.importorskip("av", reason="the camera extra: pip install 'landfall[camera]'")
+    path = tmp_path / "not-a-video.mp4"
+    path.write_bytes(b"\x00" * 1000)
+    cam = CameraStream(parse_camera_url(str(path)), CameraInfo.pinhole(64, 48, 50, 50, 32, 24).undistorter())
+    cam.start()
+    deadline = time.monotonic() + 10
+    while cam.errors == 0 and time.monotonic() < deadline:
+        time.sleep(0.01)
+    cam.close()
+    assert cam.latest() is None
+    assert cam.errors >= 1
+    assert cam.last_error
+
+
+def test_the_boot_clock_follows_a_sped_up_autopilot_through_jittery_arrivals() -> None:
+    """Arrivals 0-30 ms late (jitter), an autopilot clock running 4x this computer's (the simulator at
+    --speed 4): the fitted clock is within the least delay of the truth, and a reboot starts it again."""
+    clock = BootClock()
+    assert clock.boot_at(1.0) is None
+    rng = np.random.default_rng(0)
+    for k in range(200):
+        mono = 100.0 + 0.05 * k
+        boot = 4.0 * (mono - 100.0) + 7.0
+        clock.add(mono + rng.uniform(0.0, 0.03), boot)
+    assert clock.rate == pytest.approx(4.0, rel=0.01)
+    at = clock.boot_at(109.0)
+    assert at is not None
+    assert at == pytest.approx(4.0 * 9.0 + 7.0, abs=0.05)
+    clock.add(111.0, 0.5)  # rebooted
+    assert clock.boot_at(111.0) is None
