@@ -40,6 +40,11 @@ import numpy as np
 __all__ = ["CameraError", "CameraSpec", "CameraStream", "VideoFrame", "mount_rotation", "parse_camera_url"]
 
 REOPEN_S = 1.0
+# A live stream, decoded for the newest frame: no input buffering, and a start without seconds of probing.
+# FFmpeg's H.264 parser still holds each frame until the next one starts (it finds the end of an access
+# unit there): one frame period, which the daemon takes off the frame's time (``decode_delay_s``). Without
+# the parser a frame of several slices comes out in pieces (tried: grey-green frames read as vegetation).
+LIVE_OPTIONS = {"fflags": "nobuffer", "flags": "low_delay", "analyzeduration": "0", "probesize": "32"}
 READ_TIMEOUT_S = 5.0
 RTP_PAYLOAD_TYPE = 96
 
@@ -150,6 +155,7 @@ class CameraStream:
         self._closed = threading.Event()
         self._thread: threading.Thread | None = None
         self.frames = 0
+        self._pts_steps: list[float] = []  # the last presentation-time steps between frames
         self.errors = 0
         self.last_error: str | None = None
         self._tmp: tempfile.TemporaryDirectory[str] | None = None
@@ -170,10 +176,30 @@ class CameraStream:
         with self._lock:
             return self._latest
 
+    @property
+    def decode_delay_s(self) -> float | None:
+        """How long before its decoding a live frame was whole, on the stream's clock: one frame interval
+        (the median step of the presentation times), which the H.264 parser holds each frame for; None
+        until two frames with presentation times have come; 0 for a file (replayed by its own times)
+        and a V4L2 device."""
+        if self.spec.kind not in ("rtp", "rtsp"):
+            return 0.0
+        with self._lock:
+            steps = sorted(self._pts_steps)
+        return steps[len(steps) // 2] if steps else None
+
     def _publish(self, rgb: np.ndarray, pts_s: float | None) -> None:
         image = self._undistort(rgb)
         image.flags.writeable = False
         with self._lock:
+            last = self._latest
+            if (
+                last is not None
+                and last.pts_s is not None
+                and pts_s is not None
+                and 0 < pts_s - last.pts_s < 5
+            ):
+                self._pts_steps = [*self._pts_steps[-9:], pts_s - last.pts_s]
             self.frames += 1
             self._latest = VideoFrame(image, time.monotonic(), self.frames, pts_s)
         if self.frames == 1:
@@ -210,19 +236,28 @@ class CameraStream:
                 self._tmp = tempfile.TemporaryDirectory(prefix="landfall-camera-")
             sdp = Path(self._tmp.name) / "camera.sdp"
             sdp.write_text(_sdp(self.spec.host, self.spec.port))
-            options = {"protocol_whitelist": "file,udp,rtp", "fflags": "nobuffer", "flags": "low_delay",
-                       "reorder_queue_size": "0"}  # fmt: skip
+            options = {"protocol_whitelist": "file,udp,rtp", "reorder_queue_size": "0", **LIVE_OPTIONS}
             return av.open(str(sdp), format="sdp", options=options, timeout=(READ_TIMEOUT_S, READ_TIMEOUT_S))
         if self.spec.kind == "rtsp":
-            options = {"rtsp_transport": "tcp", "fflags": "nobuffer", "flags": "low_delay"}
+            options = {"rtsp_transport": "tcp", **LIVE_OPTIONS}
             return av.open(self.spec.url, options=options, timeout=(READ_TIMEOUT_S, READ_TIMEOUT_S))
         return av.open(self.spec.url)
 
     def _read_av(self) -> None:
+        import av
+
         container = self._open_av()
         try:
             stream = container.streams.video[0]
-            stream.thread_type = "AUTO"
+            if self.spec.kind in ("rtp", "rtsp"):
+                # frame threads hold each frame back by one more per thread (seen: three frames late):
+                # slices only, and the decoder's low-delay mode
+                stream.thread_type = "SLICE"
+                stream.codec_context.flags = int(stream.codec_context.flags) | int(
+                    av.codec.context.Flags.low_delay
+                )
+            else:
+                stream.thread_type = "AUTO"
             t0: float | None = None
             for frame in container.decode(stream):
                 if self._closed.is_set():

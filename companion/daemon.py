@@ -290,7 +290,12 @@ class Companion:
         rate = self.tm.clock.rate
         if boot is None or rate is None:
             raise FrameUnavailable("the autopilot's clock is not known yet (too little telemetry)")
-        t_cap = boot - self._camera_latency_s * rate
+        # the configured latency is this computer's seconds; the decoder's hold is the stream's own
+        # (its presentation clock runs with the autopilot's: real time, or the simulator's)
+        hold = cam.decode_delay_s
+        if hold is None:
+            raise FrameUnavailable("the camera's frame interval is not known yet (fewer than two frames)")
+        t_cap = boot - self._camera_latency_s * rate - hold
         age_s = self.tm.state.t_boot_s - t_cap
         if age_s > self._max_frame_age_s:
             raise FrameUnavailable(
@@ -335,6 +340,7 @@ class Companion:
                 "frame_seq": video.seq, "pts_s": video.pts_s, "decoded_s": round(video.decoded_s, 4),
                 "capture_boot_s": round(t_cap, 4),
                 "clock_rate": round(rate, 5), "latency_s": self._camera_latency_s,
+                "decode_delay_s": round(hold, 4),
                 "age_s": round(age_s, 3), "lidar": lidar is not None,
             })  # fmt: skip
         return posed

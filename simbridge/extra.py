@@ -16,7 +16,7 @@ from collections.abc import Sequence
 __all__ = ["INSTALL_HINT", "SIM_MODULES", "missing_sim_modules", "run_command"]
 
 INSTALL_HINT = "pip install 'landfall[sim]'"
-SIM_MODULES = ("jsbsim", "numba", "tqdm")  # the sim extra's top-level modules (pyproject.toml)
+SIM_MODULES = ("jsbsim", "numba", "tqdm", "av")  # the sim extra's top-level modules (pyproject.toml)
 
 
 def missing_sim_modules() -> list[str]:

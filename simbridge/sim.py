@@ -75,10 +75,6 @@ class SimConfig:
                 raise ValueError(
                     f"--camera-stream: with the emulated autopilots (px4, ardupilot) only, not {name} yet"
                 )
-        if not 0.2 <= self.camera_fps <= 30.0:
-            raise ValueError(
-                f"--camera-fps must be in [0.2, 30] frames per simulated second, got {self.camera_fps}"
-            )
             if self.ekf_error != "off":
                 raise ValueError("--ekf-error: real firmware has its own estimator (leave it off)")
             if self.signing_key is not None:
@@ -91,6 +87,10 @@ class SimConfig:
                     f"--mavlink {self.mavlink}: {name} sends to a companion (udpout:HOST:PORT: "
                     "the firmware's own MAVLink port sends there); it cannot listen"
                 )
+        if not 0.2 <= self.camera_fps <= 30.0:
+            raise ValueError(
+                f"--camera-fps must be in [0.2, 30] frames per simulated second, got {self.camera_fps}"
+            )
         if not self.speed > 0:
             raise ValueError(f"--speed must be > 0, got {self.speed}")
         if self.start not in ("air", "ground"):
@@ -287,6 +287,7 @@ class SimBridge:
                     continue
                 s = self.vehicle.state
                 stamp = self.time_boot_ms(s.t_s)
+                posed = time.monotonic()  # the moment of the pose: the frame's "glass" time
 
                 def render_and_send(s: Any = s, index: int = index) -> float:
                     frame = world.camera_frame(s.pos_ned_m, s.quat, s.t_s, weather, rng)
@@ -297,7 +298,8 @@ class SimBridge:
                 self.episode.event(s.t_s, "camera_frame", {
                     "index": index, "pts_s": round(index * period, 4), "time_boot_ms": stamp,
                     "pos_ned_m": [round(v, 4) for v in s.pos_ned_m],
-                    "quat_wxyz": [round(v, 6) for v in s.quat], "sent_monotonic_s": round(sent, 4),
+                    "quat_wxyz": [round(v, 6) for v in s.quat], "posed_monotonic_s": round(posed, 4),
+                    "sent_monotonic_s": round(sent, 4),
                 })  # fmt: skip
                 index += 1
                 next_t = max(next_t + period, self.vehicle.state.t_s)

@@ -4,7 +4,6 @@ dates each frame on the autopilot's clock, and takes only the LiDAR from the sen
 
 from __future__ import annotations
 
-import bisect
 import json
 import subprocess
 import sys
@@ -45,7 +44,9 @@ def test_an_alarm_lands_on_the_clear_roof_with_the_camera_read_from_an_rtp_strea
         ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "2",
          "--camera-stream", f"udp://127.0.0.1:{video}", "--camera-fps", "1"],
         ["--camera", f"udp://127.0.0.1:{video}", "--camera-info", str(info), "--record", str(record)],
-        env={"LANDFALL_CAMERA_LATENCY_MS": "60"},
+        # one frame a simulated second (the renderer's cost), which the decoder holds one frame: a frame
+        # is up to 2.5 s old when the newest is taken, older than the 2 s default allows for a 30 fps camera
+        env={"LANDFALL_CAMERA_LATENCY_MS": "100", "LANDFALL_SENSORS_MAX_FRAME_AGE_S": "3"},
     )  # fmt: skip
     rig.wait_log("camera: first frame from", timeout_s=60)
     rig.wait_log("sensor stream connected", timeout_s=60)
@@ -57,19 +58,37 @@ def test_an_alarm_lands_on_the_clear_roof_with_the_camera_read_from_an_rtp_strea
     assert td["safe"] is True
     assert "m, site clear" in log  # "descending N m, site clear": confirmed on streamed frames
 
-    # every decision frame was a video frame, dated on the autopilot's clock: against the truth (the
-    # frame simbridge sent last before the companion decoded it, matched on the shared monotonic clock)
+    # every decision frame was a video frame, dated on the autopilot's clock: against the truth, the
+    # boot clock at the pose simbridge rendered the frame with the same presentation time from
     used = [e for e in _events(record) if e["kind"] == "camera_frame"]
     assert len(used) >= 3, [e["kind"] for e in _events(record)]
-    sent: list[dict[str, Any]] = rig.sim.events("camera_frame")
-    sent_at = [float(e["sent_monotonic_s"]) for e in sent]
+    sent = rig.sim.events("camera_frame")
+
+    def truth_of(frame: dict[str, Any]) -> dict[str, Any]:
+        """simbridge's frame with the same presentation time (RTP's 90 kHz clock rounds it by a tick)."""
+        nearest = min(sent, key=lambda t: abs(float(t["pts_s"]) - float(frame["pts_s"])))
+        assert abs(float(nearest["pts_s"]) - float(frame["pts_s"])) < 0.05, (frame, nearest)
+        return nearest
+
     errors_ms = []
     for e in used:
-        k = bisect.bisect_right(sent_at, e["decoded_s"]) - 1
-        assert k >= 0
-        errors_ms.append(1000 * (e["capture_boot_s"] - sent[k]["time_boot_ms"] / 1000.0))
+        truth = truth_of(e)
+        assert e["decoded_s"] > float(truth["sent_monotonic_s"]) - 0.01  # sent, then decoded
+        errors_ms.append(round(1000 * (e["capture_boot_s"] - float(truth["time_boot_ms"]) / 1000.0)))
     assert all(e["lidar"] for e in used)  # the LiDAR from the sensor socket
-    # 2x speed: a 60 ms configured latency is 120 ms of the autopilot's clock; the frame's true capture is
-    # its render, before the encode, the network and the decode: within a quarter second of the truth
-    assert max(abs(x) for x in errors_ms) < 250, errors_ms
-    print(json.dumps({"pose_time_error_ms": errors_ms}))
+    # the 100 ms configured latency (200 ms of the autopilot's clock at 2x) stands for simbridge's render,
+    # encode and send (about 160 ms of this computer's on a free core); the decoder's one-frame hold (1 s
+    # of the stream's clock) is taken off too. A loaded machine stretches the render: dated within half
+    # a second of the truth (docs/camera.md has the figures)
+    assert max(abs(x) for x in errors_ms) < 500, errors_ms
+    # glass to decision: from the pose a frame was rendered at to the rank or confirmation made on it
+    glass_ms, last = [], None
+    for e in _events(record):
+        if e["kind"] == "camera_frame":
+            last = e
+        elif e["kind"] in ("rank", "confirm") and last is not None:
+            truth = truth_of(last)
+            glass_ms.append(round(1000 * (e["time_mono_s"] - float(truth["posed_monotonic_s"]))))
+    assert glass_ms
+    assert all(g > 0 for g in glass_ms), glass_ms
+    print(json.dumps({"pose_time_error_ms": errors_ms, "glass_to_decision_ms": glass_ms}))

@@ -129,3 +129,15 @@ def test_the_boot_clock_follows_a_sped_up_autopilot_through_jittery_arrivals() -
     assert at == pytest.approx(4.0 * 9.0 + 7.0, abs=0.05)
     clock.add(111.0, 0.5)  # rebooted
     assert clock.boot_at(111.0) is None
+
+
+def test_simbridge_refuses_a_bad_camera_stream_or_frame_rate() -> None:
+    from simbridge.camera_stream import parse_stream_url
+    from simbridge.sim import SimConfig
+
+    assert parse_stream_url("udp://127.0.0.1:5600") == ("127.0.0.1", 5600)
+    for bad in ("udp://:5600", "rtp://127.0.0.1:5600", "udp://host:99999"):
+        with pytest.raises(ValueError, match="--camera-stream: expected udp://HOST:PORT"):
+            parse_stream_url(bad)
+    with pytest.raises(ValueError, match="--camera-fps must be in"):
+        SimConfig(camera_fps=0.0)

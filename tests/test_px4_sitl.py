@@ -89,6 +89,8 @@ def test_config_refuses_what_real_px4_cannot_do_here() -> None:
         SimConfig(autopilot="px4-sitl", battery_pct=50.0)
     with pytest.raises(ValueError, match="--ekf-error"):
         SimConfig(autopilot="px4-sitl", ekf_error="nominal")
+    with pytest.raises(ValueError, match="--camera-stream: with the emulated autopilots"):
+        SimConfig(autopilot="px4-sitl", camera_stream=("127.0.0.1", 5600))
 
 
 def test_px4_boots_with_simbridge_parameters_and_the_companion_link(tmp_path: Path) -> None:
