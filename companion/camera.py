@@ -13,8 +13,9 @@ V4L2 device, by OpenCV:
 
 A thread decodes; the newest frame is kept with the moment it was decoded (this computer's monotonic
 clock). The daemon maps that moment to the autopilot's boot clock (``companion.telemetry.BootClock``)
-and subtracts the stream's latency (``camera.latency_ms``) to get the capture time, then takes the
-autopilot's pose at that time, as for the sensor stream. A stream that stops or cannot be opened is
+and subtracts the camera's latency (``camera.latency_ms``) and the decoder's one-frame hold
+(:attr:`CameraStream.decode_delay_s`) to get the capture time, then takes the autopilot's pose at that
+time, as for the sensor stream. A stream that stops or cannot be opened is
 logged and opened again every second; frames then grow old and are refused by age, as sensor frames are.
 
 Lens distortion and the camera's mounting come from a calibration file (``camera.info``:

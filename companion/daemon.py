@@ -103,7 +103,6 @@ class Companion:
         self._camera = camera
         self._camera_latency_s = camera_latency_s
         self._camera_offset = np.asarray(camera_offset_frd_m, dtype=np.float64)
-        self._camera_frames_used = 0
         self._watch_battery_pct = watch_battery_pct
         self._watch_failsafe = watch_failsafe_text
         self._watch_gps = watch_gps
@@ -334,7 +333,6 @@ class Companion:
                 pts = pts.copy()
                 pts[:, :3] -= self._camera_offset.astype(pts.dtype)
             posed = dataclasses.replace(posed, pos_ned_m=pos, lidar_frd=pts)
-        self._camera_frames_used += 1
         if self.record is not None:
             self.record.record_event("camera_frame", {
                 "frame_seq": video.seq, "pts_s": video.pts_s, "decoded_s": round(video.decoded_s, 4),

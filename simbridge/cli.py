@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import importlib.util
 import logging
 import sys
 from collections.abc import Sequence
@@ -206,6 +207,8 @@ def config_from_args(args: argparse.Namespace) -> SimConfig:
         from simbridge.camera_stream import parse_stream_url
 
         camera_stream = parse_stream_url(args.camera_stream)
+        if importlib.util.find_spec("av") is None:
+            raise ValueError("--camera-stream needs PyAV (H.264 over RTP): pip install 'landfall[sim]'")
     origin = GeoOrigin(*args.home) if args.home else GeoOrigin()
     if args.gusts < 0:
         raise ValueError(f"--gusts must be >= 0, got {args.gusts}")

@@ -235,8 +235,14 @@ class SimBridge:
                 await stack.enter_async_context(self._sensor_server(*cfg.sensors))
             if cfg.camera_stream is not None:
                 task = asyncio.create_task(self._stream_camera(*cfg.camera_stream), name="camera-stream")
+                task.add_done_callback(self._camera_stream_ended)
                 stack.push_async_callback(_cancelled, task)
             await self._loop(loop)
+
+    def _camera_stream_ended(self, task: asyncio.Task[None]) -> None:
+        """A camera stream that fails is said at once (the flight goes on without it), not at exit."""
+        if not task.cancelled() and task.exception() is not None:
+            self.log.error("camera stream stopped: %s", task.exception())
 
     def _live_world(self, flag: str) -> Any:
         from simbridge.world.live import LiveWorld
