@@ -43,12 +43,12 @@ chromium:
 	     (apt-get update -q >/dev/null && apt-get install -y -q chromium >/dev/null)); \
 	  else echo "the browser tests need chromium: sudo apt-get install chromium (they skip without it)" >&2; fi
 
-# The suite runs on pytest-xdist workers, one more than the cores: each test file on one worker, so a
-# file's module-scoped fixtures (rendered frames, simulator start-ups) are built once. The flights spend
-# much of their time waiting on the simulator's clock, so a third worker on two cores overlaps them (three
-# kept 1.57 of the 2 cores busy): 19:24 against 22:00 (docs/development.md). TEST_WORKERS=0 runs it
-# in this process. (Work stealing measured no faster: 24:01 against 23:21, and builds those fixtures twice.)
-TEST_WORKERS ?= $(shell echo $$(( $$(nproc 2>/dev/null || echo 1) + 1 )))
+# The suite runs on every core (pytest-xdist): each test file on one worker, so a file's module-scoped
+# fixtures (rendered frames, simulator start-ups) are built once; TEST_WORKERS=0 runs it in this process.
+# (Work stealing measured no faster: 24:01 against 23:21, and builds those fixtures on both workers. One
+# worker more than the cores measured 17:31 and 20:21 from fresh clones, but the second run timed out a
+# campaign episode and misdated camera frames by 2 s: the flights starve; docs/development.md.)
+TEST_WORKERS ?= auto
 test: $(DEPTH_STAMP) mosquitto chromium
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/mypy

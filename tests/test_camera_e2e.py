@@ -46,7 +46,7 @@ def test_an_alarm_lands_on_the_clear_roof_with_the_camera_read_from_an_rtp_strea
         ["--camera", f"udp://127.0.0.1:{video}", "--camera-info", str(info), "--record", str(record)],
         # one frame a simulated second (the renderer's cost), which the decoder holds one frame: a frame
         # is up to 2.5 s old when the newest is taken, older than the 2 s default allows for a 30 fps camera
-        env={"LANDFALL_CAMERA_LATENCY_MS": "100", "LANDFALL_SENSORS_MAX_FRAME_AGE_S": "3"},
+        env={"LANDFALL_CAMERA_LATENCY_MS": "0", "LANDFALL_SENSORS_MAX_FRAME_AGE_S": "3"},
     )  # fmt: skip
     rig.wait_log("camera: first frame from", timeout_s=60)
     rig.wait_log("sensor stream connected", timeout_s=60)
@@ -70,17 +70,23 @@ def test_an_alarm_lands_on_the_clear_roof_with_the_camera_read_from_an_rtp_strea
         assert abs(float(nearest["pts_s"]) - float(frame["pts_s"])) < 0.05, (frame, nearest)
         return nearest
 
-    errors_ms = []
+    errors_ms, dating_ms = [], []
     for e in used:
         truth = truth_of(e)
         assert e["decoded_s"] > float(truth["sent_monotonic_s"]) - 0.01  # sent, then decoded
-        errors_ms.append(round(1000 * (e["capture_boot_s"] - float(truth["time_boot_ms"]) / 1000.0)))
+        rate = float(e["clock_rate"])
+        posed_boot = float(truth["time_boot_ms"]) / 1000.0
+        sent_boot = posed_boot + rate * (float(truth["sent_monotonic_s"]) - float(truth["posed_monotonic_s"]))
+        errors_ms.append(round(1000 * (e["capture_boot_s"] - posed_boot)))  # against the pose (reported)
+        dating_ms.append(round(1000 * (e["capture_boot_s"] - sent_boot)))  # against the send (checked)
     assert all(e["lidar"] for e in used)  # the LiDAR from the sensor socket
-    # the 100 ms configured latency (200 ms of the autopilot's clock at 2x) stands for simbridge's render,
-    # encode and send (about 160 ms of this computer's on a free core); the decoder's one-frame hold (1 s
-    # of the stream's clock) is taken off too. A loaded machine stretches the render: dated within half
-    # a second of the truth (docs/camera.md has the figures)
-    assert max(abs(x) for x in errors_ms) < 500, errors_ms
+    # What the companion controls is the dating from the moment the frame left the camera: the clock fit
+    # and the decoder's one-frame hold (1 s of the stream's clock here). Within one frame interval of
+    # that moment, whatever the machine's load (the three-frame decoder delay once seen was 3 s off).
+    # simbridge's render, the simulated camera's own latency, grows with the load (some 160 ms of this
+    # computer's clock on a free core, 2 s seen on a loaded one): it is in the reported pose-time error
+    # and is what camera.latency_ms stands for on a vehicle (docs/camera.md has the figures)
+    assert max(abs(x) for x in dating_ms) < 1000, (dating_ms, errors_ms)
     # glass to decision: from the pose a frame was rendered at to the rank or confirmation made on it
     glass_ms, last = [], None
     for e in _events(record):
@@ -91,4 +97,5 @@ def test_an_alarm_lands_on_the_clear_roof_with_the_camera_read_from_an_rtp_strea
             glass_ms.append(round(1000 * (e["time_mono_s"] - float(truth["posed_monotonic_s"]))))
     assert glass_ms
     assert all(g > 0 for g in glass_ms), glass_ms
-    print(json.dumps({"pose_time_error_ms": errors_ms, "glass_to_decision_ms": glass_ms}))
+    print(json.dumps({"pose_time_error_ms": errors_ms, "dating_from_send_ms": dating_ms,
+                      "glass_to_decision_ms": glass_ms}))  # fmt: skip
