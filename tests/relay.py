@@ -7,6 +7,7 @@ import contextlib
 import socket
 import threading
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -141,28 +142,16 @@ class FrameEditingRelay(TcpRelay):
                 s.shutdown(socket.SHUT_RDWR)
 
 
-class LossyUdpRelay:
-    """A UDP relay between simbridge and the companion that misbehaves like a bad radio link: it
-    drops, duplicates, reorders and corrupts datagrams in both directions, from a seeded generator.
+class _UdpRelayLoop:
+    """The relay itself; it runs in its own process (``LossyUdpRelay`` starts it). In the test's
+    process a garbage collection or the test's own polling held it for up to a second on a loaded
+    machine: a gap in the companion's setpoints that PX4's offboard-loss failsafe rightly acted on."""
 
-    simbridge sends to ``port``; the relay forwards to ``target_port`` (the companion) from the same
-    socket, and forwards what comes back to simbridge's last address.
-    """
-
-    def __init__(
-        self,
-        target_port: int,
-        *,
-        drop: float = 0.2,
-        duplicate: float = 0.05,
-        reorder: float = 0.05,
-        corrupt: float = 0.02,
-        seed: int = 0,
-    ) -> None:
+    def __init__(self, target_port: int, rates: tuple[float, float, float, float], seed: int) -> None:
         import random
 
         self.target = ("127.0.0.1", target_port)
-        self.rates = (drop, duplicate, reorder, corrupt)
+        self.rates = rates
         kinds = ("in", "dropped", "duplicated", "reordered", "corrupted", "blacked_out")
         self.counts = dict.fromkeys(kinds, 0)
         self._rng = random.Random(seed)
@@ -172,14 +161,12 @@ class LossyUdpRelay:
         self.port = int(self._sock.getsockname()[1])
         self._sim: tuple[str, int] | None = None
         self._held: dict[tuple[str, int], bytes] = {}
-        self._stop = threading.Event()
-        self._blackout = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
-        self._thread.start()
+        self.stop = threading.Event()
+        self.blackout = threading.Event()
 
-    def _run(self) -> None:
+    def run(self) -> None:
         drop, duplicate, reorder, corrupt = self.rates
-        while not self._stop.is_set():
+        while not self.stop.is_set():
             try:
                 data, addr = self._sock.recvfrom(65535)
             except TimeoutError:
@@ -193,7 +180,7 @@ class LossyUdpRelay:
             if dest is None:
                 continue
             self.counts["in"] += 1
-            if self._blackout.is_set():
+            if self.blackout.is_set():
                 self.counts["blacked_out"] += 1
                 continue
             r = self._rng.random
@@ -218,15 +205,101 @@ class LossyUdpRelay:
             for d in out:
                 with contextlib.suppress(OSError):
                     self._sock.sendto(d, dest)
+        self._sock.close()
+
+
+def serve_udp_relay(target_port: int, rates: tuple[float, float, float, float], seed: int) -> None:
+    """The relay process: prints its port, then obeys one command per line on stdin (``blackout``,
+    ``restore``, ``counts``: answered with the counts as JSON); the end of its input stops it."""
+    import json
+    import sys
+
+    relay = _UdpRelayLoop(target_port, rates, seed)
+    thread = threading.Thread(target=relay.run, daemon=True)
+    thread.start()
+    print(relay.port, flush=True)
+    for line in sys.stdin:
+        cmd = line.strip()
+        if cmd == "blackout":
+            relay.blackout.set()
+        elif cmd == "restore":
+            relay.blackout.clear()
+        elif cmd == "counts":
+            print(json.dumps(relay.counts), flush=True)
+    relay.stop.set()
+    thread.join(timeout=2)
+
+
+class LossyUdpRelay:
+    """A UDP relay between simbridge and the companion that misbehaves like a bad radio link: it
+    drops, duplicates, reorders and corrupts datagrams in both directions, from a seeded generator.
+
+    simbridge sends to ``port``; the relay forwards to ``target_port`` (the companion) from the same
+    socket, and forwards what comes back to simbridge's last address. It is a process of its own,
+    so that nothing the test's process does (its polling, its garbage collector) can stall the link.
+    """
+
+    def __init__(
+        self,
+        target_port: int,
+        *,
+        drop: float = 0.2,
+        duplicate: float = 0.05,
+        reorder: float = 0.05,
+        corrupt: float = 0.02,
+        seed: int = 0,
+    ) -> None:
+        import subprocess
+        import sys
+
+        code = (
+            "from tests.relay import serve_udp_relay; "
+            f"serve_udp_relay({target_port}, ({drop}, {duplicate}, {reorder}, {corrupt}), {seed})"
+        )
+        root = Path(__file__).resolve().parent.parent
+        self._proc = subprocess.Popen(
+            [sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=root
+        )
+        assert self._proc.stdin is not None
+        assert self._proc.stdout is not None
+        self._stdin, self._stdout = self._proc.stdin, self._proc.stdout
+        line = self._stdout.readline()
+        if not line.strip().isdigit():
+            self._proc.kill()
+            raise RuntimeError(f"the UDP relay did not start (it said {line!r})")
+        self.port = int(line)
+        self._final: dict[str, int] | None = None
+
+    def _tell(self, cmd: str) -> None:
+        self._stdin.write(cmd + "\n")
+        self._stdin.flush()
+
+    @property
+    def counts(self) -> dict[str, int]:
+        """Datagrams seen, dropped, duplicated, reordered, corrupted and blacked out so far."""
+        if self._final is not None:
+            return self._final
+        import json
+
+        self._tell("counts")
+        return dict(json.loads(self._stdout.readline()))
 
     def blackout(self) -> None:
         """Drop everything, both ways, until ``restore()``: a link that is down."""
-        self._blackout.set()
+        self._tell("blackout")
 
     def restore(self) -> None:
-        self._blackout.clear()
+        self._tell("restore")
 
     def close(self) -> None:
-        self._stop.set()
-        self._thread.join(timeout=2)
-        self._sock.close()
+        """Stop the relay; ``counts`` keeps its last figures."""
+        if self._final is not None:
+            return
+        self._final = self.counts
+        self._stdin.close()
+        try:
+            self._proc.wait(timeout=5)
+        except Exception:
+            self._proc.kill()
+            self._proc.wait()
+        self._stdout.close()
