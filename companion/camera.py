@@ -12,7 +12,7 @@ V4L2 device, by OpenCV:
 - any other path: a video file, replayed at its own frame rate (for tests and replays).
 
 A thread decodes; the newest frame is kept with the moment it was decoded (this computer's monotonic
-clock). The daemon maps that moment to the autopilot's boot clock (``companion.telemetry.BootClock``)
+clock). The daemon maps that moment to the autopilot's boot clock (``landfall_link.boot_clock.BootClock``)
 and subtracts the camera's latency (``camera.latency_ms``) and the decoder's one-frame hold
 (:attr:`CameraStream.decode_delay_s`) to get the capture time, then takes the autopilot's pose at that
 time, as for the sensor stream. A stream that stops or cannot be opened is
@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import contextlib
 import logging
-import math
 import re
 import tempfile
 import threading
@@ -93,12 +92,9 @@ def mount_rotation(roll_deg: float, pitch_deg: float, yaw_deg: float) -> np.ndar
     by roll, pitch and yaw (ZYX, about the body's axes) from the nominal mount (looking down the body's
     +z axis, image top toward the nose): ``cv2.initUndistortRectifyMap``'s ``R``."""
     from companion.guidance.frames import CAMERA_TO_BODY
+    from landfall_link.lidar_bridge import body_rotation
 
-    r, p, y = (math.radians(v) for v in (roll_deg, pitch_deg, yaw_deg))
-    rx = np.array([[1, 0, 0], [0, math.cos(r), -math.sin(r)], [0, math.sin(r), math.cos(r)]])
-    ry = np.array([[math.cos(p), 0, math.sin(p)], [0, 1, 0], [-math.sin(p), 0, math.cos(p)]])
-    rz = np.array([[math.cos(y), -math.sin(y), 0], [math.sin(y), math.cos(y), 0], [0, 0, 1]])
-    turned = rz @ ry @ rx  # the mounted camera's axes from the nominal ones, in body FRD
+    turned = body_rotation(roll_deg, pitch_deg, yaw_deg)  # the mounted camera's axes from the nominal ones
     out: np.ndarray = CAMERA_TO_BODY.T @ turned @ CAMERA_TO_BODY
     return out
 

@@ -37,7 +37,11 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"first reasoning tier: {ONBOARD} (default), {', '.join(BUILTIN_PROFILES)} or a profile of the "
         "config; the onboard tier always answers when the others cannot",
     )
-    p.add_argument("--sensors", metavar="HOST:PORT", help="sensor stream endpoint (simbridge --sensors)")
+    p.add_argument(
+        "--sensors",
+        metavar="HOST:PORT",
+        help="sensor stream endpoint (simbridge --sensors, a LiDAR driver); 'none' with --camera: no LiDAR",
+    )
     p.add_argument(
         "--camera",
         metavar="URL",
@@ -156,7 +160,7 @@ def build_companion(cfg: CompanionConfig) -> Companion:
         component_id=cfg.mavlink.component_id,
         vehicle_system_id=cfg.mavlink.vehicle_system_id,
         signing_key=cfg.signing_key(),
-        sensors=parse_endpoint(cfg.sensors.endpoint),
+        sensors=None if cfg.sensors.endpoint == "none" else parse_endpoint(cfg.sensors.endpoint),
         frame_timeout_s=cfg.sensors.frame_timeout_s,
         max_frame_age_s=cfg.sensors.max_frame_age_s,
         camera=_camera(cfg),

@@ -167,14 +167,14 @@ class MavlinkConfig(_Section):
 class SensorsConfig(_Section):
     """The local sensor-stream socket (simbridge or the real sensor bridge)."""
 
-    endpoint: str = "127.0.0.1:5600"
+    endpoint: str = "127.0.0.1:5600"  # "none": no sensor stream (a camera alone, ``[camera]``)
     frame_timeout_s: float = Field(default=10.0, gt=0)
     max_frame_age_s: float = Field(default=2.0, gt=0)
 
     @field_validator("endpoint")
     @classmethod
     def _check_endpoint(cls, endpoint: str) -> str:
-        return _host_port(endpoint)
+        return endpoint if endpoint == "none" else _host_port(endpoint)
 
 
 class CameraConfig(_Section):
@@ -421,6 +421,15 @@ class CompanionConfig(_Section):
     record: RecordConfig = RecordConfig()
     mqtt: MqttConfig = MqttConfig()
     log: LogConfig = LogConfig()
+
+    @model_validator(mode="after")
+    def _needs_a_view(self) -> CompanionConfig:
+        if self.sensors.endpoint == "none" and self.camera.url is None:
+            raise ValueError(
+                "sensors.endpoint is 'none' and there is no camera: the companion needs a sensor stream "
+                "(--sensors HOST:PORT) or a camera (--camera URL) to see where it lands"
+            )
+        return self
 
     def signing_key(self) -> bytes | None:
         """The 32-byte MAVLink 2 signing key, or ``None`` to run unsigned (validated at load)."""

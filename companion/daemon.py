@@ -179,7 +179,7 @@ class Companion:
         while time.monotonic() < deadline:
             await asyncio.sleep(0.5)
             s = self.tm.state
-            if s.system_id == 0 or self.tm.age_s("position") > 3.0 or self._client is None:
+            if s.system_id == 0 or self.tm.age_s("position") > 3.0 or not self._sees():
                 continue
             if s.on_ground:
                 self.log.info("the vehicle is on the ground: nothing to resume")
@@ -189,6 +189,12 @@ class Companion:
                 self.log.info("recovery resumed after a restart")
                 return
         self.log.warning("could not resume the interrupted recovery within %.0f s", RESUME_WAIT_S)
+
+    def _sees(self) -> bool:
+        """A view to land by: a video frame from the camera, else a connected sensor stream."""
+        if self._camera is not None:
+            return self._camera.latest() is not None
+        return self._client is not None
 
     def _take_alarm(self, alarm: Alarm) -> int:
         if self._accept_from and alarm.source[0] not in self._accept_from and alarm.source != (0, 0):
@@ -206,7 +212,7 @@ class Companion:
         if s.on_ground:
             self.log.warning("alarm %r refused: the vehicle is not flying", alarm.reason)
             return RESULT_DENIED
-        if self._client is None and (self._camera is None or self._camera.latest() is None):
+        if not self._sees():
             self.log.warning("alarm %r refused: no sensor stream%s", alarm.reason,
                              "" if self._camera is None else " and no camera frame yet")  # fmt: skip
             return RESULT_TEMP_REJECTED

@@ -159,6 +159,12 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     _ekf_error_option(flying, "episodes (the emulation only)")
     flying.add_argument(
+        "--camera", choices=("socket", "rtp"), default="socket",
+        help="where the companion's images come from: simbridge's sensor stream (socket, default) or its "
+        "camera as H.264 over RTP read like a real camera, the LiDAR still on the socket (rtp; the "
+        "emulated autopilots only; needs PyAV: pip install 'landfall[sim,camera]')",
+    )  # fmt: skip
+    flying.add_argument(
         "--workers", type=_positive(int, "--workers"), default=os.cpu_count() or 1,
         help="episodes at once (default: the number of cores)",
     )  # fmt: skip
@@ -249,8 +255,11 @@ def episode_specs(args: argparse.Namespace) -> list[EpisodeSpec]:
         raise ValueError("--px4 goes with --autopilot px4-sitl")
     if args.ekf_error != "off" and args.autopilot in FIRMWARE:
         raise ValueError("--ekf-error: real firmware has its own estimator (leave it off)")
+    if args.camera == "rtp" and args.autopilot in FIRMWARE:
+        raise ValueError("--camera rtp: simbridge streams its camera beside its own autopilots only")
     base = dict(
         reasoner=args.reasoner, context=args.context, autopilot=args.autopilot, ekf_error=args.ekf_error,
+        camera=args.camera,
     )  # fmt: skip
     if args.command == "curated":
         return [
@@ -396,6 +405,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "weather",
         "autopilot",
         "ekf_error",
+        "camera",
         "speed",
         "workers",
         "scenario",

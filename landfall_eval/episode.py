@@ -90,6 +90,7 @@ class EpisodeSpec:
     criticality: str = "high"
     reason: str = "GPS spoofing detected"
     ekf_error: str = "off"  # the emulation's estimator errors (simbridge --ekf-error)
+    camera: str = "socket"  # socket: images on the sensor stream | rtp: H.264 over RTP (LiDAR on the socket)
 
     @property
     def id(self) -> str:
@@ -100,7 +101,8 @@ class EpisodeSpec:
             else f"{self.scenario}-r{self.run}"
         )
         ekf = f"-ekf-{self.ekf_error}" if self.ekf_error != "off" else ""
-        return f"{where}-{self.reasoner}-{self.context}-{self.weather}-{self.autopilot}{ekf}"
+        cam = f"-{self.camera}" if self.camera != "socket" else ""
+        return f"{where}-{self.reasoner}-{self.context}-{self.weather}-{self.autopilot}{ekf}{cam}"
 
 
 @dataclass(frozen=True, slots=True)
@@ -189,6 +191,9 @@ class JsonlTail:
             self._fh.close()
 
 
+RTP_WALL_FPS = 2.0  # an rtp episode's camera frames per wall second (simbridge renders each: ~160 ms)
+
+
 def sped_up_env(speed: float) -> dict[str, str]:
     """The companion's environment for a simulation at ``speed`` x: a frame's age is counted in
     simulated seconds, so the default 2 s tolerance becomes 2 s of wall clock at any speed."""
@@ -271,10 +276,14 @@ def simbridge_command(
     episode_log: Path,
     speed: float,
     sitl: Path | None = None,
+    video_port: int | None = None,
+    camera_info: Path | None = None,
 ) -> list[str]:
     """The ``simbridge`` command line that flies ``spec``: MAVLink to ``udp_port`` on loopback, the
     sensor stream on ``sensors_port``, the episode log at ``episode_log``, ``speed`` x real time;
-    ``sitl`` the firmware binary for ``ardupilot-sitl`` or ``px4-sitl`` (None: simbridge's own default)."""
+    ``sitl`` the firmware binary for ``ardupilot-sitl`` or ``px4-sitl`` (None: simbridge's own default).
+    With ``spec.camera`` ``rtp``: the camera as H.264 over RTP to ``video_port``, ``RTP_WALL_FPS`` frames a
+    wall second, its calibration written to ``camera_info``."""
     cmd = [
         sys.executable, "-m", "simbridge", "--scenario", spec.scenario, "--seed", str(spec.seed),
         "--autopilot", spec.autopilot, "--weather", spec.weather, "--speed", f"{speed:g}",
@@ -291,6 +300,12 @@ def simbridge_command(
         cmd += ["--ekf-error", spec.ekf_error]
     if spec.launch is not None:
         cmd.append("--launch=" + ",".join(f"{v:.2f}" for v in spec.launch))  # "=": it may start with "-"
+    if spec.camera == "rtp":
+        if video_port is None or camera_info is None:
+            raise ValueError("an rtp camera needs a video port and a calibration path")
+        fps = min(max(RTP_WALL_FPS / speed, 0.2), 30.0)
+        cmd += ["--camera-stream", f"udp://127.0.0.1:{video_port}", "--camera-fps", f"{fps:g}",
+                "--camera-info-out", str(camera_info)]  # fmt: skip
     return cmd
 
 
@@ -308,6 +323,7 @@ class LogWatch:
         self.touchdown: dict[str, Any] | None = None
         self.last_vehicle: dict[str, Any] | None = None  # the latest state line, read to the very end
         self.frames: dict[int, dict[str, Any]] = {}
+        self.camera_frames: list[dict[str, Any]] = []  # what the RTP camera sent (rtp episodes)
 
     def take(self, rows: list[dict[str, Any]], *, final: bool = False) -> None:
         """Sort ``rows`` in; ``final``: read after the processes were stopped, so only the last
@@ -322,6 +338,8 @@ class LogWatch:
                 self.header = row
             elif kind == "frame" and isinstance(row.get("time_boot_ms"), int):
                 self.frames[row["time_boot_ms"]] = row
+            elif kind == "camera_frame" and isinstance(row.get("pts_s"), int | float):
+                self.camera_frames.append(row)
             elif final:
                 continue
             elif kind == "ready" and self.ready is None:
@@ -379,13 +397,19 @@ def run_episode(
     for stale in (episode_log, comp_log):
         stale.unlink(missing_ok=True)
     udp, tcp = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_STREAM)
+    video = free_port(socket.SOCK_DGRAM) if spec.camera == "rtp" else None
+    camera_info = workdir / "camera.yaml"
+    camera_info.unlink(missing_ok=True)
     sim_cmd = simbridge_command(
-        spec, udp_port=udp, sensors_port=tcp, episode_log=episode_log, speed=times.speed, sitl=sitl
-    )
+        spec, udp_port=udp, sensors_port=tcp, episode_log=episode_log, speed=times.speed, sitl=sitl,
+        video_port=video, camera_info=camera_info,
+    )  # fmt: skip
     comp_cmd = [
         sys.executable, "-m", "companion", "--mavlink", f"udp:{udp}", "--sensors", f"127.0.0.1:{tcp}",
         "--record", str(record_dir), "--reasoner", spec.reasoner,
     ]  # fmt: skip
+    if video is not None:
+        comp_cmd += ["--camera", f"udp://127.0.0.1:{video}", "--camera-info", str(camera_info)]
     if config_path is not None:
         comp_cmd += ["--config", str(config_path)]
     env = {**os.environ, "LANDFALL_REASONER_CONTEXT": spec.context, **sped_up_env(times.speed)}
@@ -403,12 +427,19 @@ def run_episode(
         "weather": spec.weather,
         "autopilot": spec.autopilot,
         "ekf_error": spec.ekf_error,
+        "camera": spec.camera,
         "criticality": spec.criticality,
         "launch_height_m": spec.launch[2] if spec.launch is not None else None,
     }
     t_wall = time.monotonic()
     sim_err = (workdir / "simbridge.log").open("wb")
     sim = subprocess.Popen(sim_cmd, stdout=subprocess.DEVNULL, stderr=sim_err, preexec_fn=_die_with_parent)
+    if video is not None:
+        # the companion reads the camera's calibration at start: simbridge writes it as it starts
+        while (
+            not camera_info.exists() and sim.poll() is None and time.monotonic() - t_wall < times.start_wall_s
+        ):
+            time.sleep(0.1)
     with comp_log.open("wb") as fh:
         comp = subprocess.Popen(
             comp_cmd, env=env, stdout=fh, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent
@@ -546,12 +577,30 @@ def _landing_distance(log: LogWatch, events: list[dict[str, Any]], spec: Episode
     cast the pixel is not the one flown (then ``landing_error`` says so; else it is None)."""
     launch = tuple(round(v, 2) for v in spec.launch) if spec.launch is not None else None
     out: dict[str, Any] = {"landing_distance_m": None, "landing_target_ned_m": None, "landing_error": None}
+    frames = log.frames if spec.camera == "socket" else video_frames_by_stamp(log.camera_frames, events)
     try:
-        got = landing_distance_m(log.touchdown, log.header, log.frames, events, launch=launch)
+        got = landing_distance_m(log.touchdown, log.header, frames, events, launch=launch)
     except ValueError as exc:
         return {**out, "landing_error": str(exc)}
     if got is not None:
         out["landing_distance_m"], out["landing_target_ned_m"] = got
+    return out
+
+
+def video_frames_by_stamp(
+    sent: list[dict[str, Any]], events: list[dict[str, Any]]
+) -> dict[int, dict[str, Any]]:
+    """The true pose of each video frame the companion used, by the capture time it gave the frame
+    (``frame_time_boot_ms`` of its rank events): its record's ``camera_frame`` events name each frame's
+    presentation time, simbridge's the pose it rendered the frame with at that presentation time."""
+    out: dict[int, dict[str, Any]] = {}
+    for e in events:
+        if e.get("kind") != "camera_frame" or not sent:
+            continue
+        pts = float(e["pts_s"])
+        row = min(sent, key=lambda r: abs(float(r["pts_s"]) - pts))
+        if abs(float(row["pts_s"]) - pts) < 0.05:  # RTP's 90 kHz clock rounds it by a tick
+            out[max(0, round(float(e["capture_boot_s"]) * 1000))] = row
     return out
 
 

@@ -261,7 +261,9 @@ class SimBridge:
         info = CameraInfo.pinhole(
             cam.width_px, cam.height_px, cam.focal_px, cam.focal_px, cx, cy, "simbridge"
         )
-        path.write_text(info.to_ros_yaml())
+        part = path.with_name(path.name + ".part")
+        part.write_text(info.to_ros_yaml())
+        part.replace(path)  # whole or not at all: a companion may be waiting for the file to appear
         self.log.info("camera calibration written to %s", path)
 
     async def _stream_camera(self, host: str, port: int) -> None:

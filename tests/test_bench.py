@@ -260,6 +260,36 @@ def test_curated_with_ekf_error_flies_the_emulation_on_its_estimate(tmp_path: Pa
         episode_specs(parse([*base, "--autopilot", "ardupilot-sitl", "--ekf-error", "nominal"]))
 
 
+def test_curated_with_an_rtp_camera_streams_it_and_grades_by_the_video_frames(tmp_path: Path) -> None:
+    """``--camera rtp`` reaches simbridge (its camera as H.264 over RTP, two frames a wall second, its
+    calibration written out), names its episodes apart, is refused with real firmware; the landing
+    distance takes each video frame's true pose by its presentation time."""
+    from landfall_eval.episode import video_frames_by_stamp
+
+    parse = build_parser().parse_args
+    base = ["curated", "--scenario", "scenario1", "--runs", "1", "--out", str(tmp_path), "--camera", "rtp"]
+    (spec,) = episode_specs(parse(base))
+    assert spec.id == "scenario1-r0-onboard-crop-clear-px4-rtp"
+    info = tmp_path / "camera.yaml"
+    cmd = simbridge_command(spec, udp_port=1, sensors_port=2, episode_log=tmp_path / "e.jsonl", speed=4.0,
+                            video_port=5600, camera_info=info)  # fmt: skip
+    assert cmd[cmd.index("--camera-stream") + 1] == "udp://127.0.0.1:5600"
+    assert float(cmd[cmd.index("--camera-fps") + 1]) == 0.5  # 2 frames a wall second at 4 x
+    assert cmd[cmd.index("--camera-info-out") + 1] == str(info)
+    plain = episode_specs(parse(base[:-2]))[0]
+    assert "--camera-stream" not in simbridge_command(
+        plain, udp_port=1, sensors_port=2, episode_log=tmp_path / "e.jsonl", speed=4.0
+    )
+    with pytest.raises(ValueError, match="beside its own autopilots only"):
+        episode_specs(parse([*base, "--autopilot", "px4-sitl"]))
+    sent = [{"pts_s": 2.0 * k, "t_s": 10.0 + 2 * k, "pos_ned_m": [k, 0, -50], "quat_wxyz": [1, 0, 0, 0]}
+            for k in range(4)]  # fmt: skip
+    used = [{"kind": "camera_frame", "pts_s": 4.0000111, "capture_boot_s": 13.9994},
+            {"kind": "camera_frame", "pts_s": 5.0, "capture_boot_s": 15.0}]  # fmt: skip
+    # the first matches simbridge's third frame (a 90 kHz tick off); the second none (1 s from any)
+    assert video_frames_by_stamp(sent, used) == {13999: sent[2]}
+
+
 def test_summary_counts_safe_landings_rounds_and_latency() -> None:
     def ep(safe: bool, rounds: int, surface: str, weather: str = "clear") -> dict[str, Any]:
         return {

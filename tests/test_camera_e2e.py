@@ -99,3 +99,33 @@ def test_an_alarm_lands_on_the_clear_roof_with_the_camera_read_from_an_rtp_strea
     assert all(g > 0 for g in glass_ms), glass_ms
     print(json.dumps({"pose_time_error_ms": errors_ms, "dating_from_send_ms": dating_ms,
                       "glass_to_decision_ms": glass_ms}))  # fmt: skip
+
+
+def test_a_camera_alone_lands_with_the_autopilots_rangefinder(
+    start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """No LiDAR and no sensor stream at all (``--sensors none``): the image from the video stream, the
+    distance from the autopilot's downward DISTANCE_SENSOR, Surface ID on the image alone and the flat
+    ground under the rangefinder for the geometry (the design's camera-only fallback). It still lands,
+    and the record says every decision was made without a LiDAR sweep."""
+    info = _camera_info(tmp_path)
+    video = free_udp_port()
+    record = tmp_path / "record"
+    rig = start_rig(
+        ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "2",
+         "--camera-stream", f"udp://127.0.0.1:{video}", "--camera-fps", "1"],
+        ["--camera", f"udp://127.0.0.1:{video}", "--camera-info", str(info), "--record", str(record),
+         "--sensors", "none"],
+        env={"LANDFALL_CAMERA_LATENCY_MS": "0", "LANDFALL_SENSORS_MAX_FRAME_AGE_S": "3"},
+    )  # fmt: skip
+    rig.wait_log("camera: first frame from", timeout_s=60)
+    out = rig.alarm_accepted("--reason", "GPS spoofing detected", "--criticality", "high")
+    assert out.returncode == 0, out.stdout + out.stderr
+    td = _wait_event(rig.sim, "touchdown", 300)
+    log = rig.wait_log("recovery ended: landed", timeout_s=60)
+    assert "sensor stream" not in log  # never dialled
+    used = [e for e in _events(record) if e["kind"] == "camera_frame"]
+    assert len(used) >= 2, [e["kind"] for e in _events(record)]
+    assert not any(e["lidar"] for e in used)
+    print(json.dumps({"touchdown": td}))
+    assert td["safe"] is True, (td, log[-3000:])

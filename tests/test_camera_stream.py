@@ -12,8 +12,9 @@ import pytest
 
 from companion.camera import CameraError, CameraStream, mount_rotation, parse_camera_url
 from companion.guidance.frames import CAMERA_TO_BODY
-from companion.telemetry import BootClock
+from landfall_link.boot_clock import BootClock
 from landfall_link.camera_info import CameraInfo
+from tests.conftest import free_udp_port
 
 
 @pytest.mark.parametrize(
@@ -141,3 +142,25 @@ def test_simbridge_refuses_a_bad_camera_stream_or_frame_rate() -> None:
             parse_stream_url(bad)
     with pytest.raises(ValueError, match="--camera-fps must be in"):
         SimConfig(camera_fps=0.0)
+
+
+def test_a_camera_alone_runs_without_a_sensor_stream_and_nothing_at_all_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--sensors none`` with a camera: no sensor-stream client (the image from the video, the distance
+    from the autopilot's rangefinder); without a camera it is a configuration error saying what to give,
+    as is a camera without its calibration file."""
+    from companion.cli import build_companion, main
+    from companion.config import load_config
+
+    info = tmp_path / "camera.yaml"
+    info.write_text(CameraInfo.pinhole(640, 480, 320.0, 320.0, 320.0, 240.0).to_ros_yaml())
+    url = f"udp://127.0.0.1:{free_udp_port()}"
+    cfg = load_config(None, {}, {"sensors.endpoint": "none", "camera.url": url, "camera.info": str(info)})
+    companion = build_companion(cfg)
+    assert companion._sensors is None  # nothing dials a sensor stream
+    assert companion._camera is not None
+    assert main(["--mavlink", "udp:14550", "--sensors", "none"]) == 2
+    assert "needs a sensor stream (--sensors HOST:PORT) or a camera (--camera URL)" in capsys.readouterr().err
+    assert main(["--mavlink", "udp:14550", "--camera", url]) == 2
+    assert "a camera needs its calibration" in capsys.readouterr().err

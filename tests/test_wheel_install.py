@@ -22,6 +22,7 @@ from tests.conftest import free_udp_port, stop_process
 ROOT = Path(__file__).resolve().parent.parent
 COMMANDS = (
     "companion",
+    "landfall-lidar-bridge",
     "trigger_alarm.py",
     "trigger-alarm",
     "simbridge",
