@@ -14,6 +14,7 @@ import numpy as np
 from companion.alarms import Criticality
 from companion.guidance.frames import PinholeCamera, quat_to_matrix
 from companion.guidance.ipm import IpmError, LidarPixelIndex, pixel_to_ned, pixel_to_ned_flat
+from companion.perception.appearance import appearance_candidates, clear_cells
 from companion.perception.crops import crop, pad_of, rank_crops, site_box
 from companion.perception.depth import DepthError
 from companion.perception.site_check import SiteCheck, check_site, world_points
@@ -83,8 +84,18 @@ class Looking(RecoveryBase):
                 params=self.p.surface,
             )
         except DepthError as exc:
-            self.log.warning("Surface ID has no depth (%s): quadrant fallback", exc)
-            return quadrant_fallback(camera)
+            net = self._onboard.landnet
+            if net is None or frame.image_rgb is None:
+                self.log.warning("Surface ID has no depth (%s): quadrant fallback", exc)
+                return quadrant_fallback(camera)
+            # a camera alone: surfaces by how they look (companion.perception.appearance)
+            clear = clear_cells(frame.image_rgb, net.presence, tuple(net.classes))
+            cands = appearance_candidates(clear, camera.width, camera.height, max_candidates=5)
+            self.log.info(
+                "Surface ID has no depth (%s): %d clear roof surface%s by their look", exc, len(cands),
+                "" if len(cands) == 1 else "s",
+            )  # fmt: skip
+            return cands or quadrant_fallback(camera)
         return cands
 
     async def _rank(self, candidates: list[Candidate], frame: Any) -> tuple[Ranking, int | None]:
