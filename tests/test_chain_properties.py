@@ -855,7 +855,8 @@ def test_chain_from_a_frame_to_a_confirmed_target_raises_only_typed_errors(
     lidar = scene_lidar(scene, depth_px, stride, range_m)
     params = data.draw(surface_params)
     reasoner = OnboardReasoner()
-    # Surface ID (recovery._surface_id): no depth -> the quadrant fallback
+    # Surface ID (recovery._surface_id): no depth -> the quadrant fallback (with no sweep at all and
+    # LandNet-S judging, surfaces by their look: tests/test_appearance.py)
     try:
         cands, _ = _propose(LidarDepth(cell_px=scene.cell_px, range_m=range_m), scene, image, lidar, params)
     except DepthError:

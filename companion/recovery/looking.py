@@ -85,10 +85,12 @@ class Looking(RecoveryBase):
             )
         except DepthError as exc:
             net = self._onboard.landnet
-            if net is None or frame.image_rgb is None:
+            if net is None or frame.image_rgb is None or frame.lidar_frd is not None:
+                # a sweep that came empty is a gap (the next one is asked for), not a blind vehicle
                 self.log.warning("Surface ID has no depth (%s): quadrant fallback", exc)
                 return quadrant_fallback(camera)
-            # a camera alone: surfaces by how they look (companion.perception.appearance)
+            # no LiDAR at all (a camera alone, or a LiDAR that failed): surfaces by how they look
+            # (companion.perception.appearance)
             clear = clear_cells(frame.image_rgb, net.presence, tuple(net.classes))
             cands = appearance_candidates(clear, camera.width, camera.height, max_candidates=5)
             self.log.info(
