@@ -380,15 +380,25 @@ class SearchPlanner:
         groups = self.roof_groups(
             lambda c: not self._judged(c) and not any(math.dist(c, b) < 15.0 for b in bad)
         )
+
+        def aim(g: list[tuple[int, int]]) -> tuple[float, float]:
+            """The group's cell nearest its middle: a roof cell itself (what is left of a roof around a
+            site struck off is a ring, whose middle is that site)."""
+            centres = [self._centre(c) for c in g]
+            middle = np.mean(centres, axis=0)
+            return min(centres, key=lambda c: math.dist(c, middle))
+
+        # a leg that does not move shows nothing new: a roof under the vehicle that its look from here
+        # did not judge (a look from above the LiDAR's reach judges nothing) is no leg's aim
+        groups = [g for g in groups if math.dist(aim(g), here) >= self.cell_m]
         if not groups:
             return None
 
         def score(g: list[tuple[int, int]]) -> float:
-            centre = np.mean([self._centre(c) for c in g], axis=0)
-            return len(g) / (1.0 + math.dist(tuple(centre), here) / 100.0)
+            return len(g) / (1.0 + math.dist(aim(g), here) / 100.0)
 
         best = max(groups, key=score)
-        cn, ce = (float(v) for v in np.mean([self._centre(c) for c in best], axis=0))
+        cn, ce = aim(best)
         area = len(best) * self.cell_m**2
         dist = math.hypot(cn - here[0], ce - here[1])
         towards = compass_point(math.degrees(math.atan2(ce - here[1], cn - here[0])))

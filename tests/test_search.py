@@ -187,6 +187,30 @@ def test_roof_leg_skips_roofs_the_ledger_holds_as_obstructed() -> None:
     assert p.next_leg(pos, ledger).aim == "new ground"
 
 
+def test_no_roof_leg_stays_where_it_is_and_a_ring_of_roof_is_aimed_at_a_roof_cell() -> None:
+    """Seen in a camera-stream episode: a roof's middle struck off (a binding "no") leaves a ring of roof
+    cells whose mean is that very site, under a vehicle too high for its looks to judge anything (the
+    LiDAR's reach ends above the ground): 40 legs of 0 m to "roofs not yet judged", until the search's
+    leg limit. A leg now aims at a roof cell, and never at where the vehicle already is."""
+    pos = (0.0, 0.0, -105.0)  # 105 m over the street: a look from here judges nothing (LiDAR 100 m)
+    roof = (-30.0, 30.0, -30.0, 30.0, 30.0)  # 60 x 60 m, 30 m up, under the vehicle
+    ledger = SiteLedger()
+    ledger.add(LedgerSite((0.0, 0.0, -30.0), Hazard.TRAFFIC, "painted lane markings", 1, True))
+    p = planner()
+    p.observe(Frame(pos, sweep(pos, [roof], reach_m=45.0), 75.0))
+    p._judged = lambda ne_m: False  # type: ignore[method-assign]  # looks from too high judge nothing
+    leg = p.next_leg(pos, ledger)
+    assert leg.aim == "roofs", leg
+    assert math.hypot(leg.target_ned_m[0], leg.target_ned_m[1]) >= 15.0  # a cell of the ring
+    assert -30.0 <= leg.target_ned_m[0] <= 30.0  # on the roof
+    assert -30.0 <= leg.target_ned_m[1] <= 30.0
+    # nothing struck off, the vehicle above the roof's middle, which its look could not judge: no leg of 0 m
+    p = planner()
+    p.observe(Frame(pos, sweep(pos, [roof], reach_m=45.0), 75.0))
+    p._judged = lambda ne_m: False  # type: ignore[method-assign]
+    assert p.next_leg(pos, SiteLedger()).distance_m >= p.cell_m
+
+
 def test_new_ground_leg_steps_a_whole_view_and_never_back() -> None:
     p = planner()
     pos = (0.0, 0.0, -75.0)

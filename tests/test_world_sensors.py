@@ -391,3 +391,31 @@ def test_render_palette_recolours_and_is_checked() -> None:
     assert blue.rgb[centre][..., 2].mean() > base.rgb[centre][..., 2].mean() + 30
     with pytest.raises(ValueError, match="palette"):
         render(g, p, sm, cam, (0.0, 0.0, -60.0), LEVEL, sun, palette=np.zeros((3, 3), np.float32))
+
+
+def test_sensors_in_several_threads_move_the_traffic_one_at_a_time() -> None:
+    """simbridge renders the sensor stream's frames and its RTP camera's in worker threads, and each
+    moves the actors before it reads the grid: three threads doing so at once, unlocked, broke the
+    traffic's arrays (an IndexError here; a shape mismatch that killed an episode). Locked, the actors
+    end where the latest time puts them."""
+    import threading
+
+    from tests.views import world
+
+    w = world("scenario1")
+    errors: list[str] = []
+
+    def run(offset: float) -> None:
+        try:
+            for k in range(200):
+                w.sync(1.0 + 0.05 * k + offset, (0.0, 0.0, 400.0))
+        except Exception as exc:  # any error in a thread is the failure
+            errors.append(repr(exc))
+
+    threads = [threading.Thread(target=run, args=(o,)) for o in (0.0, 0.01, 0.02)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert errors == []
+    assert w.actors.t_s == pytest.approx(1.0 + 0.05 * 199 + 0.02)  # moved on to the latest time asked

@@ -3,6 +3,7 @@ and the grader need (max-height pyramid, shadow map). Implements simbridge's Ter
 
 from __future__ import annotations
 
+import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -27,6 +28,12 @@ class LiveWorld:
     ``actor_seed`` seeds the traffic and the pedestrians (the episode's seed); by default the world's
     own seed. ``world_digest`` fingerprints the static world (:meth:`World.digest`), taken before the
     first actor is stamped into the grid.
+
+    Thread-safe for its sensors: a camera frame, a LiDAR sweep and a touchdown grade each move the actors
+    and stamp them into the grid before they read it, so one lock runs them one at a time (simbridge
+    renders the sensor stream's frames and the RTP camera's in worker threads: unlocked, two threads
+    moving the traffic at once broke its arrays). The rangefinder reads without it: a read that meets a
+    car being moved sees it at one place or the other.
     """
 
     def __init__(
@@ -56,6 +63,7 @@ class LiveWorld:
             self.world_digest = digest.result()
         self.t_s = -1.0
         self._near: tuple[float, float, float] | None = None
+        self._lock = threading.RLock()
         self.sync(0.0)
 
     # ------------------------------------------------------------------ time
@@ -63,6 +71,10 @@ class LiveWorld:
         """Advance the actors to ``t_s`` and stamp them (and their shadows) into the grid: all of
         them, or (``near``: north, east, radius in metres) those within that distance, which is
         all a sensor there can see. Every actor moves either way."""
+        with self._lock:
+            self._sync(t_s, near)
+
+    def _sync(self, t_s: float, near: tuple[float, float, float] | None) -> None:
         if t_s == self.t_s and (near == self._near or self._near is None):
             return
         self.shadow.unstamp()
@@ -85,8 +97,9 @@ class LiveWorld:
         return self.grid.height_at(north_m, east_m)
 
     def grade_touchdown(self, north_m: float, east_m: float, t_s: float) -> TouchdownGrade:
-        self.sync(t_s, (north_m, east_m, SEEN_MARGIN_M))
-        return grade(self.grid, north_m, east_m, self.grader)
+        with self._lock:
+            self._sync(t_s, (north_m, east_m, SEEN_MARGIN_M))
+            return grade(self.grid, north_m, east_m, self.grader)
 
     def rangefinder_m(self, pos_ned_m: tuple[float, float, float], quat: Quat, max_m: float = 200.0) -> float:
         return rangefinder_m(self.grid, self.pyramid, pos_ned_m, quat, max_m)
@@ -100,13 +113,15 @@ class LiveWorld:
         weather: str,
         rng: np.random.Generator,
     ) -> Frame:
-        self.sync(t_s, self._seen_from(pos_ned_m))
-        return render(
-            self.grid, self.pyramid, self.shadow, self.camera, pos_ned_m, quat, self.sun_neu, weather, rng
-        )
+        with self._lock:
+            self._sync(t_s, self._seen_from(pos_ned_m))
+            return render(
+                self.grid, self.pyramid, self.shadow, self.camera, pos_ned_m, quat, self.sun_neu, weather, rng
+            )
 
     def lidar_sweep(
         self, pos_ned_m: tuple[float, float, float], quat: Quat, t_s: float, rng: np.random.Generator
     ) -> np.ndarray:
-        self.sync(t_s, self._seen_from(pos_ned_m))
-        return sweep(self.grid, self.pyramid, self.lidar, pos_ned_m, quat, rng)
+        with self._lock:
+            self._sync(t_s, self._seen_from(pos_ned_m))
+            return sweep(self.grid, self.pyramid, self.lidar, pos_ned_m, quat, rng)
