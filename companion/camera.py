@@ -25,19 +25,24 @@ nominal nadir view (image top toward the nose) in one remap before anything read
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import logging
 import re
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["CameraError", "CameraSpec", "CameraStream", "VideoFrame", "mount_rotation", "parse_camera_url"]
+__all__ = [
+    "CameraError", "CameraSpec", "CameraStream", "VideoFrame", "mount_rotation", "parse_camera_url",
+    "stream_capture_time",
+]  # fmt: skip
 
 REOPEN_S = 1.0
 # A live stream, decoded for the newest frame: no input buffering, and a start without seconds of probing.
@@ -46,6 +51,7 @@ REOPEN_S = 1.0
 # the parser a frame of several slices comes out in pieces (tried: grey-green frames read as vegetation).
 LIVE_OPTIONS = {"fflags": "nobuffer", "flags": "low_delay", "analyzeduration": "0", "probesize": "32"}
 READ_TIMEOUT_S = 5.0
+ARRIVALS_KEPT = 120  # frames whose decode delays date the next ones (a minute at 2 frames a second)
 RTP_PAYLOAD_TYPE = 96
 
 
@@ -97,6 +103,32 @@ def mount_rotation(roll_deg: float, pitch_deg: float, yaw_deg: float) -> np.ndar
     turned = body_rotation(roll_deg, pitch_deg, yaw_deg)  # the mounted camera's axes from the nominal ones
     out: np.ndarray = CAMERA_TO_BODY.T @ turned @ CAMERA_TO_BODY
     return out
+
+
+def stream_capture_time(
+    pts_s: float,
+    decoded_s: float,
+    arrivals: list[tuple[float, float]],
+    boot_at: Callable[[float], float | None],
+) -> tuple[float, float] | None:
+    """A live frame's decode moment on the autopilot's clock as it would have been with the least delay
+    seen, and how much later it really was decoded: ``(boot_s, late_s)``; None while the autopilot's
+    clock is not known.
+
+    A frame is decoded some time after its capture: the camera's own latency, the network, the parser's
+    one-frame hold, and whatever else keeps the decoder back (a busy computer: in a benchmark with two
+    flights on two cores decoding fell 4.5 s behind, and frames dated by their decode moment were dated
+    that much late). The stream's presentation times are the capture clock: a frame is dated by its own
+    presentation time plus the offset of the frame decoded soonest after its capture among the recent
+    ``arrivals`` (the lower envelope of the delay, as the autopilot's clock is fitted,
+    :class:`landfall_link.boot_clock.BootClock`), both clocks running at real time (or both at the
+    simulator's). The caller still takes the camera's latency and the parser's hold off."""
+    now = boot_at(decoded_s)
+    if now is None:
+        return None
+    offsets = [b - p for p, d in (*arrivals, (pts_s, decoded_s)) if (b := boot_at(d)) is not None]
+    boot = pts_s + min(offsets)
+    return boot, now - boot
 
 
 @dataclass(frozen=True, slots=True)
@@ -153,6 +185,7 @@ class CameraStream:
         self._thread: threading.Thread | None = None
         self.frames = 0
         self._pts_steps: list[float] = []  # the last presentation-time steps between frames
+        self._arrivals: collections.deque[tuple[float, float]] = collections.deque(maxlen=ARRIVALS_KEPT)
         self.errors = 0
         self.last_error: str | None = None
         self._tmp: tempfile.TemporaryDirectory[str] | None = None
@@ -185,7 +218,13 @@ class CameraStream:
             steps = sorted(self._pts_steps)
         return steps[len(steps) // 2] if steps else None
 
-    def _publish(self, rgb: np.ndarray, pts_s: float | None) -> None:
+    def arrivals(self) -> list[tuple[float, float]]:
+        """(presentation time, monotonic moment decoded) of the last ``ARRIVALS_KEPT`` frames that had a
+        presentation time: what :func:`stream_capture_time` dates a frame by."""
+        with self._lock:
+            return list(self._arrivals)
+
+    def _publish(self, rgb: np.ndarray, pts_s: float | None, decoded_s: float) -> None:
         image = self._undistort(rgb)
         image.flags.writeable = False
         with self._lock:
@@ -198,7 +237,9 @@ class CameraStream:
             ):
                 self._pts_steps = [*self._pts_steps[-9:], pts_s - last.pts_s]
             self.frames += 1
-            self._latest = VideoFrame(image, time.monotonic(), self.frames, pts_s)
+            if pts_s is not None:
+                self._arrivals.append((pts_s, decoded_s))
+            self._latest = VideoFrame(image, decoded_s, self.frames, pts_s)
         if self.frames == 1:
             self.log.info("camera: first frame from %s (%d x %d)", self.spec.url, rgb.shape[1], rgb.shape[0])
 
@@ -257,6 +298,7 @@ class CameraStream:
                 stream.thread_type = "AUTO"
             t0: float | None = None
             for frame in container.decode(stream):
+                decoded_s = time.monotonic()  # before the colour conversion and the undistortion
                 if self._closed.is_set():
                     return
                 pts_s = (
@@ -265,7 +307,8 @@ class CameraStream:
                 if self.spec.kind == "file" and pts_s is not None:  # replay at the file's own rate
                     t0 = time.monotonic() - pts_s if t0 is None else t0
                     self._closed.wait(max(0.0, t0 + pts_s - time.monotonic()))
-                self._publish(frame.to_ndarray(format="rgb24"), pts_s)
+                    decoded_s = time.monotonic()
+                self._publish(frame.to_ndarray(format="rgb24"), pts_s, decoded_s)
         finally:
             with contextlib.suppress(Exception):
                 container.close()
@@ -281,6 +324,7 @@ class CameraStream:
                 ok, bgr = cap.read()
                 if not ok:
                     raise OSError(f"{self.spec.url} stopped giving frames")
-                self._publish(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), None)
+                decoded_s = time.monotonic()
+                self._publish(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), None, decoded_s)
         finally:
             cap.release()

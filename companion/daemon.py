@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from companion.alarms import ALARM_TEXT_PREFIX, MAV_CMD_USER_1, Alarm, Criticality, ReasonCode
+from companion.camera import stream_capture_time
 from companion.control import VehicleController
 from companion.ground import GroundFeed, TeeRecord, telemetry_snapshot
 from companion.guidance.frames import quat_to_matrix
@@ -300,6 +301,12 @@ class Companion:
         hold = cam.decode_delay_s
         if hold is None:
             raise FrameUnavailable("the camera's frame interval is not known yet (fewer than two frames)")
+        late = 0.0
+        if video.pts_s is not None and cam.spec.kind in ("rtp", "rtsp"):
+            # dated by its presentation time: a decoder that fell behind does not make it look newer
+            dated = stream_capture_time(video.pts_s, video.decoded_s, cam.arrivals(), self.tm.clock.boot_at)
+            if dated is not None:
+                boot, late = dated
         t_cap = boot - self._camera_latency_s * rate - hold
         age_s = self.tm.state.t_boot_s - t_cap
         if age_s > self._max_frame_age_s:
@@ -344,7 +351,7 @@ class Companion:
                 "frame_seq": video.seq, "pts_s": video.pts_s, "decoded_s": round(video.decoded_s, 4),
                 "capture_boot_s": round(t_cap, 4),
                 "clock_rate": round(rate, 5), "latency_s": self._camera_latency_s,
-                "decode_delay_s": round(hold, 4),
+                "decode_delay_s": round(hold, 4), "late_s": round(late, 4),
                 "age_s": round(age_s, 3), "lidar": lidar is not None,
             })  # fmt: skip
         return posed

@@ -287,6 +287,8 @@ class SimBridge:
         weather = self.config.weather
         period = 1.0 / fps
         index, next_t = 0, self.vehicle.state.t_s
+        t0 = next_t  # presentation times are simulated time since the first frame: a skipped frame
+        # (the renderer behind) leaves a gap in them, as a real camera's clock does
         try:
             while not self._stop.is_set():
                 wait = (next_t - self.vehicle.state.t_s) / self.config.speed
@@ -297,14 +299,16 @@ class SimBridge:
                 stamp = self.time_boot_ms(s.t_s)
                 posed = time.monotonic()  # the moment of the pose: the frame's "glass" time
 
-                def render_and_send(s: Any = s, index: int = index) -> float:
+                pts = round(s.t_s - t0, 4)
+
+                def render_and_send(s: Any = s, pts: float = pts) -> float:
                     frame = world.camera_frame(s.pos_ned_m, s.quat, s.t_s, weather, rng)
-                    streamer.send(frame.rgb, index * period)
+                    streamer.send(frame.rgb, pts)
                     return time.monotonic()
 
                 sent = await loop.run_in_executor(None, render_and_send)
                 self.episode.event(s.t_s, "camera_frame", {
-                    "index": index, "pts_s": round(index * period, 4), "time_boot_ms": stamp,
+                    "index": index, "pts_s": pts, "time_boot_ms": stamp,
                     "pos_ned_m": [round(v, 4) for v in s.pos_ned_m],
                     "quat_wxyz": [round(v, 6) for v in s.quat], "posed_monotonic_s": round(posed, 4),
                     "sent_monotonic_s": round(sent, 4),

@@ -164,3 +164,33 @@ def test_a_camera_alone_runs_without_a_sensor_stream_and_nothing_at_all_is_refus
     assert "needs a sensor stream (--sensors HOST:PORT) or a camera (--camera URL)" in capsys.readouterr().err
     assert main(["--mavlink", "udp:14550", "--camera", url]) == 2
     assert "a camera needs its calibration" in capsys.readouterr().err
+
+
+def test_a_frame_decoded_late_is_dated_by_its_presentation_time() -> None:
+    """The autopilot's clock runs 4 x the computer's (a sped-up simulator) and the stream's presentation
+    clock with it. Frames reach the decoder 2.0-2.1 s of that clock after capture; one is decoded 18 s
+    after (a decoder that fell behind on a busy computer). Dated by its presentation time and the
+    fastest delay seen, it is 2.0 s after its capture (the hold and latency the caller takes off),
+    not 18 s, and ``late_s`` says how much later it came."""
+    from companion.camera import stream_capture_time
+
+    def boot_at(monotonic_s: float) -> float:
+        return 4.0 * monotonic_s + 100.0
+
+    capture_offset = 50.0  # capture boot time = pts + 50 s
+    delays = [2.0, 2.1, 2.05, 2.0, 18.0]
+    arrivals = []
+    for k, delay in enumerate(delays):
+        pts = 2.0 * k
+        decoded = (pts + capture_offset + delay - 100.0) / 4.0
+        arrivals.append((pts, decoded))
+    pts, decoded = arrivals[-1]
+    dated = stream_capture_time(pts, decoded, arrivals[:-1], boot_at)
+    assert dated is not None
+    boot, late = dated
+    assert boot == pytest.approx(pts + capture_offset + 2.0)
+    assert late == pytest.approx(16.0)
+    # the first frame of a stream: its own delay is the only one known
+    first = stream_capture_time(*arrivals[0], [], boot_at)
+    assert first == pytest.approx((capture_offset + 2.0, 0.0))
+    assert stream_capture_time(pts, decoded, arrivals, lambda m: None) is None  # no autopilot clock yet
