@@ -49,9 +49,10 @@ chromium:
 # worker more than the cores measured 17:31 and 20:21 from fresh clones, but the second run timed out a
 # campaign episode and misdated camera frames by 2 s: the flights starve; docs/development.md.)
 TEST_WORKERS ?= auto
+# simbridge's numba kernels compile (a minute and a half on a fresh clone) beside the linters.
 test: $(DEPTH_STAMP) mosquitto chromium
-	$(VENV)/bin/ruff check .
-	$(VENV)/bin/mypy
+	$(VENV)/bin/python -m tests.warmup & warm=$$!; \
+	  $(VENV)/bin/ruff check . && $(VENV)/bin/mypy; lint=$$?; wait $$warm; test $$lint = 0
 	$(VENV)/bin/pytest -n $(TEST_WORKERS) --dist loadfile --durations=25
 
 # The inner loop while developing: the unit tests only (no end-to-end flights), on every core.

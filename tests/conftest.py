@@ -30,13 +30,9 @@ def pytest_configure(config: pytest.Config) -> None:
     compile the same kernels at once, two minutes each on two cores. A few seconds once they are cached."""
     if hasattr(config, "workerinput") or os.environ.get("LANDFALL_NO_WARMUP") == "1":
         return  # an xdist worker (the controller warmed them), or asked not to
-    import numpy as np
+    from tests.warmup import warm_up
 
-    from tests.views import LEVEL
-
-    w = world("scenario1")
-    render(w, LAUNCH)
-    w.lidar_sweep(LAUNCH, LEVEL, 0.0, np.random.default_rng(0))
+    warm_up()
 
 
 @pytest.fixture

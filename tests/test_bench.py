@@ -465,7 +465,9 @@ def test_city_episode_starts_at_its_halton_point(tmp_path: Path) -> None:
     """Launch 2 (a one-round landing: launch 3 explores for eight rounds, which tests/test_search_e2e.py
     covers, and took a minute of the suite)."""
     out = tmp_path / "city"
-    res = bench("city", "--seeds", "1", "--start-index", "2", "--workers", "1", "--out", str(out))
+    res = bench(
+        "city", "--seeds", "1", "--start-index", "2", "--workers", "1", "--speed", "8", "--out", str(out)
+    )  # fmt: skip
     assert res.returncode == 0, res.stderr[-3000:]
     (e,) = json.loads((out / "results.json").read_text())["episodes"]
     launch = halton_launches(1, 2)[0]

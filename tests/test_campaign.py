@@ -239,6 +239,8 @@ def test_a_campaign_killed_outright_loses_nothing_and_resumes(tmp_path: Path) ->
         "2",
         "--workers",
         "1",
+        "--speed",
+        "8",  # what is checked is the results file and the processes, not the flights
         "--quiet",
         "--out",
         str(out),

@@ -75,7 +75,7 @@ def _fly_with_fault(
 ) -> tuple[dict[str, Any], Rig, GroundPeer, list[dict[str, Any]]]:
     record = tmp_path / "record"
     rig = start_rig(
-        ["--scenario", "scenario1", "--autopilot", autopilot, "--speed", "6"],
+        ["--scenario", "scenario1", "--autopilot", autopilot, "--speed", "10"],
         ["--record", str(record)],
         env={"LANDFALL_TEST_FAULT": stage},
     )
