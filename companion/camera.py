@@ -29,6 +29,7 @@ import collections
 import contextlib
 import logging
 import re
+import sys
 import tempfile
 import threading
 import time
@@ -51,6 +52,7 @@ REOPEN_S = 1.0
 # the parser a frame of several slices comes out in pieces (tried: grey-green frames read as vegetation).
 LIVE_OPTIONS = {"fflags": "nobuffer", "flags": "low_delay", "analyzeduration": "0", "probesize": "32"}
 READ_TIMEOUT_S = 5.0
+DECODER_SWITCH_INTERVAL_S = 0.001  # the interpreter's thread switch interval with a camera (start())
 ARRIVALS_KEPT = 120  # frames whose decode delays date the next ones (a minute at 2 frames a second)
 RTP_PAYLOAD_TYPE = 96
 
@@ -116,9 +118,10 @@ def stream_capture_time(
     clock is not known.
 
     A frame is decoded some time after its capture: the camera's own latency, the network, the parser's
-    one-frame hold, and whatever else keeps the decoder back (a busy computer: in a benchmark with two
-    flights on two cores decoding fell 4.5 s behind, and frames dated by their decode moment were dated
-    that much late). The stream's presentation times are the capture clock: a frame is dated by its own
+    one-frame hold, and whatever else keeps the decoder back (on a busy computer: with three busy
+    threads in the process, decoding fell 1-2 s behind at Python's default thread switch interval, and
+    a frame dated by its decode moment is dated that much late). The stream's presentation times are the
+    capture clock: a frame is dated by its own
     presentation time plus the offset of the frame decoded soonest after its capture among the recent
     ``arrivals`` (the lower envelope of the delay, as the autopilot's clock is fitted,
     :class:`landfall_link.boot_clock.BootClock`), both clocks running at real time (or both at the
@@ -191,6 +194,12 @@ class CameraStream:
         self._tmp: tempfile.TemporaryDirectory[str] | None = None
 
     def start(self) -> None:
+        # The decoder thread takes the interpreter lock many times a frame (every packet read, the
+        # conversion, the remap); at Python's default switch interval (5 ms), three busy threads beside
+        # it held it back 1-2 s (simbridge's stream, 2 frames a second); at 1 ms it kept to 0.5 s, the
+        # parser's one-frame hold. The interval is the process's: a shorter one costs a few more switches.
+        if sys.getswitchinterval() > DECODER_SWITCH_INTERVAL_S:
+            sys.setswitchinterval(DECODER_SWITCH_INTERVAL_S)
         if self._thread is None:
             self._thread = threading.Thread(target=self._run, name="camera", daemon=True)
             self._thread.start()

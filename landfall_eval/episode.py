@@ -40,6 +40,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
 
+import numpy as np
+
 from landfall_eval.grading import kinematic_lower_bound_s, surface_class
 from landfall_eval.landing import landing_distance_m
 
@@ -587,19 +589,62 @@ def _landing_distance(log: LogWatch, events: list[dict[str, Any]], spec: Episode
     return out
 
 
+def match_video_frames(
+    sent: list[dict[str, Any]], used: list[dict[str, Any]], tolerance_s: float = 0.02
+) -> list[dict[str, Any] | None]:
+    """For each frame the companion used (its record's ``camera_frame`` events: ``pts_s`` and the
+    monotonic ``decoded_s``), the frame simbridge sent (its episode log's ``camera_frame``: ``pts_s`` and
+    ``sent_monotonic_s``), or None.
+
+    The decoder's presentation times start at the first packet it received (FFmpeg's RTP demuxer counts
+    from there), simbridge's at its first frame: they differ by a base that depends on when the companion
+    started reading. The base is found from the frames themselves: every used frame must meet a sent
+    one at its presentation time plus the base, and none may have been decoded before the frame after
+    it was sent (the H.264 parser holds a frame until the next one begins: a frame paired one too late
+    would look decoded the moment it was sent); of the bases that allow that, the largest (a smaller
+    one pairs each frame with an earlier one)."""
+    if not sent or not used:
+        return [None] * len(used)
+    by_pts = sorted(sent, key=lambda r: float(r["pts_s"]))
+    pts = np.array([float(r["pts_s"]) for r in by_pts])
+
+    def pair(p: float, base: float) -> dict[str, Any] | None:
+        k = int(np.argmin(np.abs(pts - (p + base))))
+        return by_pts[k] if abs(pts[k] - (p + base)) < tolerance_s else None
+
+    def after(row: dict[str, Any]) -> dict[str, Any]:
+        """The frame sent next (the row itself for the last one)."""
+        k = by_pts.index(row)
+        return by_pts[min(k + 1, len(by_pts) - 1)]
+
+    ref = float(used[0]["pts_s"])
+    best: list[dict[str, Any] | None] | None = None
+    best_base = -math.inf
+    for q in pts:
+        base = float(q) - ref
+        rows = [pair(float(u["pts_s"]), base) for u in used]
+        if any(r is None for r in rows):
+            continue
+        causal = all(
+            float(after(r)["sent_monotonic_s"]) <= float(u["decoded_s"]) + 0.01
+            for r, u in zip(rows, used, strict=True)
+            if r is not None
+        )
+        if causal and base > best_base:
+            best, best_base = rows, base
+    return best if best is not None else [None] * len(used)
+
+
 def video_frames_by_stamp(
     sent: list[dict[str, Any]], events: list[dict[str, Any]]
 ) -> dict[int, dict[str, Any]]:
     """The true pose of each video frame the companion used, by the capture time it gave the frame
-    (``frame_time_boot_ms`` of its rank events): its record's ``camera_frame`` events name each frame's
-    presentation time, simbridge's the pose it rendered the frame with at that presentation time."""
+    (``frame_time_boot_ms`` of its rank events): its record's ``camera_frame`` events matched to the
+    frames simbridge sent (:func:`match_video_frames`), whose rows hold the pose each was rendered with."""
+    used = [e for e in events if e.get("kind") == "camera_frame"]
     out: dict[int, dict[str, Any]] = {}
-    for e in events:
-        if e.get("kind") != "camera_frame" or not sent:
-            continue
-        pts = float(e["pts_s"])
-        row = min(sent, key=lambda r: abs(float(r["pts_s"]) - pts))
-        if abs(float(row["pts_s"]) - pts) < 0.05:  # RTP's 90 kHz clock rounds it by a tick
+    for e, row in zip(used, match_video_frames(sent, used), strict=True):
+        if row is not None:
             out[max(0, round(float(e["capture_boot_s"]) * 1000))] = row
     return out
 

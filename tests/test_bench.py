@@ -282,12 +282,18 @@ def test_curated_with_an_rtp_camera_streams_it_and_grades_by_the_video_frames(tm
     )
     with pytest.raises(ValueError, match="beside its own autopilots only"):
         episode_specs(parse([*base, "--autopilot", "px4-sitl"]))
-    sent = [{"pts_s": 2.0 * k, "t_s": 10.0 + 2 * k, "pos_ned_m": [k, 0, -50], "quat_wxyz": [1, 0, 0, 0]}
-            for k in range(4)]  # fmt: skip
-    used = [{"kind": "camera_frame", "pts_s": 4.0000111, "capture_boot_s": 13.9994},
-            {"kind": "camera_frame", "pts_s": 5.0, "capture_boot_s": 15.0}]  # fmt: skip
-    # the first matches simbridge's third frame (a 90 kHz tick off); the second none (1 s from any)
-    assert video_frames_by_stamp(sent, used) == {13999: sent[2]}
+    # simbridge sent six frames, one every 2 simulated (0.5 wall) seconds; the companion's decoder began
+    # with the third, so its presentation times count from there, and each frame was decoded just after
+    # the next one was sent (the parser's hold)
+    sent = [{"pts_s": 2.0 * k, "t_s": 10.0 + 2 * k, "pos_ned_m": [k, 0, -50], "quat_wxyz": [1, 0, 0, 0],
+             "sent_monotonic_s": 100.0 + 0.5 * k} for k in range(6)]  # fmt: skip
+    used = [{"kind": "camera_frame", "pts_s": 0.0000111, "decoded_s": 101.51, "capture_boot_s": 13.9994},
+            {"kind": "camera_frame", "pts_s": 2.0, "decoded_s": 102.02, "capture_boot_s": 15.0}]  # fmt: skip
+    assert video_frames_by_stamp(sent, used) == {13999: sent[2], 15000: sent[3]}
+    # by equal presentation times they would have been simbridge's first two, decoded 1 s before the
+    # frames after them were sent; alone, a frame is the one whose next was sent just before its decoding
+    assert video_frames_by_stamp(sent, [{**used[0], "pts_s": 7.0}]) == {13999: sent[2]}
+    assert video_frames_by_stamp(sent, [{**used[0], "decoded_s": 100.2}]) == {}  # before any frame's next
 
 
 def test_summary_counts_safe_landings_rounds_and_latency() -> None:

@@ -13,6 +13,7 @@ from typing import Any
 
 import pytest
 
+from landfall_eval.episode import match_video_frames
 from tests.conftest import Rig, free_udp_port
 from tests.test_companion_e2e import _events
 from tests.test_sitl import _wait_event
@@ -60,15 +61,18 @@ def test_an_alarm_lands_on_the_clear_roof_with_the_camera_read_from_an_rtp_strea
 
     # every decision frame was a video frame, dated on the autopilot's clock: against the truth, the
     # boot clock at the pose simbridge rendered the frame with the same presentation time from
-    used = [e for e in _events(record) if e["kind"] == "camera_frame"]
-    assert len(used) >= 3, [e["kind"] for e in _events(record)]
+    events = _events(record)
+    used = [e for e in events if e["kind"] == "camera_frame"]
+    assert len(used) >= 3, [e["kind"] for e in events]
     sent = rig.sim.events("camera_frame")
+    # the frame simbridge sent for each one the companion used (the decoder's presentation times count
+    # from the first packet it received: landfall_eval.episode.match_video_frames finds the base)
+    pairs = {id(u): r for u, r in zip(used, match_video_frames(sent, used), strict=True)}
 
     def truth_of(frame: dict[str, Any]) -> dict[str, Any]:
-        """simbridge's frame with the same presentation time (RTP's 90 kHz clock rounds it by a tick)."""
-        nearest = min(sent, key=lambda t: abs(float(t["pts_s"]) - float(frame["pts_s"])))
-        assert abs(float(nearest["pts_s"]) - float(frame["pts_s"])) < 0.05, (frame, nearest)
-        return nearest
+        row = pairs[id(frame)]
+        assert row is not None, (frame, sent[:5])
+        return row
 
     errors_ms, dating_ms = [], []
     for e in used:
@@ -89,7 +93,7 @@ def test_an_alarm_lands_on_the_clear_roof_with_the_camera_read_from_an_rtp_strea
     assert max(abs(x) for x in dating_ms) < 1000, (dating_ms, errors_ms)
     # glass to decision: from the pose a frame was rendered at to the rank or confirmation made on it
     glass_ms, last = [], None
-    for e in _events(record):
+    for e in events:
         if e["kind"] == "camera_frame":
             last = e
         elif e["kind"] in ("rank", "confirm") and last is not None:
