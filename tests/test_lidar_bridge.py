@@ -93,8 +93,9 @@ def test_a_sweep_is_served_in_the_body_frame_and_dated_on_the_autopilots_clock(a
                 bridge.push(sweep, taken)
                 frame = await client.frame(want=("lidar",))
                 assert frame.image_rgb is None
-                # dated on the autopilot's clock within the link's delay: 2 x 0.1 s back, plus 100 s
-                assert frame.time_boot_ms / 1000.0 == pytest.approx(pilot.boot_s(taken), abs=0.06)
+                # dated on the autopilot's clock within the link's delay (0-20 ms, twice that on this clock; a
+                # loaded test machine adds its own): a forgotten rate or offset is off by seconds
+                assert frame.time_boot_ms / 1000.0 == pytest.approx(pilot.boot_s(taken), abs=0.2)
                 assert frame.pos_ned_m == (1.0, 2.0, -30.0)
                 pts = frame.lidar_frd
                 assert pts is not None
