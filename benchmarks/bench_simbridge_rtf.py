@@ -11,6 +11,9 @@ With ``--autopilot ardupilot-sitl`` the process is simbridge with real ArduCopte
 pinned to the one core), ``--start air``: the firmware initialises, arms, climbs to the launch pose and
 holds, in lock step with JSBSim at SITL's 600 Hz; the baseline is then bare JSBSim stepped at 600 Hz.
 ``--autopilot px4-sitl`` does the same with real PX4 (HIL at 250 Hz; baseline bare JSBSim at 250 Hz).
+With firmware it also reads the CPU time the firmware process and simbridge's own process took (from
+/proc while they run): the firmware's CPU seconds per simulated second are its own floor, the real-time
+factor it could reach on a core of its own with a simulator that cost nothing.
 
 Usage: python benchmarks/bench_simbridge_rtf.py [--runs 5] [--sim-seconds 120]
        [--autopilot ardupilot|ardupilot-sitl|px4-sitl]
@@ -80,8 +83,28 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def bench_process(sim_s: float, autopilot: str = "ardupilot") -> tuple[float, int]:
-    """Returns (real-time factor, frames the client decoded)."""
+def _cpu_s(pid: int) -> float:
+    """User + system CPU seconds of a live process (/proc), 0 when it is gone."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return 0.0
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _children(pid: int) -> list[int]:
+    out: list[int] = []
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        try:
+            out += [int(c) for c in (task / "children").read_text().split()]
+        except OSError:
+            continue
+    return out
+
+
+def bench_process(sim_s: float, autopilot: str = "ardupilot") -> tuple[float, int, dict[str, float]]:
+    """Returns (real-time factor, frames the client decoded, CPU seconds of simbridge and of its
+    firmware child as last seen while they ran)."""
     port = _free_port()
     sitl = autopilot in FIRMWARE
     with tempfile.TemporaryDirectory() as tmp:
@@ -119,15 +142,29 @@ def bench_process(sim_s: float, autopilot: str = "ardupilot") -> tuple[float, in
                         0, 1, 1, 1, 3576, n, 0, -100, 0, 0, 0, 0, 0, 0, 0, 0
                     )
 
+        cpu = {"simbridge": 0.0, "firmware": 0.0}
+
+        def sample() -> None:
+            while proc.poll() is None:
+                cpu["simbridge"] = max(cpu["simbridge"], _cpu_s(proc.pid))
+                kids = _children(proc.pid)
+                if kids:
+                    cpu["firmware"] = max(cpu["firmware"], sum(_cpu_s(k) for k in kids))
+                time.sleep(0.1)
+
         _pin(CLIENT_CORE)
         t = threading.Thread(target=drive, daemon=True)
         t.start()
+        sampler = threading.Thread(target=sample, daemon=True)
+        sampler.start()
         proc.wait(timeout=600)
         stop.set()
         t.join(timeout=5)
+        sampler.join(timeout=5)
         conn.close()
         stop_event = next(json.loads(x) for x in log.read_text().splitlines() if '"event": "stop"' in x)
-        return float(stop_event["t_s"]) / float(stop_event["wall_s"]), decoded
+        sim_done = float(stop_event["t_s"])
+        return sim_done / float(stop_event["wall_s"]), decoded, {**cpu, "sim_s": sim_done}
 
 
 def main() -> int:
@@ -140,16 +177,26 @@ def main() -> int:
     dt = 1.0 / FIRMWARE[args.autopilot][1] if sitl else F450Physics.DT_S
     results: dict[str, list[float]] = {"physics": [], "control": [], "process": []}
     frames = []
+    floors: list[float] = []
+    shares: list[float] = []
     for i in range(args.runs):
         _pin(SIM_CORE)
         results["physics"].append(bench_physics(args.sim_seconds, dt))
         results["control"].append(bench_control(args.sim_seconds))
-        rtf, n = bench_process(args.sim_seconds, args.autopilot)
+        rtf, n, cpu = bench_process(args.sim_seconds, args.autopilot)
         results["process"].append(rtf)
         frames.append(n)
+        extra = ""
+        if sitl and cpu["firmware"] > 0:
+            floors.append(cpu["sim_s"] / cpu["firmware"])
+            shares.append(cpu["firmware"] / (cpu["firmware"] + cpu["simbridge"]))
+            extra = (
+                f"  CPU: firmware {cpu['firmware']:.1f} s, simbridge {cpu['simbridge']:.1f} s "
+                f"for {cpu['sim_s']:.0f} s simulated"
+            )
         print(
             f"run {i + 1}/{args.runs}: physics {results['physics'][-1]:7.1f}x  "
-            f"+control {results['control'][-1]:6.1f}x  full process {rtf:6.1f}x  ({n} frames decoded)",
+            f"+control {results['control'][-1]:6.1f}x  full process {rtf:6.1f}x  ({n} frames decoded){extra}",
             flush=True,
         )
     med = {k: statistics.median(v) for k, v in results.items()}
@@ -168,7 +215,13 @@ def main() -> int:
     for label, value in rows:
         print(f"  {label:<46} {value:7.1f}x real time  ratio {value / base:.2f}")
     if sitl:
-        print("  (no goal set; the firmware initialises, arms and climbs to the launch pose in this time)")
+        print("  (the firmware initialises, arms and climbs to the launch pose in this time)")
+        if floors:
+            floor, share = statistics.median(floors), 100 * statistics.median(shares)
+            print(
+                f"  the firmware's own floor: {floor:.1f}x real time on a core of its own (simulated s per "
+                f"CPU s of the firmware process); it took {share:.0f} % of the CPU both processes used"
+            )
     else:
         print(f"  goal >= 50x for the full process: {'met' if med['process'] >= 50 else 'NOT met'}")
     print(f"  client decoded a median of {statistics.median(frames):.0f} MAVLink frames per run")
