@@ -551,7 +551,7 @@ def test_curated_episode_flies_real_arducopter(arducopter: Path, tmp_path: Path)
     out = tmp_path / "sitl"
     res = bench(
         "curated", "--scenario", "scenario2", "--runs", "1", "--workers", "1", "--autopilot",
-        "ardupilot-sitl", "--sitl", str(arducopter), "--quiet", "--out", str(out),
+        "ardupilot-sitl", "--sitl", str(arducopter), "--speed", "8", "--quiet", "--out", str(out),
     )  # fmt: skip
     results = json.loads((out / "results.json").read_text())
     (e,) = results["episodes"]

@@ -83,7 +83,7 @@ def test_alarm_lands_on_the_clear_roof(
     roof_ne: tuple[float, float] | None,
     roof_height_m: float | None,
 ) -> None:
-    rig = start_rig(["--scenario", scenario, "--autopilot", autopilot, "--speed", "4"])
+    rig = start_rig(["--scenario", scenario, "--autopilot", autopilot, "--speed", "8"])
     _wait_for_companion(rig)
     out = rig.alarm_accepted(
         "--reason", "GPS spoofing detected", "--criticality", "high", "--code", "gps_spoofing"
