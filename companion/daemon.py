@@ -214,8 +214,8 @@ class Companion:
             self.log.warning("alarm %r refused: the vehicle is not flying", alarm.reason)
             return RESULT_DENIED
         if not self._sees():
-            self.log.warning("alarm %r refused: no sensor stream%s", alarm.reason,
-                             "" if self._camera is None else " and no camera frame yet")  # fmt: skip
+            missing = "no sensor stream" if self._camera is None else "no camera frame yet"
+            self.log.warning("alarm %r refused: %s", alarm.reason, missing)
             return RESULT_TEMP_REJECTED
         self.recovery = Recovery(
             alarm,
