@@ -121,11 +121,11 @@ def stream_capture_time(
     one-frame hold, and whatever else keeps the decoder back (on a busy computer: with three busy
     threads in the process, decoding fell 1-2 s behind at Python's default thread switch interval, and
     a frame dated by its decode moment is dated that much late). The stream's presentation times are the
-    capture clock: a frame is dated by its own
-    presentation time plus the offset of the frame decoded soonest after its capture among the recent
-    ``arrivals`` (the lower envelope of the delay, as the autopilot's clock is fitted,
-    :class:`landfall_link.boot_clock.BootClock`), both clocks running at real time (or both at the
-    simulator's). The caller still takes the camera's latency and the parser's hold off."""
+    capture clock: a frame is dated by its own presentation time plus the offset of the frame decoded
+    soonest after its capture among the recent ``arrivals`` of the same opening of the stream (whose
+    presentation times count from its first packet): the lower envelope of the delay, as the autopilot's
+    clock is fitted (:class:`landfall_link.boot_clock.BootClock`), both clocks running at real time (or
+    both at the simulator's). The caller still takes the camera's latency and the parser's hold off."""
     now = boot_at(decoded_s)
     if now is None:
         return None
@@ -294,6 +294,9 @@ class CameraStream:
         import av
 
         container = self._open_av()
+        with self._lock:  # a stream opened again counts its presentation times from a new first packet
+            self._arrivals.clear()
+            self._pts_steps = []
         try:
             stream = container.streams.video[0]
             if self.spec.kind in ("rtp", "rtsp"):
