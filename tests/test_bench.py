@@ -365,7 +365,9 @@ def curated_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, subproc
     """Two curated scenario1 episodes through the local executor, two at a time: flown once for the
     tests of the results file and of the Ray executor (which must give the same verdicts)."""
     out = tmp_path_factory.mktemp("curated") / "bench"
-    res = bench("curated", "--scenario", "scenario1", "--runs", "2", "--workers", "2", "--out", str(out))
+    # 8 x: what the two tests check (the results file, the verdicts) does not depend on the speed
+    res = bench("curated", "--scenario", "scenario1", "--runs", "2", "--workers", "2", "--speed", "8",
+                "--out", str(out))  # fmt: skip
     return out, res
 
 
@@ -447,8 +449,8 @@ def test_ray_tasks_give_the_verdicts_the_local_executor_gives(
     pytest.importorskip("ray", reason="the campaign extra: pip install 'landfall[campaign]'")
     local, res = curated_run
     assert res.returncode == 0, res.stderr[-3000:]
-    ray = bench("curated", "--scenario", "scenario1", "--runs", "2", "--workers", "2", "--quiet",
-                "--executor", "ray", "--out", str(tmp_path / "ray"))  # fmt: skip
+    ray = bench("curated", "--scenario", "scenario1", "--runs", "2", "--workers", "2", "--speed", "8",
+                "--quiet", "--executor", "ray", "--out", str(tmp_path / "ray"))  # fmt: skip
     assert ray.returncode == 0, ray.stderr[-3000:]
     assert _verdicts(tmp_path / "ray") == _verdicts(local)
     assert [v[2] for v in _verdicts(tmp_path / "ray")] == [True, True]
