@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import itertools
 import logging
 import re
 import sys
@@ -53,6 +54,7 @@ REOPEN_S = 1.0
 LIVE_OPTIONS = {"fflags": "nobuffer", "flags": "low_delay", "analyzeduration": "0", "probesize": "32"}
 READ_TIMEOUT_S = 5.0
 DECODER_SWITCH_INTERVAL_S = 0.001  # the interpreter's thread switch interval with a camera (start())
+PTS_STEPS_KEPT = 10  # the frame interval is the median of the last steps of the presentation times
 ARRIVALS_KEPT = 120  # frames whose decode delays date the next ones (a minute at 2 frames a second)
 RTP_PAYLOAD_TYPE = 96
 
@@ -187,7 +189,6 @@ class CameraStream:
         self._closed = threading.Event()
         self._thread: threading.Thread | None = None
         self.frames = 0
-        self._pts_steps: list[float] = []  # the last presentation-time steps between frames
         self._arrivals: collections.deque[tuple[float, float]] = collections.deque(maxlen=ARRIVALS_KEPT)
         self.errors = 0
         self.last_error: str | None = None
@@ -224,7 +225,8 @@ class CameraStream:
         if self.spec.kind not in ("rtp", "rtsp"):
             return 0.0
         with self._lock:
-            steps = sorted(self._pts_steps)
+            recent = [p for p, _d in list(self._arrivals)[-PTS_STEPS_KEPT - 1 :]]
+        steps = sorted(b - a for a, b in itertools.pairwise(recent) if 0 < b - a < 5)
         return steps[len(steps) // 2] if steps else None
 
     def arrivals(self) -> list[tuple[float, float]]:
@@ -237,14 +239,6 @@ class CameraStream:
         image = self._undistort(rgb)
         image.flags.writeable = False
         with self._lock:
-            last = self._latest
-            if (
-                last is not None
-                and last.pts_s is not None
-                and pts_s is not None
-                and 0 < pts_s - last.pts_s < 5
-            ):
-                self._pts_steps = [*self._pts_steps[-9:], pts_s - last.pts_s]
             self.frames += 1
             if pts_s is not None:
                 self._arrivals.append((pts_s, decoded_s))
@@ -296,7 +290,6 @@ class CameraStream:
         container = self._open_av()
         with self._lock:  # a stream opened again counts its presentation times from a new first packet
             self._arrivals.clear()
-            self._pts_steps = []
         try:
             stream = container.streams.video[0]
             if self.spec.kind in ("rtp", "rtsp"):

@@ -607,32 +607,32 @@ def match_video_frames(
         return [None] * len(used)
     by_pts = sorted(sent, key=lambda r: float(r["pts_s"]))
     pts = np.array([float(r["pts_s"]) for r in by_pts])
+    sent_s = [float(r["sent_monotonic_s"]) for r in by_pts]
+    used_pts = [float(u["pts_s"]) for u in used]
+    decoded = [float(u["decoded_s"]) for u in used]
 
-    def pair(p: float, base: float) -> dict[str, Any] | None:
+    def pair(p: float, base: float) -> int | None:
         k = int(np.argmin(np.abs(pts - (p + base))))
-        return by_pts[k] if abs(pts[k] - (p + base)) < tolerance_s else None
+        return k if abs(pts[k] - (p + base)) < tolerance_s else None
 
-    def after(row: dict[str, Any]) -> dict[str, Any]:
-        """The frame sent next (the row itself for the last one)."""
-        k = by_pts.index(row)
-        return by_pts[min(k + 1, len(by_pts) - 1)]
-
-    ref = float(used[0]["pts_s"])
-    best: list[dict[str, Any] | None] | None = None
+    best: list[int | None] | None = None
     best_base = -math.inf
     for q in pts:
-        base = float(q) - ref
-        rows = [pair(float(u["pts_s"]), base) for u in used]
-        if any(r is None for r in rows):
+        base = float(q) - used_pts[0]
+        found = [pair(p, base) for p in used_pts]
+        if any(k is None for k in found):
             continue
+        # the frame after each one (the last one itself) was sent before it was decoded
         causal = all(
-            float(after(r)["sent_monotonic_s"]) <= float(u["decoded_s"]) + 0.01
-            for r, u in zip(rows, used, strict=True)
-            if r is not None
+            sent_s[min(k + 1, len(by_pts) - 1)] <= d + 0.01
+            for k, d in zip(found, decoded, strict=True)
+            if k is not None
         )
         if causal and base > best_base:
-            best, best_base = rows, base
-    return best if best is not None else [None] * len(used)
+            best, best_base = found, base
+    if best is None:
+        return [None] * len(used)
+    return [by_pts[k] if k is not None else None for k in best]
 
 
 def video_frames_by_stamp(

@@ -67,7 +67,7 @@ def appearance_candidates(
     mask = cv2.erode(clear.astype(np.uint8), np.ones((3, 3), np.uint8), borderType=cv2.BORDER_REPLICATE)
     count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=4)
     sy, sx = height_px / rows, width_px / cols
-    found: list[tuple[int, Candidate]] = []
+    found: list[tuple[int, tuple[int, int, int, int], tuple[float, float]]] = []
     for k in range(1, count):
         x, y, w, h, area = (int(v) for v in stats[k])
         if area < min_cells:
@@ -85,9 +85,9 @@ def appearance_candidates(
             min(int((x + w + 1) * sx), width_px),
             min(int((y + h + 1) * sy), height_px),
         )
-        found.append((area, Candidate(0, box, ((c + 0.5) * sx, (r + 0.5) * sy), measured_share=0.0)))
+        found.append((area, box, ((c + 0.5) * sx, (r + 0.5) * sy)))
     found.sort(key=lambda t: -t[0])
     return [
-        Candidate(i, c.box_px, c.centre_px, measured_share=0.0)
-        for i, (_a, c) in enumerate(found[:max_candidates])
+        Candidate(i, box, centre, measured_share=0.0)
+        for i, (_a, box, centre) in enumerate(found[:max_candidates])
     ]
