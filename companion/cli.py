@@ -67,6 +67,7 @@ def params_from(cfg: CompanionConfig) -> RecoveryParams:
         arrival_tolerance_m=r.arrival_tolerance_m,
         arrival_speed_m_s=r.arrival_speed_m_s,
         move_timeout_s=r.move_timeout_s,
+        move_timeout_s_per_m=r.move_timeout_s_per_m,
         explore_climb_m=r.explore_climb_m,
         explore_max_alt_m=r.explore_max_alt_m,
         blind_descent_agl_m=r.blind_descent_agl_m,

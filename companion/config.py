@@ -257,6 +257,7 @@ class RecoveryConfig(_Section):
     arrival_tolerance_m: float = Field(default=0.5, gt=0)
     arrival_speed_m_s: float = Field(default=0.3, gt=0)
     move_timeout_s: float = Field(default=60.0, gt=0)
+    move_timeout_s_per_m: float = Field(default=0.5, ge=0)
     explore_climb_m: float = Field(default=15.0, gt=0)
     explore_max_alt_m: float = Field(default=90.0, gt=0)
     blind_descent_agl_m: float = Field(default=70.0, gt=0)

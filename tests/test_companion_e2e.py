@@ -165,9 +165,9 @@ def test_unreachable_target_ends_the_round_and_the_budget_still_lands(start_rig:
     from pymavlink import mavutil
 
     # ArduPilot's geofence (10 m) refuses every target toward the roofs and the vehicle holds:
-    # each move times out
-    env = {"LANDFALL_RECOVERY_MOVE_TIMEOUT_S": "2"}
-    rig = start_rig(["--scenario", "scenario1", "--autopilot", "ardupilot", "--speed", "4"], env=env)
+    # each move times out (after 6 s of wall clock and 0.1 s a metre, 8x faster than real time)
+    env = {"LANDFALL_RECOVERY_MOVE_TIMEOUT_S": "6", "LANDFALL_RECOVERY_MOVE_TIMEOUT_S_PER_M": "0.1"}
+    rig = start_rig(["--scenario", "scenario1", "--autopilot", "ardupilot", "--speed", "8"], env=env)
     gcs = mavutil.mavlink_connection(
         f"udpout:127.0.0.1:{_sim_port(rig)}", source_system=255, source_component=190
     )
@@ -184,8 +184,8 @@ def test_unreachable_target_ends_the_round_and_the_budget_still_lands(start_rig:
     _raise_alarm(rig, "storm", "critical")
     _wait_touchdown(rig, timeout_s=200)
     log = rig.wait_log("recovery ended")
-    # the round's target is not reached (a move of 2 s wall, 4x faster than real time, plus its
-    # distance allowance: over a minute of the autopilot's clock), and the critical alarm's window
+    # the round's target is not reached (a move of 6 s wall plus its distance allowance, 8x faster
+    # than real time: over a minute of the autopilot's clock), and the critical alarm's window
     # (60 s) has closed by then: no more rounds, the least bad site measured, not reached either
     assert "site 0 roof 29 m W" in log
     assert "target not reached (28" in log
@@ -348,14 +348,14 @@ def _events(record: Path) -> list[dict[str, Any]]:
 
 
 def _lvlm_rig(start_rig: Callable[..., Rig], tmp_path: Path, base_url: str, record: Path) -> Rig:
-    """scenario1, PX4, 4x; the companion's reasoner is the model "vlm" at ``base_url``, recorded."""
+    """scenario1, PX4, 8x; the companion's reasoner is the model "vlm" at ``base_url``, recorded."""
     config = tmp_path / "companion.toml"
     config.write_text(
         f'[reasoner]\nname = "edge"\n[reasoner.profiles.edge]\nbase_url = "{base_url}"\n'
         'model = "vlm"\napi_key_env = ""\n'
     )
     return start_rig(
-        ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "4"],
+        ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "8"],
         ["--config", str(config), "--record", str(record)],
     )
 
@@ -407,7 +407,7 @@ def test_stale_frames_are_discarded_and_a_vehicle_with_no_fresh_frame_lands_wher
     no site."""
     record = tmp_path / "record"
     env = {"LANDFALL_SENSORS_MAX_FRAME_AGE_S": "0.01", "LANDFALL_RECOVERY_SENSOR_LOSS_S": "3"}
-    rig = start_rig(["--scenario", "scenario1", "--speed", "4"], ["--record", str(record)], env=env)
+    rig = start_rig(["--scenario", "scenario1", "--speed", "8"], ["--record", str(record)], env=env)
     _raise_alarm(rig, "sensor failure", "high")
     td = _wait_touchdown(rig, timeout_s=200)
     log = rig.wait_log("recovery ended", timeout_s=60)
@@ -514,7 +514,7 @@ def test_a_companion_killed_mid_recovery_resumes_it_after_a_restart(
     roof. The killed session's record stays readable."""
     record = tmp_path / "record"
     rig = start_rig(
-        ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "4"], ["--record", str(record)]
+        ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "8"], ["--record", str(record)]
     )
     _raise_alarm(rig, "GPS spoofing", "high")
     rig.wait_log("site 0 roof")
@@ -701,7 +701,7 @@ def test_the_signed_link_refuses_forged_replayed_and_foreign_alarms_and_leaks_no
         )
         record = tmp_path / "record"
         rig = start_rig(
-            ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "4", "--signing-key", key_hex],
+            ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "8", "--signing-key", key_hex],
             ["--config", str(config), "--record", str(record), "--log-level", "DEBUG"],
             env={"LANDFALL_SIGNING_KEY": key_hex, "LANDFALL_TEST_API_KEY": api_key},
         )

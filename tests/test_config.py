@@ -69,7 +69,12 @@ def test_load_config_defaults_match_the_brief() -> None:
         0.5,
         0.3,
     )
-    assert (r.move_timeout_s, r.explore_climb_m, r.explore_max_alt_m) == (60.0, 15.0, 90.0)
+    assert (r.move_timeout_s, r.move_timeout_s_per_m, r.explore_climb_m, r.explore_max_alt_m) == (
+        60.0,
+        0.5,
+        15.0,
+        90.0,
+    )
     pc = cfg.perception
     assert (pc.depth, pc.depth_model, pc.cell_px, pc.window_cells) == ("lidar", None, 4, 5)
     assert (pc.max_slope_deg, pc.max_roughness_m, pc.min_area_m2, pc.edge_margin_m, pc.max_candidates) == (
@@ -184,6 +189,16 @@ def test_rounds_for_caps_by_max_rounds() -> None:
     assert load_config(None, {}, {}).rounds_for("critical") == 3
     assert load_config(None, {}, {}).rounds_for("low") == 10
     assert load_config(None, {"LANDFALL_RECOVERY_MAX_ROUNDS": "2"}, {}).rounds_for("high") == 2
+
+
+def test_a_moves_allowance_grows_with_its_distance_as_configured() -> None:
+    from companion.cli import params_from
+
+    cfg = load_config(None, {"LANDFALL_RECOVERY_MOVE_TIMEOUT_S_PER_M": "0.25"}, {})
+    p = params_from(cfg)
+    assert p.move_timeout(0.0) == 60.0
+    assert p.move_timeout(40.0) == 70.0
+    assert params_from(load_config(None, {}, {})).move_timeout(40.0) == 80.0  # 0.5 s a metre
 
 
 def test_env_var_name_upper_cases_section_and_key() -> None:

@@ -99,7 +99,7 @@ def test_the_companion_lands_on_the_clear_roof_on_an_estimate_with_errors(
 ) -> None:
     """The companion places its frames with the autopilot's estimate (bias, noise, lag, attitude
     error) and flies in that frame: it still lands on scenario1's clear roof."""
-    rig = start_rig(["--scenario", "scenario1", "--ekf-error", "nominal", "--seed", "2", "--speed", "4"])
+    rig = start_rig(["--scenario", "scenario1", "--ekf-error", "nominal", "--seed", "2", "--speed", "8"])
     rig.wait_log("sensor stream connected", timeout_s=60)
     out = rig.alarm_accepted("--reason", "GPS spoofing detected", "--criticality", "high")
     assert out.returncode == 0, out.stdout + out.stderr

@@ -332,7 +332,7 @@ def test_a_five_second_link_loss_on_real_arducopter_holds_then_lands_on_the_same
     try:
         rig = start_rig(
             ["--autopilot", "ardupilot-sitl", "--sitl", str(arducopter), "--scenario", "scenario2",
-             "--launch", "12,8", "--speed", "4"],
+             "--launch", "12,8", "--speed", "8"],
             mavlink_via=via,
         )  # fmt: skip
         ready = _wait_event(rig.sim, "ready", 240)

@@ -68,6 +68,7 @@ class RecoveryParams:
     arrival_tolerance_m: float = 0.5
     arrival_speed_m_s: float = 0.3
     move_timeout_s: float = 60.0
+    move_timeout_s_per_m: float = 0.5  # on top of move_timeout_s, per metre to fly: a 2 m/s cruise
     explore_climb_m: float = 15.0
     explore_max_alt_m: float = 90.0  # below the LiDAR's range (100 m): higher up it sees nothing
     blind_descent_agl_m: float = 70.0  # no LiDAR return at all and the ground farther: descend to this
@@ -81,6 +82,10 @@ class RecoveryParams:
     link_loss_s: float = 60.0  # wall seconds without telemetry before leaving the vehicle to the autopilot
     search: SearchLimits = field(default_factory=SearchLimits)  # when searching on must stop
     search_agl_m: float = 75.0  # a search leg's least height above the ground
+
+    def move_timeout(self, distance_m: float) -> float:
+        """Wall seconds a move of ``distance_m`` may take before it counts as not reached."""
+        return self.move_timeout_s + distance_m * self.move_timeout_s_per_m
 
 
 class Record(Protocol):

@@ -253,7 +253,7 @@ class Recovery(Searching, SiteChoice, Looking):
                 d,
                 tolerance_m=self.p.arrival_tolerance_m,
                 speed_m_s=self.p.arrival_speed_m_s,
-                timeout_s=self.p.move_timeout_s + dist / 2.0,
+                timeout_s=self.p.move_timeout(dist),
             )
         except TargetTimeout as exc:
             self._say(4, f"target not reached ({exc.error_m:.1f} m off): next round")

@@ -171,7 +171,7 @@ class Searching(RecoveryBase):
                     sd,
                     tolerance_m=2.0,
                     speed_m_s=0.5,
-                    timeout_s=self.p.move_timeout_s + math.dist((sn, se, sd), self.tm.state.pos_ned_m) / 2.0,
+                    timeout_s=self.p.move_timeout(math.dist((sn, se, sd), self.tm.state.pos_ned_m)),
                 )
         return leg
 

@@ -94,7 +94,7 @@ class SiteChoice(RecoveryBase):
                 d,
                 tolerance_m=self.p.arrival_tolerance_m,
                 speed_m_s=self.p.arrival_speed_m_s,
-                timeout_s=self.p.move_timeout_s + math.hypot(n - n0, e - e0) / 2.0,
+                timeout_s=self.p.move_timeout(math.hypot(n - n0, e - e0)),
             )
         except TargetTimeout as exc:
             self._say(4, f"{what} target not reached ({exc.error_m:.1f} m off): {then}")
