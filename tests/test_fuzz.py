@@ -25,6 +25,10 @@ from companion.reasoning.parsing import parse_confirm, parse_rank
 from landfall_link.sensorstream import ImageEncoding, Part, SensorFrame, SensorStreamError
 from landfall_link.sensorstream.wire import _encode_frame, _frame_from_wire, _part_specs
 
+# Examples per property: 2,000 where more examples reach more branches (the LVLM answer parsers reach
+# 95 % of parsing.py's lines at 2,000, 89 % at 1,000, 85 % at 500); 500 where they reach no more (the
+# sensor frame decoder's and the MQTT intake's lines and branches, measured 2026-11-28 with
+# `coverage run --branch`: the same at 500 as at 2,000, which took 4x as long).
 MANY = settings(max_examples=2000, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 SOME = settings(max_examples=500, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
@@ -132,7 +136,7 @@ HEADER, BLOBS = _wire()
 PART_KEYS = ["name", "encoding", "dtype", "shape", "nbytes"]
 
 
-@MANY
+@SOME
 @given(
     st.dictionaries(st.sampled_from(sorted(HEADER)), json_values, max_size=3),
     st.lists(st.tuples(st.sampled_from(PART_KEYS), json_values), max_size=3),
@@ -218,7 +222,7 @@ def test_alarm_command_decodes_or_says_why(p1: float, p2: float, text: str) -> N
     assert alarm.reason
 
 
-@MANY
+@SOME
 @given(st.binary(max_size=200) | json_values.map(lambda v: json.dumps(v).encode()))
 def test_mqtt_alarm_intake_decodes_or_says_why(payload: bytes) -> None:
     try:
