@@ -60,7 +60,10 @@ class Px4SitlBridge(FirmwareBridge):
 
     def _stop_fields(self) -> dict[str, Any]:
         lock = self.lockstep
+        pace = lock.lockstep_rate() if lock else None
         return {
             "frames": lock.steps if lock else 0,
             "actuator_msgs": lock.actuator_msgs if lock else 0,
+            "lockstep_wall_s": round(pace[0], 3) if pace else None,
+            "lockstep_sim_s": round(pace[1], 3) if pace else None,
         }

@@ -54,6 +54,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from simbridge.autopilot.flavours import Px4Flavour
 from simbridge.geo import GeoOrigin, Quat, Vec3, rotate_body_to_ned
+from simbridge.hil_wire import ActuatorControls, HilWire
 from simbridge.physics import VehicleState
 from simbridge.sitl import (
     FirmwareProcess,
@@ -92,6 +93,7 @@ STALL_S = 15.0  # wall seconds without an actuator message once they have starte
 MAX_LAG_S = 0.05  # wall seconds the lock step may fall behind --speed before it drops the lag
 BOOT_PACE_S = 1.0 / SENSOR_HZ  # wall pacing of sensor steps before PX4's controllers answer
 _TAIL_LINES = 60
+_NOISE_BLOCK = SENSOR_HZ  # sensor noise drawn for this many steps at once
 
 # sensor model (white noise per sample; biases drawn once per run)
 ACCEL_NOISE = 0.03  # m/s^2
@@ -297,6 +299,10 @@ class Isa:
         return 15.0 - 0.0065 * alt_m
 
 
+def _unit(v: float) -> float:
+    return 1.0 if v > 1.0 else (v if v > 0.0 else 0.0)
+
+
 def mag_field_ned() -> Vec3:
     inc = math.radians(MAG_INCLINATION_DEG)
     return (MAG_FIELD_GAUSS * math.cos(inc), 0.0, MAG_FIELD_GAUSS * math.sin(inc))
@@ -346,8 +352,11 @@ class HilLockStep(LockStepThread):
         self.steps = 0
         self.actuator_msgs = 0
         self.connected_wall_s: float | None = None
+        self.first_answer: tuple[float, int] | None = None  # (monotonic, steps) at PX4's first answer
         self._mav = M.MAVLink(None, srcSystem=1, srcComponent=51)
         self._mav.robust_parsing = True
+        self._wire = HilWire(self._mav)
+        self._noise = np.empty((0, 12))  # standard normals, drawn a block at a time (one row a step)
         self._accel_bias = tuple(rng.normal(0.0, ACCEL_BIAS, 3))
         self._gyro_bias = tuple(rng.normal(0.0, GYRO_BIAS, 3))
         self._controls: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
@@ -438,24 +447,42 @@ class HilLockStep(LockStepThread):
                 conn.settimeout(0.25)
         if not data:
             raise SitlDied("PX4 closed the simulator connection", self.process.tail())
-        for msg in self._mav.parse_buffer(data) or ():
+        for msg in self._wire.feed(data):
             self._on_message(msg)
         return True
 
-    def _on_message(self, msg: Any) -> None:
-        if msg.get_type() == "HIL_ACTUATOR_CONTROLS":
-            c = [min(1.0, max(0.0, float(v))) for v in msg.controls[:4]]
-            if any(math.isnan(v) for v in msg.controls[:4]):
-                raise SitlProtocolError("HIL_ACTUATOR_CONTROLS with NaN motor commands", self.process.tail())
-            armed = bool(msg.mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
-            self._controls = (c[0], c[1], c[2], c[3]) if armed else (0.0, 0.0, 0.0, 0.0)
-            self.actuator_msgs += 1
+    def _on_message(self, msg: ActuatorControls | Any) -> None:
+        if not isinstance(msg, ActuatorControls):
+            if msg.get_type() != "HIL_ACTUATOR_CONTROLS":
+                return
+            msg = ActuatorControls(msg.time_usec, msg.flags, tuple(msg.controls), msg.mode)  # a signed one
+        c0, c1, c2, c3 = msg.controls[:4]
+        if math.isnan(c0) or math.isnan(c1) or math.isnan(c2) or math.isnan(c3):
+            raise SitlProtocolError("HIL_ACTUATOR_CONTROLS with NaN motor commands", self.process.tail())
+        if msg.mode & M.MAV_MODE_FLAG_SAFETY_ARMED:
+            self._controls = (_unit(c0), _unit(c1), _unit(c2), _unit(c3))
+        else:
+            self._controls = (0.0, 0.0, 0.0, 0.0)
+        if not self.actuator_msgs:
+            self.first_answer = (time.monotonic(), self.steps)
+        self.actuator_msgs += 1
+
+    def lockstep_rate(self) -> tuple[float, float] | None:
+        """(wall seconds, simulated seconds) since PX4 first answered: the lock step's own pace,
+        without the process start before it; None before that."""
+        if self.first_answer is None:
+            return None
+        wall0, steps0 = self.first_answer
+        return time.monotonic() - wall0, (self.steps - steps0) / SENSOR_HZ
 
     def _sensors(self, s: VehicleState, t_s: float) -> bytes:
         mav = self._mav
         rng = self.rng
         usec = round(t_s * 1e6)
-        n = rng.normal(0.0, 1.0, 12)
+        k = self.steps % _NOISE_BLOCK
+        if k == 0 or len(self._noise) != _NOISE_BLOCK:
+            self._noise = rng.normal(0.0, 1.0, (_NOISE_BLOCK, 12))
+        n = self._noise[k].tolist()
         ax, ay, az = self.vehicle.physics.specific_force_frd()
         p, q, r = s.rates_frd_rad_s
         ba, bg = self._accel_bias, self._gyro_bias
@@ -471,11 +498,11 @@ class HilLockStep(LockStepThread):
             temp = Isa.temperature_c(alt) + 0.01 * n[10]
             fields |= 0b111 << 6 | 0b1101 << 9  # mag; abs pressure, pressure altitude, temperature
         out = [
-            mav.hil_sensor_encode(
+            self._wire.hil_sensor(
                 usec, ax + ba[0] + ACCEL_NOISE * n[0], ay + ba[1] + ACCEL_NOISE * n[1],
                 az + ba[2] + ACCEL_NOISE * n[2], p + bg[0] + GYRO_NOISE * n[3], q + bg[1] + GYRO_NOISE * n[4],
                 r + bg[2] + GYRO_NOISE * n[5], mx, my, mz, abs_p, 0.0, alt, temp, fields, 0,
-            ).pack(mav)
+            )
         ]  # fmt: skip
         vn, ve, vd = s.vel_ned_m_s
         if step % GPS_EVERY == 0:
