@@ -222,15 +222,13 @@ def main() -> int:
         print(f"  {label:<46} {value:7.1f}x real time  ratio {value / base:.2f}")
     if paces:
         pace = statistics.median(paces)
-        print(
-            f"  {'the same from the firmware first answering':<46} {pace:7.1f}x real time  ratio {pace / base:.2f}"
-        )
+        label = "the same from the firmware first answering"
+        print(f"  {label:<46} {pace:7.1f}x real time  ratio {pace / base:.2f}")
     if sitl:
         print("  (the firmware initialises, arms and climbs to the launch pose in this time)")
         if paces:
-            print(
-                f"  goal >= 10x in lock step on one core: {'met' if statistics.median(paces) >= 10 else 'NOT met'}"
-            )
+            verdict = "met" if statistics.median(paces) >= 10 else "NOT met"
+            print(f"  goal >= 10x in lock step on one core: {verdict}")
         if floors:
             floor, share = statistics.median(floors), 100 * statistics.median(shares)
             print(
