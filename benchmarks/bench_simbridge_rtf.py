@@ -39,12 +39,13 @@ from pymavlink import mavutil
 from simbridge.control import Setpoint
 from simbridge.geo import GeoOrigin
 from simbridge.physics import F450Physics
+from simbridge.px4_sitl import SENSOR_HZ as PX4_HIL_HZ
 from simbridge.telemetry import DEFAULT_INTERVALS_S
 from simbridge.terrain import FlatTerrain
 from simbridge.vehicle import Vehicle
 
 SIM_CORE, CLIENT_CORE = 0, 1
-FIRMWARE = {"ardupilot-sitl": ("real ArduCopter SITL", 600), "px4-sitl": ("real PX4 SITL", 250)}  # name, Hz
+FIRMWARE = {"ardupilot-sitl": ("real ArduCopter SITL", 600), "px4-sitl": ("real PX4 SITL", PX4_HIL_HZ)}  # Hz
 
 
 def _pin(core: int) -> None:

@@ -86,8 +86,8 @@ MODEL = "none_iris"
 HIL_BASE_PORT = 4560
 MAX_INSTANCES = 10  # PX4's offboard port 14540 + N is shared beyond 10 instances
 SENSOR_HZ = 250  # HIL_SENSOR rate = PX4's IMU_INTEG_RATE; one JSBSim step each
-GPS_EVERY = 25  # 10 Hz
-TRUTH_EVERY = 5  # ground truth, barometer, magnetometer and rangefinder at 50 Hz
+GPS_EVERY = SENSOR_HZ // 10  # 10 Hz
+TRUTH_EVERY = SENSOR_HZ // 50  # ground truth, barometer, magnetometer and rangefinder at 50 Hz
 CONNECT_S = 60.0  # wall seconds from start to PX4's TCP connection
 STALL_S = 15.0  # wall seconds without an actuator message once they have started
 MAX_LAG_S = 0.05  # wall seconds the lock step may fall behind --speed before it drops the lag

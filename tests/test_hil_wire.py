@@ -116,3 +116,17 @@ def test_a_signed_actuator_frame_goes_to_pymavlink() -> None:
     (msg,) = HilWire(sim_mav).feed(frame)
     assert msg.get_type() == "HIL_ACTUATOR_CONTROLS"
     assert math.isclose(msg.controls[0], 0.5)
+
+
+def test_without_fastcrc_the_crc_is_pymavlinks_own(monkeypatch: pytest.MonkeyPatch) -> None:
+    import simbridge.hil_wire as hil_wire
+
+    ours, theirs = (
+        M.MAVLink(None, srcSystem=1, srcComponent=51),
+        M.MAVLink(None, srcSystem=1, srcComponent=51),
+    )
+    args = (123456, *[float(k) for k in range(13)], 0x1FFF, 0)
+    fast = HilWire(ours).hil_sensor(*args)
+    monkeypatch.setattr(hil_wire, "_mcrf4xx", None)
+    ours.seq = 0
+    assert HilWire(ours).hil_sensor(*args) == fast == theirs.hil_sensor_encode(*args).pack(theirs)
