@@ -114,6 +114,15 @@ class F450Physics:
         self._sim_time = node("simulation/sim-time-sec")
         self._force = [node(f"forces/fb{a}-total-lbs") for a in ("x", "y", "z")]  # all but gravity
         self._mass_slugs = node("inertia/mass-slugs")
+        # what state() reads every step, as bound getters in one tuple (a lock step reads it 250 times
+        # a simulated second: one comprehension instead of a generator per group)
+        self._state_reads = tuple(
+            n.get_double_value
+            for n in (self._lat, self._lon, self._alt, *self._euler, *self._vel, *self._rates, self._sim_time,
+                      *self._wow, *self._thrust)
+        )  # fmt: skip
+        self._wow_end = 13 + len(self._wow)  # where the gear legs end in what state() reads
+        self._force_reads = tuple(n.get_double_value for n in (*self._force, self._mass_slugs))
         self._ground_height_m = 0.0
         self._t0_s = 0.0
         self._last_pos: Vec3 = (0.0, 0.0, 0.0)
@@ -159,9 +168,9 @@ class F450Physics:
     def specific_force_frd(self) -> Vec3:
         """What an accelerometer at the CG reads, body FRD, m/s^2: every force but gravity over the
         mass (at rest on the gear, (0, 0, -g))."""
-        mass_kg = self._mass_slugs.get_double_value() * _SLUG_KG
-        fx, fy, fz = (n.get_double_value() * LBF_N / mass_kg for n in self._force)
-        return (fx, fy, fz)
+        fx, fy, fz, mass_slugs = (read() for read in self._force_reads)
+        k = LBF_N / (mass_slugs * _SLUG_KG)
+        return (fx * k, fy * k, fz * k)
 
     def step(self, throttles: tuple[float, float, float, float]) -> None:
         """Advance one JSBSim step (``dt_s``) with ESC commands in [0, 1], JSBSim motor order."""
@@ -189,23 +198,20 @@ class F450Physics:
 
     def state(self) -> VehicleState:
         """Read the truth state after the last step."""
-        pos = self.origin.to_ned(
-            self._lat.get_double_value(), self._lon.get_double_value(), self._alt.get_double_value()
-        )
-        roll, pitch, psi = (n.get_double_value() for n in self._euler)
+        v = [read() for read in self._state_reads]
+        lat, lon, alt, roll, pitch, psi, vn, ve, vd, p, q, r, t = v[:13]
+        pos = self.origin.to_ned(lat, lon, alt)
         yaw = wrap_pi(psi)
-        vn, ve, vd = (n.get_double_value() * FT_M for n in self._vel)
-        p, q, r = (n.get_double_value() for n in self._rates)
         self._last_pos = pos
-        self._contact = any(n.get_double_value() > 0.5 for n in self._wow)
+        self._contact = max(v[13 : self._wow_end]) > 0.5  # a gear leg's weight on wheels
         return VehicleState(
-            t_s=self._sim_time.get_double_value() - self._t0_s,
+            t_s=t - self._t0_s,
             pos_ned_m=pos,
-            vel_ned_m_s=(vn, ve, vd),
+            vel_ned_m_s=(vn * FT_M, ve * FT_M, vd * FT_M),
             quat=euler_to_quat(roll, pitch, yaw),
             euler_rad=(roll, pitch, yaw),
             rates_frd_rad_s=(p, q, r),
             ground_height_m=self._ground_height_m,
             on_ground=self._contact,
-            thrust_n=sum(n.get_double_value() for n in self._thrust) * LBF_N,
+            thrust_n=sum(v[self._wow_end :]) * LBF_N,
         )
