@@ -237,8 +237,10 @@ class Px4Process(FirmwareProcess):
             "# simbridge (landfall): PX4's MAVLink links",
             "# the ground-station link, to simbridge's own watcher (in place of QGroundControl's 14550)",
             f"mavlink start -x -u $((18570+px4_instance)) -r 4000000 -f -o {self.pilot_port}",
-            "# the API/offboard link (MAVSDK's default: PX4 sends to 14540 + N)",
-            "mavlink start -x -u $((14580+px4_instance)) -r 4000000 -f -m onboard -o $((14540+px4_instance))",
+            "# the API/offboard link (MAVSDK's default: PX4 sends to 14540 + N), in PX4's normal mode:",
+            "# MAVSDK asks for the rates it needs; onboard mode's streams to a port nobody may listen on",
+            "# cost PX4 a fifth of its CPU in lock step (docs/px4-sitl.md)",
+            "mavlink start -x -u $((14580+px4_instance)) -r 4000000 -f -o $((14540+px4_instance))",
         ]
         if self.companion is not None:
             host, port = self.companion
