@@ -121,8 +121,9 @@ class HilWire:
             else:
                 i += 1
                 continue
-            got = self.mav.parse_buffer(bytes(buf[i : i + size])) or []
-            if (magic == _V2 and buf[i + 2] & ~_SIGNED) or any(m.get_type() == "BAD_DATA" for m in got):
+            impossible = magic == _V2 and buf[i + 2] & ~_SIGNED  # flags MAVLink 2 does not define
+            got = [] if impossible else self.mav.parse_buffer(bytes(buf[i : i + size])) or []
+            if impossible or any(m.get_type() == "BAD_DATA" for m in got):
                 self.bad_frames += 1
                 i += 1  # a false start (or a frame damaged): look for the next start
                 continue

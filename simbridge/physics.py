@@ -116,12 +116,9 @@ class F450Physics:
         self._mass_slugs = node("inertia/mass-slugs")
         # what state() reads every step, as bound getters in one tuple (a lock step reads it 250 times
         # a simulated second: one comprehension instead of a generator per group)
-        self._state_reads = tuple(
-            n.get_double_value
-            for n in (self._lat, self._lon, self._alt, *self._euler, *self._vel, *self._rates, self._sim_time,
-                      *self._wow, *self._thrust)
-        )  # fmt: skip
-        self._wow_end = 13 + len(self._wow)  # where the gear legs end in what state() reads
+        head = (self._lat, self._lon, self._alt, *self._euler, *self._vel, *self._rates, self._sim_time)
+        self._state_reads = tuple(n.get_double_value for n in (*head, *self._wow, *self._thrust))
+        self._wow_at = (len(head), len(head) + len(self._wow))  # the gear legs in what state() reads
         self._force_reads = tuple(n.get_double_value for n in (*self._force, self._mass_slugs))
         self._ground_height_m = 0.0
         self._t0_s = 0.0
@@ -199,11 +196,12 @@ class F450Physics:
     def state(self) -> VehicleState:
         """Read the truth state after the last step."""
         v = [read() for read in self._state_reads]
-        lat, lon, alt, roll, pitch, psi, vn, ve, vd, p, q, r, t = v[:13]
+        w0, w1 = self._wow_at
+        lat, lon, alt, roll, pitch, psi, vn, ve, vd, p, q, r, t = v[:w0]
         pos = self.origin.to_ned(lat, lon, alt)
         yaw = wrap_pi(psi)
         self._last_pos = pos
-        self._contact = max(v[13 : self._wow_end]) > 0.5  # a gear leg's weight on wheels
+        self._contact = max(v[w0:w1]) > 0.5  # a gear leg's weight on wheels
         return VehicleState(
             t_s=t - self._t0_s,
             pos_ned_m=pos,
@@ -213,5 +211,5 @@ class F450Physics:
             rates_frd_rad_s=(p, q, r),
             ground_height_m=self._ground_height_m,
             on_ground=self._contact,
-            thrust_n=sum(v[self._wow_end :]) * LBF_N,
+            thrust_n=sum(v[w1:]) * LBF_N,
         )
