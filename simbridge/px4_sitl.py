@@ -41,6 +41,7 @@ import os
 import shutil
 import signal
 import socket
+import struct
 import tempfile
 import threading
 import time
@@ -316,6 +317,19 @@ def ned_to_body(q: Quat, v: Vec3) -> Vec3:
 
 
 # ---------------------------------------------------------------------------------------------- lock step
+IO_TIMEOUT_S = 0.25  # the simulator socket's send and receive timeouts
+
+
+def _kernel_timeouts(conn: socket.socket) -> None:
+    """A blocking socket whose timeouts the kernel keeps (SO_RCVTIMEO, SO_SNDTIMEO): a receive is one
+    system call, where Python's own timeout adds a poll before each (two calls a step, 500 a simulated
+    second); a timeout raises BlockingIOError."""
+    conn.settimeout(None)
+    tv = struct.pack("ll", 0, round(IO_TIMEOUT_S * 1e6))
+    conn.setsockopt(socket.SOL_SOCKET, socket.SO_RCVTIMEO, tv)
+    conn.setsockopt(socket.SOL_SOCKET, socket.SO_SNDTIMEO, tv)
+
+
 StateHook = Callable[[VehicleState], None]
 
 
@@ -395,7 +409,7 @@ class HilLockStep(LockStepThread):
         vehicle = self.vehicle
         physics = vehicle.physics
         physics.set_dt(1.0 / SENSOR_HZ)
-        conn.settimeout(0.25)
+        _kernel_timeouts(conn)
         wall0 = time.monotonic()
         last_actuator_wall = wall0
         s = vehicle.state
@@ -439,14 +453,9 @@ class HilLockStep(LockStepThread):
     def _drain(self, conn: socket.socket, *, block: bool) -> bool:
         """Read what PX4 sent; True if anything came."""
         try:
-            if not block:
-                conn.setblocking(False)
-            data = conn.recv(65536)
-        except (BlockingIOError, TimeoutError):
+            data = conn.recv(65536, 0 if block else socket.MSG_DONTWAIT)
+        except (BlockingIOError, TimeoutError):  # nothing yet, or the kernel's receive timeout
             return False
-        finally:
-            if not block:
-                conn.settimeout(0.25)
         if not data:
             raise SitlDied("PX4 closed the simulator connection", self.process.tail())
         for msg in self._wire.feed(data):
