@@ -307,6 +307,41 @@ class VehicleController:
             self._streamer = None
         self._engaged_mode = None
 
+    async def ride_out_failsafe(self, grace_s: float) -> bool:
+        """After an ``AutopilotFailsafe``: for up to ``grace_s`` stream a hold where the vehicle is,
+        commanding no mode, and watch the heartbeat. True when the autopilot went back to the
+        companion's mode by itself (its failsafe cleared: PX4's offboard-loss fallback does once
+        setpoints flow again), and the companion commands again; False when it did not (or the vehicle
+        is down): then the setpoints stop, and the caller decides from the mode the autopilot is in.
+        The hold is ignored by an autopilot in any other mode."""
+        if self.failsafe is None or self._engaged_mode is None:
+            return False
+        n, e, d = self.tm.state.pos_ned_m
+        self.set_target(n, e, d)
+        start = time.monotonic()
+        while (remaining := start + grace_s - time.monotonic()) > 0:
+            with contextlib.suppress(TimeoutError):
+                await self.tm.wait_update(min(remaining, 0.5))
+            s = self.tm.state
+            if s.on_ground:
+                break
+            if s.stamps.get("heartbeat", 0.0) > start and s.custom_mode == self._engaged_mode:
+                self.failsafe = None
+                return True
+        self._target = None
+        return False
+
+    async def wait_on_ground(self, timeout_s: float) -> bool:
+        """Without commanding anything: wait until the vehicle is on the ground (landed or
+        disarmed). False when ``timeout_s`` passed first."""
+        deadline = time.monotonic() + timeout_s
+        while not self.tm.state.on_ground:
+            if time.monotonic() > deadline:
+                return False
+            with contextlib.suppress(TimeoutError):
+                await self.tm.wait_update(1.0)
+        return True
+
     async def goto(
         self, n: float, e: float, d: float, *, tolerance_m: float, speed_m_s: float, timeout_s: float
     ) -> None:

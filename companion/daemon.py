@@ -29,6 +29,7 @@ from landfall_link.mavlink import MavlinkUdpLink
 MAV_TYPE_ONBOARD_CONTROLLER = 18
 MAV_AUTOPILOT_INVALID = 8
 MAV_STATE_STANDBY, MAV_STATE_ACTIVE = 3, 4
+SEVERITY_WARNING = 4  # MAV_SEVERITY_WARNING: autopilot texts this grave or graver go into a recovery's record
 RESULT_ACCEPTED, RESULT_TEMP_REJECTED, RESULT_DENIED, RESULT_UNSUPPORTED, RESULT_IN_PROGRESS = 0, 1, 2, 3, 5
 RESUME_WAIT_S = 60.0  # after a restart mid-recovery: how long to wait for telemetry and sensors
 POSE_WAIT_UPDATES = 3  # position updates a frame newer than the telemetry waits for
@@ -445,6 +446,13 @@ class Companion:
         fresh = self.tm.texts_received - self._texts_seen
         self._texts_seen = self.tm.texts_received
         new_texts = self.tm.texts[-fresh:] if fresh > 0 else []
+        running = self._recovery_task is not None and not self._recovery_task.done()
+        if running and self.record is not None:
+            # what the autopilot warned of during the recovery (its failsafes, a low battery) goes
+            # into the record and the ground feed beside the companion's own decisions
+            for _, severity, text in new_texts:
+                if severity <= SEVERITY_WARNING:
+                    self.record.record_event("autopilot_text", {"severity": severity, "text": text})
         if s.on_ground:
             return
         if self._watch_battery_pct is not None and s.battery_pct < self._watch_battery_pct:

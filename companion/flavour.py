@@ -21,6 +21,9 @@ class Flavour:
     modes: dict[Mode, int]  # custom_mode values in the heartbeat
     set_mode: dict[Mode, tuple[float, float, float]]  # DO_SET_MODE params 1-3
     needs_stream: bool  # PX4: setpoints must stream before and during OFFBOARD
+    # modes in which the autopilot lands or flies home by itself (custom_mode -> its name): a failsafe
+    # that picks one of them has decided how the flight ends, and the companion does not take it back
+    comes_down: dict[int, str]
 
     def mode_of(self, custom_mode: int) -> Mode | None:
         for mode, value in self.modes.items():
@@ -28,18 +31,28 @@ class Flavour:
                 return mode
         return None
 
+    def lands_or_returns(self, custom_mode: int) -> str | None:
+        """The name of ``custom_mode`` when the autopilot lands or returns home in it by itself."""
+        return self.comes_down.get(custom_mode)
+
 
 PX4 = Flavour(
     name="px4",
     modes={Mode.GUIDED: 6 << 16, Mode.HOLD: (4 << 16) | (3 << 24), Mode.LAND: (4 << 16) | (6 << 24)},
     set_mode={Mode.GUIDED: (1, 6, 0), Mode.HOLD: (1, 4, 3), Mode.LAND: (1, 4, 6)},
     needs_stream=True,
+    comes_down={
+        (4 << 16) | (5 << 24): "AUTO.RTL",
+        (4 << 16) | (6 << 24): "AUTO.LAND",
+        (4 << 16) | (9 << 24): "AUTO.PRECLAND",
+    },
 )
 ARDUPILOT = Flavour(
     name="ardupilot",
     modes={Mode.GUIDED: 4, Mode.HOLD: 5, Mode.LAND: 9},
     set_mode={Mode.GUIDED: (1, 4, 0), Mode.HOLD: (1, 5, 0), Mode.LAND: (1, 9, 0)},
     needs_stream=False,
+    comes_down={6: "RTL", 9: "LAND", 21: "SMART_RTL", 27: "AUTO_RTL"},
 )
 
 

@@ -163,6 +163,14 @@ class _UdpRelayLoop:
         self._held: dict[tuple[str, int], bytes] = {}
         self.stop = threading.Event()
         self.blackout = threading.Event()
+        self.uplink_blackout = threading.Event()  # only what goes toward simbridge
+
+    def inject(self, data: bytes) -> None:
+        """One datagram to simbridge's side, from the relay's socket: to the autopilot it comes from
+        the companion's address, as a second MAVLink system sharing the link would."""
+        if self._sim is not None:
+            with contextlib.suppress(OSError):
+                self._sock.sendto(data, self._sim)
 
     def run(self) -> None:
         drop, duplicate, reorder, corrupt = self.rates
@@ -180,7 +188,7 @@ class _UdpRelayLoop:
             if dest is None:
                 continue
             self.counts["in"] += 1
-            if self.blackout.is_set():
+            if self.blackout.is_set() or (self.uplink_blackout.is_set() and dest != self.target):
                 self.counts["blacked_out"] += 1
                 continue
             r = self._rng.random
@@ -222,8 +230,13 @@ def serve_udp_relay(target_port: int, rates: tuple[float, float, float, float], 
         cmd = line.strip()
         if cmd == "blackout":
             relay.blackout.set()
+        elif cmd == "blackout_uplink":
+            relay.uplink_blackout.set()
+        elif cmd.startswith("inject "):
+            relay.inject(bytes.fromhex(cmd.split(" ", 1)[1]))
         elif cmd == "restore":
             relay.blackout.clear()
+            relay.uplink_blackout.clear()
         elif cmd == "counts":
             print(json.dumps(relay.counts), flush=True)
     relay.stop.set()
@@ -288,8 +301,18 @@ class LossyUdpRelay:
         """Drop everything, both ways, until ``restore()``: a link that is down."""
         self._tell("blackout")
 
+    def blackout_uplink(self) -> None:
+        """Drop what the companion sends (setpoints, commands) until ``restore()``; the autopilot's
+        telemetry still gets through: a radio whose uplink failed."""
+        self._tell("blackout_uplink")
+
     def restore(self) -> None:
         self._tell("restore")
+
+    def inject(self, data: bytes) -> None:
+        """Send ``data`` (a MAVLink frame) up the link to the autopilot: a ground station's PARAM_SET
+        on real firmware, whose only MAVLink port is the companion's."""
+        self._tell("inject " + data.hex())
 
     def close(self) -> None:
         """Stop the relay; ``counts`` keeps its last figures."""

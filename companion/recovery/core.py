@@ -80,6 +80,10 @@ class RecoveryParams:
     land_timeout_s: float = 120.0
     sensor_loss_s: float = 30.0  # wall seconds without a usable frame before landing without sensors
     link_loss_s: float = 60.0  # wall seconds without telemetry before leaving the vehicle to the autopilot
+    # wall seconds the companion waits after the autopilot's own failsafe took its mode, streaming a
+    # hold and commanding no mode: a failsafe may clear by itself (PX4's offboard-loss fallback) or
+    # hold before it acts (PX4's COM_BAT_ACT_T, 5 s), and a command then would cancel it
+    failsafe_grace_s: float = 6.0
     search: SearchLimits = field(default_factory=SearchLimits)  # when searching on must stop
     search_agl_m: float = 75.0  # a search leg's least height above the ground
 

@@ -21,6 +21,7 @@ import math
 import traceback
 
 from companion.control import (
+    MAV_STATE_CRITICAL,
     AutopilotFailsafe,
     ControlError,
     OperatorTakeover,
@@ -48,6 +49,10 @@ class Recovery(Searching, SiteChoice, Looking):
         self._say(5, f"alarm '{self.alarm.reason}' ({self.criticality.name.lower()}), {self.budget} rounds")
         self.search.start(self._clock_s(), self.tm.state.battery_pct)
         try:
+            held = self._failsafe_in_charge()
+            if held is not None:  # an alarm after the autopilot's own failsafe took the vehicle
+                self.record.record_event("autopilot_failsafe", {"round": 0, "state": "idle", "mode": held})
+                return await self._leave_to_autopilot(held)
             await self._engage_and_look()
             resume: tuple[tuple[float, float, float], Candidate] | None = None
             while resume is not None or self._go_on():
@@ -63,7 +68,9 @@ class Recovery(Searching, SiteChoice, Looking):
                     resume = None
                 except AutopilotFailsafe as exc:
                     resume = None
-                    await self._reengage(exc)
+                    ended = await self._on_failsafe(exc)
+                    if ended is not None:
+                        return ended
                     continue
                 except TelemetryLost as exc:
                     resume = self._descending
@@ -156,6 +163,53 @@ class Recovery(Searching, SiteChoice, Looking):
             State.LANDED, self.round, site.ned_m if site is not None else None, f"defect ({text}): landed"
         )
 
+    def _failsafe_in_charge(self) -> str | None:
+        """The mode of an autopilot failsafe that lands or flies home and has the vehicle now
+        (system status critical): the companion does not take the vehicle from it."""
+        s = self.tm.state
+        if s.system_status != MAV_STATE_CRITICAL:
+            return None
+        return self.ctl.flavour.lands_or_returns(s.custom_mode)
+
+    async def _on_failsafe(self, exc: AutopilotFailsafe) -> Outcome | None:
+        """Policy for the autopilot leaving the companion's mode in a failsafe of its own. A failsafe
+        may clear by itself (PX4's offboard-loss fallback, once setpoints flow again) or hold before it
+        acts (PX4 holds for ``COM_BAT_ACT_T`` / ``COM_FAIL_ACT_T`` before its battery or other action,
+        and a command in that time is a user takeover that cancels it). So first, for
+        ``failsafe_grace_s``, the companion streams a hold where the vehicle is and commands no mode.
+        Back in the companion's mode meanwhile: the recovery goes on (None). Then in a mode that lands
+        or flies home (a battery, GPS, geofence or link failsafe), or already down: the autopilot keeps
+        the vehicle (:meth:`_leave_to_autopilot`). Still holding (PX4's POSCTL or AUTO.LOITER,
+        ArduPilot's LOITER or BRAKE): re-engaged from where it is (:meth:`_reengage`)."""
+        flavour = self.ctl.flavour
+        seen = flavour.lands_or_returns(exc.custom_mode) or f"custom_mode {exc.custom_mode}"
+        fields = {"round": self.round, "state": self.state.value, "mode": seen}
+        self.record.record_event("autopilot_failsafe", fields)
+        self._say(4, f"autopilot failsafe: {seen}; waiting {self.p.failsafe_grace_s:g} s for it to clear")
+        if await self.ctl.ride_out_failsafe(self.p.failsafe_grace_s):
+            self.record.record_event("autopilot_failsafe_cleared", fields)
+            self._say(5, f"the autopilot's failsafe cleared ({seen} -> back to the companion): going on")
+            return None
+        now = self.tm.state
+        mode = flavour.lands_or_returns(now.custom_mode)
+        if mode is not None or now.on_ground:
+            return await self._leave_to_autopilot(mode or seen)
+        await self._reengage(AutopilotFailsafe(now.custom_mode))
+        return None
+
+    async def _leave_to_autopilot(self, mode: str) -> Outcome:
+        """The autopilot's failsafe keeps the vehicle: the companion stops its setpoint stream, says so
+        (critical) and never takes the vehicle back. A landing (or a return home, which ends in one)
+        is watched to the ground for ``land_timeout_s`` so that the record ends with it."""
+        await self.ctl.release()
+        self._set(State.ABORTED)
+        self._say(SEVERITY_CRITICAL, f"autopilot failsafe: {mode}; the autopilot keeps control")
+        self.record.record_event("released", {"round": self.round, "to": mode})
+        if await self.ctl.wait_on_ground(self.p.land_timeout_s):
+            self._set(State.LANDED)
+            return Outcome(State.LANDED, self.round, None, f"the autopilot's failsafe landed it ({mode})")
+        return Outcome(State.ABORTED, self.round, None, f"the autopilot's failsafe has it ({mode})")
+
     async def _reengage(self, exc: AutopilotFailsafe) -> None:
         """Policy: the autopilot's own failsafe (e.g. a lost setpoint stream) is re-engaged from where
         the vehicle is, ``MAX_REENGAGE`` times at most; then the autopilot keeps control."""
@@ -169,8 +223,9 @@ class Recovery(Searching, SiteChoice, Looking):
         """Policy for a lost MAVLink link: keep streaming the last setpoint and wait up to
         ``link_loss_s`` for telemetry. Meanwhile the autopilot holds (PX4's offboard-loss failsafe
         after COM_OF_LOSS_T; ArduPilot's GUIDED keeps the last target). When the link returns: a
-        vehicle that came down meanwhile ends the recovery; a failsafe is re-engaged from where the
-        vehicle is; someone else's mode is a takeover. Then an interrupted descent goes on at the
+        vehicle that came down meanwhile ends the recovery; a failsafe that holds is re-engaged from
+        where the vehicle is, one that lands or returns keeps the vehicle; someone else's mode is a
+        takeover. Then an interrupted descent goes on at the
         same site, confirmed again first; otherwise the next round starts. No telemetry within
         ``link_loss_s``: the companion stops commanding and leaves the vehicle to the autopilot."""
         self.record.record_event("link_lost", {"round": self.round, "state": self.state.value})
@@ -192,7 +247,7 @@ class Recovery(Searching, SiteChoice, Looking):
         try:
             self.ctl.check_interruption()
         except AutopilotFailsafe as failsafe:
-            await self._reengage(failsafe)
+            return await self._on_failsafe(failsafe)
         return None
 
     async def _engage_and_look(self) -> None:

@@ -14,6 +14,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from simbridge.autopilot.flavours import (
+    BATTERY_LEVEL_NAMES,
+    BATTERY_OK,
     MAV_RESULT_ACCEPTED,
     MAV_RESULT_DENIED,
     MAV_RESULT_FAILED,
@@ -105,6 +107,9 @@ class Autopilot:
         self._external_at_s = -math.inf
         self._offboard_lost_to: ModeSpec | None = None  # the offboard-loss failsafe's mode, while in it
         self._last_reject = ("", -math.inf)
+        self._battery_level = BATTERY_OK  # the worst battery warning of this flight so far
+        self._battery_level_at_arming = BATTERY_OK
+        self._battery_action: tuple[str, float, int] | None = None  # (mode, when, level) pending
         self._apply_limits()
 
     # ------------------------------------------------------------------ spawn
@@ -115,6 +120,7 @@ class Autopilot:
         self.landed = False
         self.landed_state = LANDED_IN_AIR
         self._armed_at_s = state.t_s
+        self._arm_battery_watch()
         self._set_mode(self.flavour.mode(self.flavour.air_start_mode), state, announce=False)
 
     # ------------------------------------------------------------------ parameters
@@ -162,6 +168,7 @@ class Autopilot:
                 return self._refuse("Arming denied: vehicle not landed", self._arm_refusal())
             self.armed = True
             self._armed_at_s = s.t_s
+            self._arm_battery_watch()
             self._has_flown = False
             self._landed_since = s.t_s
             self.vehicle.controller.reset()
@@ -192,6 +199,7 @@ class Autopilot:
         if spec.nav is Nav.TAKEOFF and self.armed and not self.landed:
             return self._refuse("Takeoff denied: already flying", MAV_RESULT_TEMPORARILY_REJECTED)
         self.failsafe = False
+        self._battery_action = None  # a user takeover cancels a failsafe action still waiting
         self._set_mode(spec, s)
         return ACCEPTED
 
@@ -287,6 +295,8 @@ class Autopilot:
         self._update_land_detector(s)
         if not self.armed:
             return None
+        if not self.landed:
+            self._watch_battery(s)
         if self.landed:
             return self._on_ground(s)
         return self._fly(s)
@@ -442,6 +452,52 @@ class Autopilot:
             self._external_is_velocity = False
             return self._external
         return sp
+
+    # ------------------------------------------------------------------ battery failsafe
+    def _arm_battery_watch(self) -> None:
+        level = self.flavour.battery_level(self.params, self.vehicle.battery)
+        self._battery_level = self._battery_level_at_arming = level
+        self._battery_action = None
+
+    def _watch_battery(self, s: VehicleState) -> None:
+        """The autopilot's battery failsafe (flavour rules): a warning level worse than the flight's
+        worst so far is said (STATUSTEXT) and recorded (``battery_warning``); where the parameters
+        give it an action, the autopilot switches to that mode in a failsafe (system status critical,
+        ``failsafe`` event) after the flavour's delay (PX4's COM_BAT_ACT_T). PX4 acts only on a level
+        worse than the one at arming, as its failsafe.cpp does; a landing is never turned into a
+        return."""
+        battery = self.vehicle.battery
+        level = self.flavour.battery_level(self.params, battery)
+        if level > self._battery_level:
+            self._battery_level = level
+            reaction = self.flavour.battery_reaction(self.params, level, battery)
+            name = BATTERY_LEVEL_NAMES[level]
+            self._emit_event(
+                "battery_warning",
+                {"level": name, "remaining_pct": round(100 * battery.remaining_fraction, 1),
+                 "action": reaction.mode},
+            )  # fmt: skip
+            self._emit_text(SEV_WARNING if reaction.mode is None else SEV_CRITICAL, reaction.text)
+            if reaction.mode is not None and not (self._px4 and level <= self._battery_level_at_arming):
+                self._battery_action = (reaction.mode, s.t_s + reaction.delay_s, level)
+                if reaction.hold_first is not None and self.mode.nav is not Nav.LAND:
+                    # PX4 holds while its action waits: a mode commanded meanwhile is the user taking
+                    # over, which cancels the action (set_mode)
+                    self.failsafe = True
+                    self._set_mode(self.flavour.mode(reaction.hold_first), s, announce=False)
+                    self._emit_event("failsafe", {"reason": f"battery_{name}", "action": reaction.hold_first})
+        pending = self._battery_action
+        if pending is None or s.t_s < pending[1]:
+            return
+        self._battery_action = None
+        mode, _, level = pending
+        spec = self.flavour.mode(mode)
+        if spec == self.mode or (spec.nav is Nav.RTL and self.mode.nav is Nav.LAND):
+            return
+        self.failsafe = True
+        self._set_mode(spec, s, announce=False)
+        self._emit_event("failsafe", {"reason": f"battery_{BATTERY_LEVEL_NAMES[level]}", "action": mode})
+        self._emit_text(SEV_CRITICAL, f"Failsafe: battery {BATTERY_LEVEL_NAMES[level]}, {mode}")
 
     # ------------------------------------------------------------------ land detector
     def _update_land_detector(self, s: VehicleState) -> None:

@@ -9,6 +9,7 @@ import math
 from dataclasses import dataclass
 from typing import ClassVar
 
+from simbridge.battery import Battery
 from simbridge.control import ControlLimits
 
 # MAVLink enum values used here (common.xml)
@@ -39,6 +40,21 @@ class Nav(enum.Enum):
 
 
 PILOT_NAVS = frozenset({Nav.PILOT_THRUST, Nav.PILOT_ALT, Nav.PILOT_POS})
+
+# battery warning levels (PX4's battery_status warning, ArduPilot's low/critical)
+BATTERY_OK, BATTERY_LOW, BATTERY_CRITICAL, BATTERY_EMERGENCY = 0, 1, 2, 3
+BATTERY_LEVEL_NAMES = {BATTERY_LOW: "low", BATTERY_CRITICAL: "critical", BATTERY_EMERGENCY: "emergency"}
+
+
+@dataclass(frozen=True, slots=True)
+class BatteryReaction:
+    """What the autopilot does at a battery warning level: says ``text``; then, ``delay_s`` later,
+    switches to ``mode`` in a failsafe (None: a warning only), holding in ``hold_first`` meanwhile."""
+
+    text: str
+    mode: str | None
+    delay_s: float = 0.0
+    hold_first: str | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -113,6 +129,13 @@ class Flavour:
     def tunables(self, p: dict[str, float]) -> Tunables:
         raise NotImplementedError
 
+    def battery_level(self, p: dict[str, float], battery: Battery) -> int:
+        """The battery warning level (``BATTERY_*``) the autopilot's parameters give the pack."""
+        raise NotImplementedError
+
+    def battery_reaction(self, p: dict[str, float], level: int, battery: Battery) -> BatteryReaction:
+        raise NotImplementedError
+
     def external_mode_name(self) -> str:
         return next(m.name for m in self.modes if m.nav is Nav.EXTERNAL)
 
@@ -148,6 +171,12 @@ class Px4Flavour(Flavour):
         Param("RTL_RETURN_ALT", 60.0, MAV_PARAM_TYPE_REAL32),
         Param("GF_MAX_HOR_DIST", 2000.0, MAV_PARAM_TYPE_REAL32),
         Param("GF_MAX_VER_DIST", 500.0, MAV_PARAM_TYPE_REAL32),
+        # the battery failsafe (PX4 1.15 defaults: warnings only)
+        Param("BAT_LOW_THR", 0.15, MAV_PARAM_TYPE_REAL32),
+        Param("BAT_CRIT_THR", 0.07, MAV_PARAM_TYPE_REAL32),
+        Param("BAT_EMERGEN_THR", 0.05, MAV_PARAM_TYPE_REAL32),
+        Param("COM_LOW_BAT_ACT", 0, MAV_PARAM_TYPE_INT32),
+        Param("COM_BAT_ACT_T", 5.0, MAV_PARAM_TYPE_REAL32),
     )
     air_start_mode = "AUTO.LOITER"
     ground_start_mode = "AUTO.LOITER"
@@ -176,6 +205,34 @@ class Px4Flavour(Flavour):
         custom = _px4_custom(main_i, sub_i if main_i == 4 else 0)
         spec = self.mode_for_custom(custom)
         return spec if spec is not None else MAV_RESULT_UNSUPPORTED
+
+    # COM_LOW_BAT_ACT: 0 warning, 1 return, 2 land, 3 return at critical, land at emergency
+    # (failsafe.cpp, fromBatteryWarningActParam); a low level is always a warning
+    _BAT_ACTIONS: ClassVar[dict[int, dict[int, str]]] = {
+        1: {BATTERY_CRITICAL: "AUTO.RTL", BATTERY_EMERGENCY: "AUTO.RTL"},
+        2: {BATTERY_CRITICAL: "AUTO.LAND", BATTERY_EMERGENCY: "AUTO.LAND"},
+        3: {BATTERY_CRITICAL: "AUTO.RTL", BATTERY_EMERGENCY: "AUTO.LAND"},
+    }
+    _BAT_TEXTS: ClassVar[dict[int, str]] = {
+        BATTERY_LOW: "Low battery level, return advised",
+        BATTERY_CRITICAL: "Critical battery level, landing advised",
+        BATTERY_EMERGENCY: "Emergency battery level, land immediately",
+    }
+
+    def battery_level(self, p: dict[str, float], battery: Battery) -> int:
+        left = battery.remaining_fraction
+        for level, name in ((BATTERY_EMERGENCY, "BAT_EMERGEN_THR"), (BATTERY_CRITICAL, "BAT_CRIT_THR")):
+            if left < p[name]:
+                return level
+        return BATTERY_LOW if left < p["BAT_LOW_THR"] else BATTERY_OK
+
+    def battery_reaction(self, p: dict[str, float], level: int, battery: Battery) -> BatteryReaction:
+        mode = self._BAT_ACTIONS.get(int(p["COM_LOW_BAT_ACT"]), {}).get(level)
+        delay = p["COM_BAT_ACT_T"]
+        # real PX4 1.15 in SITL held in AUTO.LOITER (failsafe) before its battery action
+        # (tests/test_autopilot_failsafes.py)
+        hold = "AUTO.LOITER" if mode is not None and delay > 0 else None
+        return BatteryReaction(self._BAT_TEXTS[level], mode, delay, hold)
 
     def tunables(self, p: dict[str, float]) -> Tunables:
         return Tunables(
@@ -229,6 +286,14 @@ class ArduPilotFlavour(Flavour):
         Param("FENCE_ALT_MAX", 500.0, MAV_PARAM_TYPE_REAL32),
         Param("PILOT_SPEED_UP", 250.0, MAV_PARAM_TYPE_INT32),
         Param("PILOT_SPEED_DN", 0.0, MAV_PARAM_TYPE_INT32),  # 0: PILOT_SPEED_UP
+        # the battery failsafe (ArduCopter's defaults: a low-voltage warning for a 3S pack, no action;
+        # simbridge's pack is 4S, so nothing fires unless these are set)
+        Param("BATT_LOW_VOLT", 10.5, MAV_PARAM_TYPE_REAL32),
+        Param("BATT_CRT_VOLT", 0.0, MAV_PARAM_TYPE_REAL32),
+        Param("BATT_LOW_MAH", 0.0, MAV_PARAM_TYPE_REAL32),
+        Param("BATT_CRT_MAH", 0.0, MAV_PARAM_TYPE_REAL32),
+        Param("BATT_FS_LOW_ACT", 0, MAV_PARAM_TYPE_INT32),
+        Param("BATT_FS_CRT_ACT", 0, MAV_PARAM_TYPE_INT32),
     )
     air_start_mode = "LOITER"
     ground_start_mode = "LOITER"
@@ -241,6 +306,32 @@ class ArduPilotFlavour(Flavour):
     # (tests/test_firmware_parity.py); AUTO without a mission is refused
     _NOT_BUILT: ClassVar[frozenset[int]] = frozenset({13})
     _NO_MISSION: ClassVar[dict[int, str]] = {3: "AUTO"}
+
+    # BATT_FS_*_ACT: 0 none, 1 land, 2 RTL, 3 SmartRTL or RTL, 4 SmartRTL or land, 5 terminate,
+    # 6 DO_LAND_START or RTL, 7 brake or land. The emulation has no SmartRTL path, no mission and no
+    # terminate: 3 and 6 fly RTL, 4 and 7 land (ArduCopter's own fallbacks), 5 is a warning only.
+    _BATT_ACTIONS: ClassVar[dict[int, str]] = {1: "LAND", 2: "RTL", 3: "RTL", 4: "LAND", 6: "RTL", 7: "LAND"}
+
+    def battery_level(self, p: dict[str, float], battery: Battery) -> int:
+        """ArduCopter's two levels, by remaining capacity (``BATT_*_MAH``) or resting voltage
+        (``BATT_*_VOLT``); 0 disables a threshold."""
+        left_mah = battery.config.capacity_mah - battery.consumed_mah
+        volts = battery.voltage_v
+        for level, mah, volt in (
+            (BATTERY_CRITICAL, p["BATT_CRT_MAH"], p["BATT_CRT_VOLT"]),
+            (BATTERY_LOW, p["BATT_LOW_MAH"], p["BATT_LOW_VOLT"]),
+        ):
+            if (mah > 0 and left_mah < mah) or (volt > 0 and volts < volt):
+                return level
+        return BATTERY_OK
+
+    def battery_reaction(self, p: dict[str, float], level: int, battery: Battery) -> BatteryReaction:
+        act = p["BATT_FS_CRT_ACT"] if level >= BATTERY_CRITICAL else p["BATT_FS_LOW_ACT"]
+        text = (
+            f"Battery 1 is {BATTERY_LEVEL_NAMES[min(level, BATTERY_CRITICAL)]} {battery.voltage_v:.2f}V "
+            f"used {battery.consumed_mah:.0f} mAh"
+        )
+        return BatteryReaction(text, self._BATT_ACTIONS.get(int(act)))
 
     def decode_set_mode(self, base_mode: float, main: float, sub: float) -> ModeSpec | int:
         mode_number = int(main)

@@ -1,0 +1,307 @@
+"""The autopilot's own failsafes in the middle of a recovery (issue 35), on simbridge's emulation of
+PX4 and ArduPilot: the companion sees the autopilot take over, stops commanding, says so, records it
+and never fights the autopilot's choice; a failsafe that clears by itself (PX4's offboard-loss
+fallback) hands the vehicle back; a warning that leaves room lets the recovery go on."""
+
+from __future__ import annotations
+
+import struct
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tests.conftest import Rig
+from tests.test_companion_e2e import (
+    _clean_relay,
+    _events,
+    _raise_alarm,
+    _sim_port,
+    _via,
+    _wait_for_companion,
+    _wait_touchdown,
+)
+
+pytestmark = pytest.mark.slow
+
+INT32 = 6  # MAV_PARAM_TYPE_INT32
+REAL32 = 9
+
+
+def _set_params(rig: Rig, params: dict[str, tuple[float, int]], *, bytewise: bool) -> None:
+    """PARAM_SET from a ground station of its own, each confirmed by its PARAM_VALUE echo. PX4 carries
+    an INT32 bytewise in the float field (``bytewise``), ArduPilot casts it."""
+    from pymavlink import mavutil
+
+    gcs = mavutil.mavlink_connection(
+        f"udpout:127.0.0.1:{_sim_port(rig)}", source_system=255, source_component=190
+    )
+    try:
+        for name, (value, kind) in params.items():
+            wire = value
+            if kind == INT32 and bytewise:
+                wire = struct.unpack("<f", struct.pack("<i", int(value)))[0]
+            for _ in range(5):
+                gcs.mav.param_set_send(1, 1, name.encode(), wire, kind)
+                echo = gcs.recv_match(type="PARAM_VALUE", blocking=True, timeout=2)
+                if echo is not None and echo.param_id == name and echo.param_value == pytest.approx(wire):
+                    break
+            else:
+                raise AssertionError(f"{name} not set")
+    finally:
+        gcs.close()
+
+
+def _modes_after(rig: Rig, mode: str) -> list[Any]:
+    modes = [e["mode"] for e in rig.sim.events("mode")]
+    assert mode in modes, modes
+    return modes[modes.index(mode) :]
+
+
+def test_a_battery_failsafe_that_lands_keeps_the_vehicle_and_the_companion_stands_down(
+    start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """PX4 set to land at a critical battery (COM_LOW_BAT_ACT 2). Mid-descent the pack crosses the
+    critical threshold: PX4 holds for COM_BAT_ACT_T (a command then would be a user takeover that
+    cancels the action), then switches to AUTO.LAND. The companion commands nothing for its grace
+    period; the failsafe does not clear, so it stops commanding, says so, watches the landing down and
+    records how the flight ended."""
+    record = tmp_path / "record"
+    rig = start_rig(
+        ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "8", "--battery", "40"],
+        ["--record", str(record)],
+    )
+    _wait_for_companion(rig)
+    _set_params(rig, {"COM_LOW_BAT_ACT": (2, INT32)}, bytewise=True)
+    _raise_alarm(rig, "GPS spoofing", "high")
+    rig.wait_log("m, ", timeout_s=120)  # "descending 62 m, <rationale>": the first descent step
+    # the thresholds raised above the charge left: the pack is now critical
+    _set_params(rig, {"BAT_LOW_THR": (0.5, REAL32), "BAT_CRIT_THR": (0.45, REAL32)}, bytewise=True)
+    td = _wait_touchdown(rig, timeout_s=200)
+    log = rig.wait_log("recovery ended", timeout_s=60)
+    failsafes = rig.sim.events("failsafe")
+    # PX4 holds while its action waits (COM_BAT_ACT_T), then lands
+    assert [(f["reason"], f["action"]) for f in failsafes] == [
+        ("battery_critical", "AUTO.LOITER"),
+        ("battery_critical", "AUTO.LAND"),
+    ], failsafes
+    assert "waiting 6 s for it to clear" in log
+    assert "autopilot failsafe: AUTO.LAND; the autopilot keeps control" in log
+    assert "re-engaging" not in log
+    assert "recovery ended: aborted" not in log
+    assert "(the autopilot's failsafe landed it (AUTO.LAND))" in log
+    assert "OFFBOARD" not in _modes_after(rig, "AUTO.LAND")  # never taken back
+    assert rig.sim.events("disarmed"), "PX4 disarms after its landing"
+    assert td["pos_ned_m"]
+    events = _events(record)
+    kinds = [e["kind"] for e in events]
+    assert "autopilot_failsafe" in kinds
+    assert any(e["kind"] == "released" and e["to"] == "AUTO.LAND" for e in events)
+    texts = [e["text"] for e in events if e["kind"] == "autopilot_text"]
+    assert any("Critical battery level" in t for t in texts), texts
+    assert events[-1]["kind"] == "outcome"
+    assert events[-1]["state"] == "landed"
+    assert "failsafe" in events[-1]["reason"]
+
+
+def test_an_offboard_loss_set_to_land_clears_when_the_link_returns_and_the_recovery_goes_on(
+    start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """PX4 set to land on a lost offboard stream (COM_OBL_RC_ACT 4). During the descent the companion's
+    setpoints stop reaching PX4 (its telemetry still comes): PX4 falls back to AUTO.LAND, and the
+    companion sees it. That fallback is a mode fallback: once setpoints flow again PX4 goes back to
+    OFFBOARD by itself (failsafe.cpp, checkModeFallback). The companion holds off for its grace period,
+    streaming a hold, rather than taking the failsafe for the end of the flight; the uplink returns
+    within it, and the recovery lands on the roof it chose."""
+    relays: list[Any] = []
+    record = tmp_path / "record"
+    try:
+        rig = start_rig(
+            ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "4"],
+            ["--record", str(record)],
+            mavlink_via=_via(relays, _clean_relay),
+        )
+        _wait_for_companion(rig)
+        _set_params(rig, {"COM_OBL_RC_ACT": (4, INT32)}, bytewise=True)
+        _raise_alarm(rig, "GPS spoofing", "high")
+        rig.wait_log("m, ", timeout_s=120)
+        # the companion's setpoints stop reaching PX4, its telemetry still comes: PX4's fallback shows
+        relays[0].blackout_uplink()
+        rig.wait_log("autopilot failsafe: AUTO.LAND; waiting 6 s for it to clear", timeout_s=60)
+        relays[0].restore()  # within the grace period: the hold setpoints reach PX4 again
+        td = _wait_touchdown(rig, timeout_s=200)
+        log = rig.wait_log("recovery ended", timeout_s=60)
+    finally:
+        for r in relays:
+            r.close()
+    assert [f["action"] for f in rig.sim.events("failsafe")] == ["AUTO.LAND"], rig.sim.events("failsafe")
+    assert [f["mode"] for f in rig.sim.events("failsafe_cleared")] == ["OFFBOARD"]
+    assert "the autopilot keeps control" not in log
+    assert "the autopilot's failsafe cleared (AUTO.LAND -> back to the companion): going on" in log
+    assert "recovery ended: landed after" in log
+    assert "failsafe landed it" not in log
+    assert td["surface"] == "rooftop_clear", td
+    assert td["safe"] is True
+    events = _events(record)
+    assert events[-1]["kind"] == "outcome"
+    assert events[-1]["reason"] == "landed"
+
+
+def test_a_battery_warning_leaves_room_and_the_recovery_goes_on(
+    start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """ArduCopter's low-battery level with no action (BATT_FS_LOW_ACT 0, its default) crossed mid-descent:
+    a warning only. The companion records the autopilot's words and lands where it chose."""
+    record = tmp_path / "record"
+    rig = start_rig(
+        ["--scenario", "scenario2", "--autopilot", "ardupilot", "--speed", "8"],
+        ["--record", str(record)],
+    )
+    _raise_alarm(rig, "GPS spoofing", "high")
+    rig.wait_log("m, ", timeout_s=120)
+    _set_params(rig, {"BATT_LOW_MAH": (4999.0, REAL32)}, bytewise=False)  # less than that left: low
+    td = _wait_touchdown(rig, timeout_s=200)
+    log = rig.wait_log("recovery ended", timeout_s=60)
+    warnings = rig.sim.events("battery_warning")
+    assert [(w["level"], w["action"]) for w in warnings] == [("low", None)], warnings
+    assert rig.sim.events("failsafe") == []
+    assert "recovery ended: landed after" in log
+    assert "autopilot failsafe" not in log
+    assert td["safe"] is True
+    events = _events(record)
+    texts = [e["text"] for e in events if e["kind"] == "autopilot_text"]
+    assert any(t.startswith("Battery 1 is low") for t in texts), texts
+    assert events[-1]["kind"] == "outcome"
+    assert events[-1]["reason"] == "landed"
+
+
+def test_an_alarm_while_the_autopilots_failsafe_lands_does_not_take_the_vehicle(
+    start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """ArduCopter set to land at a critical battery (BATT_FS_CRT_ACT 1) before any alarm: its failsafe
+    lands the vehicle and says so, which the companion's watcher takes as an alarm. The recovery that
+    starts finds the autopilot's failsafe in charge and leaves the vehicle to it."""
+    record = tmp_path / "record"
+    rig = start_rig(
+        ["--scenario", "scenario2", "--autopilot", "ardupilot", "--speed", "8"],
+        ["--record", str(record)],
+    )
+    _wait_for_companion(rig)
+    _set_params(rig, {"BATT_FS_CRT_ACT": (1, INT32), "BATT_CRT_MAH": (4999.0, REAL32)}, bytewise=False)
+    _wait_touchdown(rig, timeout_s=200)
+    log = rig.wait_log("recovery ended", timeout_s=60)
+    assert [(f["reason"], f["action"]) for f in rig.sim.events("failsafe")] == [("battery_critical", "LAND")]
+    assert "watcher alarm 'Failsafe: battery critical, LAND'" in log
+    assert "autopilot failsafe: LAND; the autopilot keeps control" in log
+    assert "GUIDED" not in _modes_after(rig, "LAND")
+    events = _events(record)
+    assert events[-1]["kind"] == "outcome"
+    assert events[-1]["state"] == "landed"
+    assert events[-1]["rounds"] == 0
+
+
+# ------------------------------------------------------------------------------------- real firmware
+def _param_set_frames(params: dict[str, tuple[float, int]], *, bytewise: bool) -> list[bytes]:
+    """PARAM_SET frames from a ground station (255/190) for the vehicle (1/1)."""
+    from pymavlink.dialects.v20 import common as mavlink2
+
+    mav = mavlink2.MAVLink(None, srcSystem=255, srcComponent=190)
+    frames = []
+    for name, (value, kind) in params.items():
+        wire = value
+        if kind == INT32 and bytewise:
+            wire = struct.unpack("<f", struct.pack("<i", int(value)))[0]
+        frames.append(mav.param_set_encode(1, 1, name.encode(), wire, kind).pack(mav))
+    return frames
+
+
+def _real_firmware_failsafe_lands(
+    start_rig: Callable[..., Rig],
+    tmp_path: Path,
+    sim_args: list[str],
+    params: dict[str, tuple[float, int]],
+    *,
+    bytewise: bool,
+    land_mode: str,
+) -> list[dict[str, Any]]:
+    """An alarm on real firmware; at the first descent step a failsafe is set up from a ground station
+    sharing the companion's link (real firmware has no other MAVLink port here); then the firmware's
+    own failsafe lands the vehicle in ``land_mode``. Checks that the companion stood down and never
+    took the vehicle back while it flew, and returns the flight record's events."""
+    from tests.test_sitl import _wait_event
+
+    relays: list[Any] = []
+    record = tmp_path / "record"
+    try:
+        rig = start_rig(
+            [*sim_args, "--speed", "4"], ["--record", str(record)], mavlink_via=_via(relays, _clean_relay)
+        )
+        _wait_event(rig.sim, "ready", 240)
+        rig.wait_log("sensor stream connected", timeout_s=60)
+        out = rig.alarm_accepted("--reason", "GPS spoofing detected", "--criticality", "high")
+        assert out.returncode == 0, out.stdout + out.stderr
+        rig.wait_log("m, site clear", timeout_s=300)  # "descending 70 m, site clear: ...": the first step
+        for _ in range(3):  # a datagram may be lost; setting a parameter twice does no harm
+            for frame in _param_set_frames(params, bytewise=bytewise):
+                relays[0].inject(frame)
+            time.sleep(0.2)
+        touchdown = _wait_event(rig.sim, "touchdown", 400)["t_s"]
+        log = rig.wait_log("recovery ended", timeout_s=120)
+        _wait_event(rig.sim, "disarmed", 60)
+    finally:
+        for r in relays:
+            r.close()
+    assert f"autopilot failsafe: {land_mode}; the autopilot keeps control" in log, log[-3000:]
+    assert f"(the autopilot's failsafe landed it ({land_mode}))" in log
+    assert "re-engaging" not in log
+    # never taken back while it flew (once its land detector has the vehicle down, real PX4 ends the
+    # failsafe and goes back to the mode its user chose, before it disarms: after the touchdown)
+    timed = [(e["t_s"], e["mode"]) for e in rig.sim.events("mode")]
+    landing = next(t for t, m in timed if m == land_mode)
+    assert [m for t, m in timed if landing <= t <= touchdown] == [land_mode], timed
+    events = _events(record)
+    assert any(e["kind"] == "released" and e["to"] == land_mode for e in events)
+    assert events[-1]["kind"] == "outcome"
+    assert events[-1]["state"] == "landed"
+    return events
+
+
+@pytest.mark.sitl
+def test_real_arducopters_battery_failsafe_lands_and_the_companion_stands_down(
+    arducopter: Path, start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """Real ArduCopter: mid-descent its critical battery level is set above the charge left with the
+    land action (BATT_CRT_MAH, BATT_FS_CRT_ACT 1). ArduCopter's own battery failsafe switches to LAND;
+    the companion waits its grace period, leaves the vehicle to it, and records the landing."""
+    events = _real_firmware_failsafe_lands(
+        start_rig,
+        tmp_path,
+        ["--autopilot", "ardupilot-sitl", "--sitl", str(arducopter), "--scenario", "scenario2"],
+        {"BATT_FS_CRT_ACT": (1, INT32), "BATT_CRT_MAH": (100000.0, REAL32)},
+        bytewise=False,
+        land_mode="LAND",
+    )
+    texts = [e["text"] for e in events if e["kind"] == "autopilot_text"]
+    assert any("Battery 1 is critical" in t for t in texts), texts
+
+
+@pytest.mark.sitl
+def test_real_px4s_battery_failsafe_lands_and_the_companion_stands_down(
+    px4: Path, start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """Real PX4 1.15: mid-descent the critical battery threshold is raised above the charge its battery
+    simulator reports, with the land action (BAT_CRIT_THR, COM_LOW_BAT_ACT 2). PX4 holds in AUTO.LOITER
+    for COM_BAT_ACT_T, then its failsafe switches to AUTO.LAND; the companion commands nothing in its
+    grace period (a command in PX4's hold would cancel the action), leaves the vehicle to it, and records
+    the landing."""
+    events = _real_firmware_failsafe_lands(
+        start_rig,
+        tmp_path,
+        ["--autopilot", "px4-sitl", "--px4", str(px4), "--scenario", "scenario1"],
+        {"COM_LOW_BAT_ACT": (2, INT32), "BAT_LOW_THR": (0.99, REAL32), "BAT_CRIT_THR": (0.98, REAL32)},
+        bytewise=True,
+        land_mode="AUTO.LAND",
+    )
+    assert any(e["kind"] == "autopilot_failsafe" for e in events)
