@@ -74,6 +74,7 @@ def params_from(cfg: CompanionConfig) -> RecoveryParams:
         sensor_loss_s=r.sensor_loss_s,
         link_loss_s=r.link_loss_s,
         failsafe_grace_s=r.failsafe_grace_s,
+        land_timeout_s=r.land_timeout_s,
         search=SearchLimits(
             reserve_pct=r.search_reserve_pct,
             window_s={c: getattr(r.search_window_s, c.name.lower()) for c in Criticality},

@@ -264,6 +264,7 @@ class RecoveryConfig(_Section):
     sensor_loss_s: float = Field(default=30.0, gt=0)
     link_loss_s: float = Field(default=60.0, gt=0)
     failsafe_grace_s: float = Field(default=6.0, ge=0)
+    land_timeout_s: float = Field(default=120.0, gt=0)
     search_reserve_pct: float = Field(default=25.0, ge=0, le=100)
     search_window_s: SearchWindow = SearchWindow()
     search_agl_m: float = Field(default=75.0, gt=0)

@@ -260,11 +260,19 @@ class VehicleController:
         """After ``TelemetryLost``: wait until LOCAL_POSITION_NED flows again and a heartbeat sent
         after the wait began has come (the mode the autopilot is in *now*). The setpoint stream keeps
         running meanwhile. Returns the seconds since the last position before the silence; raises
-        ``TelemetryLost`` when nothing came within ``timeout_s``."""
+        ``TelemetryLost`` when nothing came within ``timeout_s``, and ``AutopilotFailsafe`` or
+        ``OperatorTakeover`` when heartbeats say the autopilot left the companion's mode meanwhile
+        (the link is up, its estimator lost the position)."""
         start = time.monotonic()
         last_heard = self.tm.state.stamps.get("position", start - LINK_SILENCE_S)
         deadline = start + timeout_s
         while True:
+            # heartbeats without a position: the link is up but the estimator has none (a GPS loss);
+            # the autopilot's own failsafe taking the vehicle then is seen as at any time
+            if self.failsafe is not None:
+                raise self.failsafe
+            if self.takeover is not None:
+                raise self.takeover
             fresh = self.tm.age_s("position") < LINK_SILENCE_S / 3
             if fresh and self.tm.state.stamps.get("heartbeat", 0.0) > start:
                 return time.monotonic() - last_heard

@@ -46,6 +46,7 @@ STREAMS_HZ: dict[int, float] = {
 }
 STREAM_PARTS = ("attitude", "position", "landed", "battery", "gps")  # TelemetryCache parts they feed
 STREAM_CHECK_S = 2.0
+OWN_ALARM_RETRY_S = 30.0  # how long a watcher alarm refused for now is asked again
 MAV_CMD_SET_MESSAGE_INTERVAL = 511
 
 
@@ -118,6 +119,9 @@ class Companion:
         self._stop = asyncio.Event()
         self._client: Any = None
         self._gps_was_ok = False
+        # a watcher alarm refused for now (no fresh telemetry or frame yet): asked again each second
+        # until this monotonic time, since its cause (a failsafe's one STATUSTEXT) may not come again
+        self._own_pending: tuple[Alarm, float] | None = None
         self._texts_seen = 0
 
     # ------------------------------------------------------------------ MAVLink in
@@ -454,7 +458,11 @@ class Companion:
                 if severity <= SEVERITY_WARNING:
                     self.record.record_event("autopilot_text", {"severity": severity, "text": text})
         if s.on_ground:
+            self._own_pending = None
             return
+        pending, self._own_pending = self._own_pending, None
+        if pending is not None and time.monotonic() < pending[1]:
+            self._own_alarm(pending[0].code, pending[0].criticality, pending[0].reason, until=pending[1])
         if self._watch_battery_pct is not None and s.battery_pct < self._watch_battery_pct:
             self._own_alarm(ReasonCode.LOW_BATTERY, Criticality.HIGH, f"battery {s.battery_pct:.0f} %")
         if self._watch_failsafe:
@@ -468,9 +476,14 @@ class Companion:
                 self._own_alarm(ReasonCode.GPS_LOST, Criticality.CRITICAL, "GPS fix lost")
                 self._gps_was_ok = False
 
-    def _own_alarm(self, code: ReasonCode, criticality: Criticality, text: str) -> None:
-        result = self.raise_alarm(Alarm(code, criticality, text, (0, 0), time.monotonic()))
+    def _own_alarm(
+        self, code: ReasonCode, criticality: Criticality, text: str, until: float | None = None
+    ) -> None:
+        alarm = Alarm(code, criticality, text, (0, 0), time.monotonic())
+        result = self.raise_alarm(alarm)
         self.log.info("watcher alarm %r -> MAV_RESULT %d", text, result)
+        if result == RESULT_TEMP_REJECTED:
+            self._own_pending = (alarm, until if until is not None else time.monotonic() + OWN_ALARM_RETRY_S)
 
     async def _connect_sensors(self, stack: contextlib.AsyncExitStack, client_cls: Any) -> None:
         """Connect to the sensor stream, retrying every second: it may come up after us. Alarms

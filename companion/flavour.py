@@ -24,12 +24,16 @@ class Flavour:
     # modes in which the autopilot lands or flies home by itself (custom_mode -> its name): a failsafe
     # that picks one of them has decided how the flight ends, and the companion does not take it back
     comes_down: dict[int, str]
+    names: dict[int, str]  # custom_mode -> the autopilot's own name for it (for what the companion says)
 
     def mode_of(self, custom_mode: int) -> Mode | None:
         for mode, value in self.modes.items():
             if value == custom_mode:
                 return mode
         return None
+
+    def mode_name(self, custom_mode: int) -> str:
+        return self.names.get(custom_mode, f"custom_mode {custom_mode}")
 
     def lands_or_returns(self, custom_mode: int) -> str | None:
         """The name of ``custom_mode`` when the autopilot lands or returns home in it by itself."""
@@ -46,6 +50,31 @@ PX4 = Flavour(
         (4 << 16) | (6 << 24): "AUTO.LAND",
         (4 << 16) | (9 << 24): "AUTO.PRECLAND",
     },
+    names={
+        **{
+            main << 16: name
+            for main, name in (
+                (1, "MANUAL"),
+                (2, "ALTCTL"),
+                (3, "POSCTL"),
+                (5, "ACRO"),
+                (6, "OFFBOARD"),
+                (7, "STABILIZED"),
+            )
+        },
+        **{
+            (4 << 16) | (sub << 24): f"AUTO.{name}"
+            for sub, name in (
+                (2, "TAKEOFF"),
+                (3, "LOITER"),
+                (4, "MISSION"),
+                (5, "RTL"),
+                (6, "LAND"),
+                (8, "FOLLOW_TARGET"),
+                (9, "PRECLAND"),
+            )
+        },
+    },
 )
 ARDUPILOT = Flavour(
     name="ardupilot",
@@ -53,6 +82,20 @@ ARDUPILOT = Flavour(
     set_mode={Mode.GUIDED: (1, 4, 0), Mode.HOLD: (1, 5, 0), Mode.LAND: (1, 9, 0)},
     needs_stream=False,
     comes_down={6: "RTL", 9: "LAND", 21: "SMART_RTL", 27: "AUTO_RTL"},
+    names={
+        0: "STABILIZE",
+        1: "ACRO",
+        2: "ALT_HOLD",
+        3: "AUTO",
+        4: "GUIDED",
+        5: "LOITER",
+        6: "RTL",
+        9: "LAND",
+        16: "POSHOLD",
+        17: "BRAKE",
+        21: "SMART_RTL",
+        27: "AUTO_RTL",
+    },
 )
 
 

@@ -101,6 +101,8 @@ ACCEL_NOISE = 0.03  # m/s^2
 ACCEL_BIAS = 0.02
 GYRO_NOISE = 0.003  # rad/s
 GYRO_BIAS = 0.001
+ACCEL_RANGE = 16 * 9.80665  # m/s^2: the IMU's range, +-16 g (and +-2000 deg/s), as common MEMS IMUs
+GYRO_RANGE = math.radians(2000.0)
 MAG_NOISE = 0.002  # gauss
 MAG_FIELD_GAUSS = 0.48
 MAG_INCLINATION_DEG = 63.0
@@ -302,6 +304,12 @@ class Isa:
         return 15.0 - 0.0065 * alt_m
 
 
+def _i16(v: float) -> int:
+    """An int16 field (cm/s, mG): a crash's spike of acceleration saturates rather than breaking the
+    frame (a touchdown at speed read 33 g for one step, more than int16 milli-g holds)."""
+    return max(-32767, min(32767, round(v)))
+
+
 def _unit(v: float) -> float:
     return 1.0 if v > 1.0 else (v if v > 0.0 else 0.0)
 
@@ -496,6 +504,10 @@ class HilLockStep(LockStepThread):
         n = self._noise[k].tolist()
         ax, ay, az = self.vehicle.physics.specific_force_frd()
         p, q, r = s.rates_frd_rad_s
+        if max(abs(ax), abs(ay), abs(az)) > ACCEL_RANGE or max(abs(p), abs(q), abs(r)) > GYRO_RANGE:
+            # an IMU saturates at its range (a crash's spike would not fit the frame's fields otherwise)
+            ax, ay, az = (max(-ACCEL_RANGE, min(ACCEL_RANGE, v)) for v in (ax, ay, az))
+            p, q, r = (max(-GYRO_RANGE, min(GYRO_RANGE, v)) for v in (p, q, r))
         ba, bg = self._accel_bias, self._gyro_bias
         fields = 0b111111  # accel, gyro
         step = self.steps
@@ -527,8 +539,8 @@ class HilLockStep(LockStepThread):
             out.append(
                 mav.hil_gps_encode(
                     usec, 3, round(glat * 1e7), round(glon * 1e7), round(galt * 1000), 60, 90,
-                    round(math.hypot(gvn, gve) * 100), round(gvn * 100), round(gve * 100), round(gvd * 100),
-                    round(cog * 100), 16,
+                    min(65534, round(math.hypot(gvn, gve) * 100)), _i16(gvn * 100), _i16(gve * 100),
+                    _i16(gvd * 100), round(cog * 100), 16,
                 ).pack(mav)
             )  # fmt: skip
         if step % TRUTH_EVERY == 1:  # ground truth at 50 Hz: the geodetic conversion only then
@@ -537,9 +549,9 @@ class HilLockStep(LockStepThread):
             out.append(
                 mav.hil_state_quaternion_encode(
                     usec, list(s.quat), p, q, r, round(lat * 1e7), round(lon * 1e7), round(alt_true * 1000),
-                    round(vn * 100), round(ve * 100), round(vd * 100), 0, 0,
-                    round(ax_n[0] / 9.80665 * 1000), round(ax_n[1] / 9.80665 * 1000),
-                    round(ax_n[2] / 9.80665 * 1000),
+                    _i16(vn * 100), _i16(ve * 100), _i16(vd * 100), 0, 0,
+                    _i16(ax_n[0] / 9.80665 * 1000), _i16(ax_n[1] / 9.80665 * 1000),
+                    _i16(ax_n[2] / 9.80665 * 1000),
                 ).pack(mav)
             )  # fmt: skip
             rng_m = self.vehicle.physics.terrain.rangefinder_m(s.pos_ned_m, s.quat, RANGEFINDER_MAX_CM / 100)

@@ -166,7 +166,9 @@ class Telemetry:
                 nxt = due + interval
                 # after a stall (or a fresh stream) restart the cadence from now, never burst
                 self._next_due_s[msg_id] = nxt if nxt > t_s else t_s + interval
-                out.append(self._builders[msg_id]())
+                msg = self._builders[msg_id]()
+                if msg is not None:  # None: nothing to say (a position without an estimate)
+                    out.append(msg)
         return out
 
     # ------------------------------------------------------------------ helpers
@@ -269,11 +271,15 @@ class Telemetry:
         return self._mav.attitude_quaternion_encode(self.time_boot_ms, *s.quat, *s.rates_frd_rad_s)
 
     def local_position_ned(self) -> Any:
+        if not self.ap.position_valid:
+            return None
         s = self.ap.estimated_state
         local = self.ap.to_local(s.pos_ned_m)  # relative to the EKF origin (home), as real autopilots
         return self._mav.local_position_ned_encode(self.time_boot_ms, *local, *s.vel_ned_m_s)
 
     def global_position_int(self) -> Any:
+        if not self.ap.position_valid:
+            return None
         s = self.ap.estimated_state
         lat, lon, alt_mm = self._geo()
         home_alt_m = self.origin.alt_m - self.ap.home_ned_m[2]
@@ -296,6 +302,8 @@ class Telemetry:
         lat, lon, alt_mm = self._geo()
         vn, ve, _ = s.vel_ned_m_s
         cog = round(math.degrees(math.atan2(ve, vn)) * 100) % 36000
+        if not self.ap.gps_enabled:  # no fix: nothing but the time
+            return self._mav.gps_raw_int_encode(int(s.t_s * 1e6), 0, 0, 0, 0, 65535, 65535, 65535, 65535, 0)
         return self._mav.gps_raw_int_encode(
             int(s.t_s * 1e6),
             3,

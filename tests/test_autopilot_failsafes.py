@@ -5,9 +5,10 @@ fallback) hands the vehicle back; a warning that leaves room lets the recovery g
 
 from __future__ import annotations
 
+import math
 import struct
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -202,9 +203,42 @@ def test_an_alarm_while_the_autopilots_failsafe_lands_does_not_take_the_vehicle(
     assert events[-1]["rounds"] == 0
 
 
+def test_a_gps_loss_hands_the_vehicle_to_the_estimators_failsafe(
+    start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """ArduCopter's GPS switched off mid-descent (SITL's SIM_GPS1_ENABLE 0): its estimator dead-reckons,
+    then has no position, and its EKF failsafe (FS_EKF_ACTION 1) lands where it is. The companion,
+    whose position telemetry stops while heartbeats go on, leaves the vehicle to it and records why."""
+    record = tmp_path / "record"
+    rig = start_rig(
+        ["--scenario", "scenario2", "--autopilot", "ardupilot", "--speed", "4"],
+        ["--record", str(record)],
+    )
+    _raise_alarm(rig, "GPS spoofing", "high")
+    rig.wait_log("m, ", timeout_s=120)
+    _set_params(rig, {"SIM_GPS1_ENABLE": (0, INT32)}, bytewise=False)
+    _wait_touchdown(rig, timeout_s=200)
+    log = rig.wait_log("recovery ended", timeout_s=60)
+    assert [(f["reason"], f["action"]) for f in rig.sim.events("failsafe")] == [("position_lost", "LAND")]
+    assert "autopilot failsafe: LAND; the autopilot keeps control" in log, log[-3000:]
+    assert "(the autopilot's failsafe landed it (LAND))" in log
+    assert "GUIDED" not in _modes_after(rig, "LAND")
+    events = _events(record)
+    texts = [e["text"] for e in events if e["kind"] == "autopilot_text"]
+    assert any("position estimate lost" in t for t in texts), texts
+    assert events[-1]["kind"] == "outcome"
+    assert events[-1]["state"] == "landed"
+
+
 # ------------------------------------------------------------------------------------- real firmware
-def _param_set_frames(params: dict[str, tuple[float, int]], *, bytewise: bool) -> list[bytes]:
-    """PARAM_SET frames from a ground station (255/190) for the vehicle (1/1)."""
+def _gcs_frames(
+    params: dict[str, tuple[float, int]],
+    *,
+    bytewise: bool,
+    commands: Sequence[tuple[int, Sequence[float]]] = (),
+) -> list[bytes]:
+    """PARAM_SET frames, then COMMAND_LONG ones (command, its first params), from a ground station
+    (255/190) for the vehicle (1/1)."""
     from pymavlink.dialects.v20 import common as mavlink2
 
     mav = mavlink2.MAVLink(None, srcSystem=255, srcComponent=190)
@@ -214,7 +248,59 @@ def _param_set_frames(params: dict[str, tuple[float, int]], *, bytewise: bool) -
         if kind == INT32 and bytewise:
             wire = struct.unpack("<f", struct.pack("<i", int(value)))[0]
         frames.append(mav.param_set_encode(1, 1, name.encode(), wire, kind).pack(mav))
+    for command, args in commands:
+        p = [*args, *[0.0] * (7 - len(args))]
+        frames.append(mav.command_long_encode(1, 1, command, 0, *p).pack(mav))
     return frames
+
+
+def _real_firmware_failsafe(
+    start_rig: Callable[..., Rig],
+    tmp_path: Path,
+    sim_args: list[str],
+    params: dict[str, tuple[float, int]],
+    *,
+    bytewise: bool,
+    commands: Sequence[tuple[int, Sequence[float]]] = (),
+    env: dict[str, str] | None = None,
+    until_touchdown: bool = True,
+) -> tuple[Rig, str, list[dict[str, Any]], float]:
+    """An alarm on real firmware; at the first descent step a failsafe is set up from a ground station
+    sharing the companion's link (real firmware has no other MAVLink port here); then the recovery
+    ends and (``until_touchdown``) the vehicle is on the ground, disarmed. Returns the rig, the
+    companion's log, the flight record's events and the touchdown's simulated time (nan without)."""
+    from tests.test_sitl import _wait_event
+
+    relays: list[Any] = []
+    record = tmp_path / "record"
+    try:
+        rig = start_rig(
+            [*sim_args, "--speed", "4"],
+            ["--record", str(record)],
+            env=env,
+            mavlink_via=_via(relays, _clean_relay),
+        )
+        _wait_event(rig.sim, "ready", 240)
+        rig.wait_log("sensor stream connected", timeout_s=60)
+        out = rig.alarm_accepted("--reason", "GPS spoofing detected", "--criticality", "high")
+        assert out.returncode == 0, out.stdout + out.stderr
+        rig.wait_log("m, site clear", timeout_s=300)  # "descending 70 m, site clear: ...": the first step
+        for _ in range(3):  # a datagram may be lost; setting a parameter twice does no harm
+            for frame in _gcs_frames(params, bytewise=bytewise, commands=commands):
+                relays[0].inject(frame)
+            time.sleep(0.2)
+        touchdown = math.nan
+        if until_touchdown:
+            touchdown = float(_wait_event(rig.sim, "touchdown", 400)["t_s"])
+        log = rig.wait_log("recovery ended", timeout_s=120)
+        if until_touchdown:
+            _wait_event(rig.sim, "disarmed", 60)
+    finally:
+        for r in relays:
+            r.close()
+    events = _events(record)
+    assert events[-1]["kind"] == "outcome"
+    return rig, log, events, touchdown
 
 
 def _real_firmware_failsafe_lands(
@@ -226,33 +312,11 @@ def _real_firmware_failsafe_lands(
     bytewise: bool,
     land_mode: str,
 ) -> list[dict[str, Any]]:
-    """An alarm on real firmware; at the first descent step a failsafe is set up from a ground station
-    sharing the companion's link (real firmware has no other MAVLink port here); then the firmware's
-    own failsafe lands the vehicle in ``land_mode``. Checks that the companion stood down and never
-    took the vehicle back while it flew, and returns the flight record's events."""
-    from tests.test_sitl import _wait_event
-
-    relays: list[Any] = []
-    record = tmp_path / "record"
-    try:
-        rig = start_rig(
-            [*sim_args, "--speed", "4"], ["--record", str(record)], mavlink_via=_via(relays, _clean_relay)
-        )
-        _wait_event(rig.sim, "ready", 240)
-        rig.wait_log("sensor stream connected", timeout_s=60)
-        out = rig.alarm_accepted("--reason", "GPS spoofing detected", "--criticality", "high")
-        assert out.returncode == 0, out.stdout + out.stderr
-        rig.wait_log("m, site clear", timeout_s=300)  # "descending 70 m, site clear: ...": the first step
-        for _ in range(3):  # a datagram may be lost; setting a parameter twice does no harm
-            for frame in _param_set_frames(params, bytewise=bytewise):
-                relays[0].inject(frame)
-            time.sleep(0.2)
-        touchdown = _wait_event(rig.sim, "touchdown", 400)["t_s"]
-        log = rig.wait_log("recovery ended", timeout_s=120)
-        _wait_event(rig.sim, "disarmed", 60)
-    finally:
-        for r in relays:
-            r.close()
+    """:func:`_real_firmware_failsafe` where the firmware's own failsafe lands the vehicle in
+    ``land_mode``: the companion stood down and never took the vehicle back while it flew."""
+    rig, log, events, touchdown = _real_firmware_failsafe(
+        start_rig, tmp_path, sim_args, params, bytewise=bytewise
+    )
     assert f"autopilot failsafe: {land_mode}; the autopilot keeps control" in log, log[-3000:]
     assert f"(the autopilot's failsafe landed it ({land_mode}))" in log
     assert "re-engaging" not in log
@@ -261,9 +325,7 @@ def _real_firmware_failsafe_lands(
     timed = [(e["t_s"], e["mode"]) for e in rig.sim.events("mode")]
     landing = next(t for t, m in timed if m == land_mode)
     assert [m for t, m in timed if landing <= t <= touchdown] == [land_mode], timed
-    events = _events(record)
     assert any(e["kind"] == "released" and e["to"] == land_mode for e in events)
-    assert events[-1]["kind"] == "outcome"
     assert events[-1]["state"] == "landed"
     return events
 
@@ -305,3 +367,51 @@ def test_real_px4s_battery_failsafe_lands_and_the_companion_stands_down(
         land_mode="AUTO.LAND",
     )
     assert any(e["kind"] == "autopilot_failsafe" for e in events)
+
+
+@pytest.mark.sitl
+def test_real_arducopters_gps_loss_hands_the_vehicle_to_its_ekf_failsafe(
+    arducopter: Path, start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """Real ArduCopter: its simulated GPS switched off mid-descent (SIM_GPS1_ENABLE 0). Its EKF
+    failsafe lands the vehicle; the companion stands down and records it."""
+    _real_firmware_failsafe_lands(
+        start_rig,
+        tmp_path,
+        ["--autopilot", "ardupilot-sitl", "--sitl", str(arducopter), "--scenario", "scenario2"],
+        {"SIM_GPS1_ENABLE": (0, INT32)},
+        bytewise=False,
+        land_mode="LAND",
+    )
+
+
+@pytest.mark.sitl
+def test_real_px4s_gps_failure_leaves_it_to_px4_which_takes_no_landing_command(
+    px4: Path, start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """Real PX4 1.15: its GPS failed mid-descent by PX4's own failure injection (SYS_FAILURE_EN 1,
+    MAV_CMD_INJECT_FAILURE: GPS off; its simulator_mavlink then drops simbridge's HIL_GPS). EKF2
+    dead-reckons for EKF2_NOAID_TOUT, then OFFBOARD cannot run and PX4 falls back to ALTCTL (with no
+    stick input here: in two flights one descended blind within 140 s simulated, the other drifted
+    1.6 km and came down after 700 s). After its grace period the companion cannot have OFFBOARD back
+    (refused without a position); it asks for PX4's land mode where the vehicle is, which PX4 refuses
+    too, so it leaves the vehicle to PX4 and watches for a landing (``recovery.land_timeout_s``, 20 s
+    here), then records why it ended."""
+    rig, log, events, _ = _real_firmware_failsafe(
+        start_rig,
+        tmp_path,
+        ["--autopilot", "px4-sitl", "--px4", str(px4), "--scenario", "scenario1"],
+        {"SYS_FAILURE_EN": (1, INT32)},
+        bytewise=True,
+        commands=[(420, (4.0, 1.0))],  # MAV_CMD_INJECT_FAILURE: FAILURE_UNIT_SENSOR_GPS, FAILURE_TYPE_OFF
+        env={"LANDFALL_RECOVERY_LAND_TIMEOUT_S": "20"},
+        until_touchdown=False,
+    )
+    assert "autopilot failsafe: ALTCTL; waiting 6 s for it to clear" in log, log[-3000:]
+    assert "asking it to land where it is" in log
+    assert "land mode refused as well" in log
+    assert "autopilot failsafe: ALTCTL; the autopilot keeps control" in log
+    assert any(e["kind"] == "land_in_place" for e in events)
+    assert any(e["kind"] == "released" and e["to"] == "ALTCTL" for e in events)
+    assert "ALTCTL" in events[-1]["reason"]
+    assert _modes_after(rig, "ALTCTL")[:2] != ["ALTCTL", "OFFBOARD"]  # never taken back in flight

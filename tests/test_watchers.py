@@ -33,12 +33,44 @@ def test_a_failsafe_text_after_fifty_others_still_raises_an_alarm(caplog: pytest
             c.watch_once()
     c.watch_once()
     assert "watcher alarm" not in caplog.text
+    raised: list[str] = []
+    c.raise_alarm = lambda alarm: raised.append(alarm.reason) or 0  # type: ignore[method-assign]
     feed(c, AUTOPILOT.statustext_encode(2, b"Failsafe: offboard lost, AUTO.LOITER"))
     c.watch_once()
     assert "watcher alarm 'Failsafe: offboard lost, AUTO.LOITER'" in caplog.text
-    caplog.clear()
     c.watch_once()  # seen once, raised once
-    assert "watcher alarm" not in caplog.text
+    assert raised == ["Failsafe: offboard lost, AUTO.LOITER"]
+
+
+def test_a_watcher_alarm_refused_for_now_is_asked_again_until_taken(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A failsafe's STATUSTEXT comes once: an alarm raised from it while the companion cannot take one
+    yet (no fresh telemetry, no frame: TEMPORARILY_REJECTED) is asked again at each look, for
+    ``OWN_ALARM_RETRY_S``, until taken (found in CI: the first telemetry after the companion's stream
+    request came a moment after ArduCopter's battery failsafe had said so)."""
+    import companion.daemon as daemon
+
+    c = _flying()
+    answers = [1, 1, 0]  # refused for now twice, then taken
+    raised: list[str] = []
+    c.raise_alarm = lambda alarm: raised.append(alarm.reason) or answers.pop(0)  # type: ignore[method-assign]
+    feed(c, AUTOPILOT.statustext_encode(2, b"Failsafe: battery critical, LAND"))
+    for _ in range(5):
+        c.watch_once()
+    assert raised == ["Failsafe: battery critical, LAND"] * 3
+
+    c = _flying()
+    clock = [1000.0]
+    monkeypatch.setattr(daemon.time, "monotonic", lambda: clock[0])
+    raised = []
+    c.raise_alarm = lambda alarm: raised.append(alarm.reason) or 1  # type: ignore[method-assign]
+    feed(c, AUTOPILOT.statustext_encode(2, b"Failsafe: battery critical, LAND"))
+    c.watch_once()
+    clock[0] += daemon.OWN_ALARM_RETRY_S / 2
+    c.watch_once()
+    clock[0] += daemon.OWN_ALARM_RETRY_S
+    c.watch_once()  # too late: given up
+    c.watch_once()
+    assert len(raised) == 2
 
 
 def test_texts_that_came_on_the_ground_are_passed_over(caplog: pytest.LogCaptureFixture) -> None:

@@ -23,6 +23,7 @@ import traceback
 from companion.control import (
     MAV_STATE_CRITICAL,
     AutopilotFailsafe,
+    CommandRefused,
     ControlError,
     OperatorTakeover,
     TargetTimeout,
@@ -182,7 +183,7 @@ class Recovery(Searching, SiteChoice, Looking):
         the vehicle (:meth:`_leave_to_autopilot`). Still holding (PX4's POSCTL or AUTO.LOITER,
         ArduPilot's LOITER or BRAKE): re-engaged from where it is (:meth:`_reengage`)."""
         flavour = self.ctl.flavour
-        seen = flavour.lands_or_returns(exc.custom_mode) or f"custom_mode {exc.custom_mode}"
+        seen = flavour.mode_name(exc.custom_mode)
         fields = {"round": self.round, "state": self.state.value, "mode": seen}
         self.record.record_event("autopilot_failsafe", fields)
         self._say(4, f"autopilot failsafe: {seen}; waiting {self.p.failsafe_grace_s:g} s for it to clear")
@@ -194,8 +195,39 @@ class Recovery(Searching, SiteChoice, Looking):
         mode = flavour.lands_or_returns(now.custom_mode)
         if mode is not None or now.on_ground:
             return await self._leave_to_autopilot(mode or seen)
-        await self._reengage(AutopilotFailsafe(now.custom_mode))
+        try:
+            await self._reengage(AutopilotFailsafe(now.custom_mode))
+        except CommandRefused as refused:
+            # the companion's mode cannot run (no position estimate: PX4 refuses OFFBOARD and holds in
+            # ALTCTL, drifting, for as long as the battery lasts): the least bad is the autopilot's own
+            # landing where the vehicle is
+            return await self._land_in_place(flavour.mode_name(now.custom_mode), refused)
         return None
+
+    async def _land_in_place(self, holding: str, refused: CommandRefused) -> Outcome:
+        """The autopilot's failsafe holds and will not give the companion its mode back: ask for the
+        autopilot's land mode where the vehicle is and watch it down (``land_timeout_s``); refused
+        too, the autopilot keeps the vehicle (:meth:`_leave_to_autopilot`)."""
+        self._set(State.LAND)
+        self._say(
+            SEVERITY_CRITICAL,
+            f"autopilot failsafe holds in {holding} and refuses the companion's mode ({refused}): "
+            "asking it to land where it is",
+        )
+        self.record.record_event(
+            "land_in_place", {"round": self.round, "holding": holding, "why": str(refused)}
+        )
+        try:
+            await self.ctl.land(self.p.land_timeout_s)
+        except CommandRefused as again:
+            # refused too (real PX4 takes no AUTO.LAND without a position; its own blind descent is
+            # what is left): the autopilot keeps the vehicle, watched down
+            self._say(4, f"land mode refused as well ({again})")
+            return await self._leave_to_autopilot(holding)
+        self._set(State.LANDED)
+        return Outcome(
+            State.LANDED, self.round, None, f"landed where it was: the autopilot held in {holding}"
+        )
 
     async def _leave_to_autopilot(self, mode: str) -> Outcome:
         """The autopilot's failsafe keeps the vehicle: the companion stops its setpoint stream, says so
@@ -234,6 +266,9 @@ class Recovery(Searching, SiteChoice, Looking):
             silent_s = await self.ctl.await_link(self.p.link_loss_s)
         except TelemetryLost as lost:
             raise ControlError(f"{lost}: leaving the vehicle to the autopilot") from lost
+        except AutopilotFailsafe as failsafe:  # heartbeats without positions: the estimator lost them
+            self._say(4, "the autopilot is heard but sends no position: its estimator has none")
+            return await self._on_failsafe(failsafe)
         s = self.tm.state
         self.record.record_event(
             "link_restored",

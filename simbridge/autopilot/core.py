@@ -20,6 +20,8 @@ from simbridge.autopilot.flavours import (
     MAV_RESULT_DENIED,
     MAV_RESULT_FAILED,
     MAV_RESULT_TEMPORARILY_REJECTED,
+    MAV_RESULT_UNSUPPORTED,
+    NEEDS_POSITION,
     PILOT_NAVS,
     Flavour,
     ModeSpec,
@@ -34,6 +36,9 @@ from simbridge.vehicle import Vehicle
 
 # STATUSTEXT severities
 SEV_CRITICAL, SEV_WARNING, SEV_NOTICE, SEV_INFO = 2, 4, 5, 6
+
+# MAV_CMD_INJECT_FAILURE: FAILURE_UNIT_SENSOR_GPS; FAILURE_TYPE_OK, FAILURE_TYPE_OFF
+_FAILURE_UNIT_GPS, _FAILURE_OK, _FAILURE_OFF = 4, 0, 1
 
 # MAV_LANDED_STATE
 LANDED_ON_GROUND, LANDED_IN_AIR, LANDED_TAKEOFF, LANDED_LANDING = 1, 2, 3, 4
@@ -110,6 +115,11 @@ class Autopilot:
         self._battery_level = BATTERY_OK  # the worst battery warning of this flight so far
         self._battery_level_at_arming = BATTERY_OK
         self._battery_action: tuple[str, float, int] | None = None  # (mode, when, level) pending
+        # the GPS and the estimator: SITL's SIM_GPS1_ENABLE (ArduPilot), MAV_CMD_INJECT_FAILURE (PX4)
+        self.gps_enabled = True
+        self.position_valid = True  # False: no position estimate, none sent (LOCAL_POSITION_NED, ...)
+        self._gps_off_at: float | None = None
+        self._before_position_loss: ModeSpec | None = None
         self._apply_limits()
 
     # ------------------------------------------------------------------ spawn
@@ -137,7 +147,19 @@ class Autopilot:
             return False
         self.tun = tun
         self._apply_limits()
+        if name == "SIM_GPS1_ENABLE":
+            self.gps_enabled = value != 0
         return True
+
+    def inject_failure(self, unit: int, failure: int) -> CommandOutcome:
+        """MAV_CMD_INJECT_FAILURE (PX4): the GPS off (type 1) or back (type 0); refused unless
+        SYS_FAILURE_EN is 1, as real PX4 does."""
+        if self.params.get("SYS_FAILURE_EN", 0) != 1:
+            return self._refuse("Failure injection disabled", MAV_RESULT_DENIED)
+        if unit != _FAILURE_UNIT_GPS or failure not in (_FAILURE_OK, _FAILURE_OFF):
+            return CommandOutcome(MAV_RESULT_UNSUPPORTED)
+        self.gps_enabled = failure == _FAILURE_OK
+        return ACCEPTED
 
     def _apply_limits(self) -> None:
         """The controller's envelope: the navigation limits, or in the pilot's altitude-holding
@@ -198,6 +220,11 @@ class Autopilot:
             )
         if spec.nav is Nav.TAKEOFF and self.armed and not self.landed:
             return self._refuse("Takeoff denied: already flying", MAV_RESULT_TEMPORARILY_REJECTED)
+        if not self.position_valid and (spec.nav in NEEDS_POSITION or (self._px4 and spec.nav is Nav.LAND)):
+            # real PX4 answered TEMPORARILY_REJECTED to OFFBOARD and to AUTO.LAND without a position
+            # estimate; ArduCopter lands without one (level, drifting)
+            result = MAV_RESULT_TEMPORARILY_REJECTED if self._px4 else MAV_RESULT_FAILED
+            return self._refuse(f"{spec.name} needs a position estimate", result)
         self.failsafe = False
         self._battery_action = None  # a user takeover cancels a failsafe action still waiting
         self._set_mode(spec, s)
@@ -293,6 +320,7 @@ class Autopilot:
         if self.estimate is not None:
             self.estimate.step(s)
         self._update_land_detector(s)
+        self._watch_estimator(s)
         if not self.armed:
             return None
         if not self.landed:
@@ -314,6 +342,10 @@ class Autopilot:
             return self._fly_rtl(s)
         if nav in PILOT_NAVS:
             return self._fly_pilot_at_rest(s)
+        if nav is Nav.ALT_DRIFT:
+            vn, ve, _ = s.vel_ned_m_s
+            hold_d = self._hold.pos_d_m if self._hold is not None else None
+            return Setpoint(pos_d_m=hold_d, vel_ned_m_s=(vn, ve, 0.0))
         return self._hold
 
     def _fly_pilot_at_rest(self, s: VehicleState) -> Setpoint | None:
@@ -390,8 +422,11 @@ class Autopilot:
         else:
             vz = t.land_speed_m_s
         self.landed_state = LANDED_LANDING
-        ne = over.pos_ne_m if over is not None else (s.pos_ned_m[0], s.pos_ned_m[1])
         yaw = over.yaw_rad if over is not None else None
+        if not self.position_valid:  # no horizontal position to hold: level, drifting as it goes
+            vn, ve, _ = s.vel_ned_m_s
+            return Setpoint(vel_ned_m_s=(vn, ve, vz), yaw_rad=yaw)
+        ne = over.pos_ne_m if over is not None else (s.pos_ned_m[0], s.pos_ned_m[1])
         return Setpoint(pos_ne_m=ne, pos_d_m=None, vel_ned_m_s=(0.0, 0.0, vz), yaw_rad=yaw)
 
     def _fly_rtl(self, s: VehicleState) -> Setpoint:
@@ -498,6 +533,41 @@ class Autopilot:
         self._set_mode(spec, s, announce=False)
         self._emit_event("failsafe", {"reason": f"battery_{BATTERY_LEVEL_NAMES[level]}", "action": mode})
         self._emit_text(SEV_CRITICAL, f"Failsafe: battery {BATTERY_LEVEL_NAMES[level]}, {mode}")
+
+    # ------------------------------------------------------------------ GPS and estimator
+    def _watch_estimator(self, s: VehicleState) -> None:
+        """Without GPS the estimator dead-reckons for the flavour's time, then has no position: none
+        is sent, and in flight the flavour's failsafe takes a mode that needs none (PX4: Descend,
+        reported as AUTO.LAND; ArduCopter's EKF failsafe: FS_EKF_ACTION). GPS back: the position
+        returns; PX4's fallback clears back to the mode it replaced, ArduCopter stays in its mode."""
+        if self.gps_enabled:
+            self._gps_off_at = None
+            if not self.position_valid:
+                self.position_valid = True
+                self._emit_event("position_restored", {})
+                self._emit_text(SEV_INFO, "GPS fix regained, position estimate back")
+                back, self._before_position_loss = self._before_position_loss, None
+                if back is not None and self._px4 and self.armed and self.failsafe:
+                    self.failsafe = False
+                    self._set_mode(back, s, announce=False)
+                    self._emit_event("failsafe_cleared", {"reason": "position_lost", "mode": back.name})
+            return
+        if self._gps_off_at is None:
+            self._gps_off_at = s.t_s
+            self._emit_event("gps_lost", {})
+            self._emit_text(SEV_CRITICAL, "GPS lost: no fix")
+        delay, mode = self.flavour.position_lost(self.params)
+        if not self.position_valid or s.t_s - self._gps_off_at < delay:
+            return
+        self.position_valid = False
+        self._emit_event("position_lost", {"gps_off_s": round(s.t_s - self._gps_off_at, 2)})
+        if not self.armed or self.landed or mode is None or self.mode.name == mode:
+            return
+        self._before_position_loss = self.mode
+        self.failsafe = True
+        self._set_mode(self.flavour.mode(mode), s, announce=False)
+        self._emit_event("failsafe", {"reason": "position_lost", "action": mode})
+        self._emit_text(SEV_CRITICAL, f"Failsafe: position estimate lost, {mode}")
 
     # ------------------------------------------------------------------ land detector
     def _update_land_detector(self, s: VehicleState) -> None:

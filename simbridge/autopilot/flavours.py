@@ -37,9 +37,14 @@ class Nav(enum.Enum):
     PILOT_THRUST = "pilot_thrust"  # STABILIZE, ACRO: attitude level, the motors at minimum thrust
     PILOT_ALT = "pilot_alt"  # ALT_HOLD: attitude level, descending at the pilot's full down speed
     PILOT_POS = "pilot_pos"  # POSHOLD: the same descent, holding its position
+    # PX4's ALTCTL with no RC (COM_RC_IN_MODE 4: the sticks rest centred): level, holding the altitude,
+    # drifting; where real PX4's fallback ends when the estimator has no position
+    ALT_DRIFT = "alt_drift"
 
 
 PILOT_NAVS = frozenset({Nav.PILOT_THRUST, Nav.PILOT_ALT, Nav.PILOT_POS})
+# what cannot be flown without a horizontal position estimate
+NEEDS_POSITION = frozenset({Nav.HOLD, Nav.TAKEOFF, Nav.RTL, Nav.EXTERNAL, Nav.PILOT_POS})
 
 # battery warning levels (PX4's battery_status warning, ArduPilot's low/critical)
 BATTERY_OK, BATTERY_LOW, BATTERY_CRITICAL, BATTERY_EMERGENCY = 0, 1, 2, 3
@@ -136,6 +141,11 @@ class Flavour:
     def battery_reaction(self, p: dict[str, float], level: int, battery: Battery) -> BatteryReaction:
         raise NotImplementedError
 
+    def position_lost(self, p: dict[str, float]) -> tuple[float, str | None]:
+        """(seconds without GPS before the estimator's position is gone, the failsafe's mode then:
+        None keeps the mode)."""
+        raise NotImplementedError
+
     def external_mode_name(self) -> str:
         return next(m.name for m in self.modes if m.nav is Nav.EXTERNAL)
 
@@ -148,6 +158,7 @@ class Px4Flavour(Flavour):
     name = "px4"
     autopilot_id = MAV_AUTOPILOT_PX4
     modes = (
+        ModeSpec("ALTCTL", Nav.ALT_DRIFT, _px4_custom(2)),  # entered by the failsafe only (no RC)
         ModeSpec("POSCTL", Nav.HOLD, _px4_custom(3)),
         ModeSpec("AUTO.TAKEOFF", Nav.TAKEOFF, _px4_custom(4, 2)),
         ModeSpec("AUTO.LOITER", Nav.HOLD, _px4_custom(4, 3)),
@@ -177,6 +188,10 @@ class Px4Flavour(Flavour):
         Param("BAT_EMERGEN_THR", 0.05, MAV_PARAM_TYPE_REAL32),
         Param("COM_LOW_BAT_ACT", 0, MAV_PARAM_TYPE_INT32),
         Param("COM_BAT_ACT_T", 5.0, MAV_PARAM_TYPE_REAL32),
+        # the estimator without GPS (EKF2_NOAID_TOUT, microseconds) and failure injection
+        # (MAV_CMD_INJECT_FAILURE needs SYS_FAILURE_EN 1, as on real PX4)
+        Param("EKF2_NOAID_TOUT", 5000000, MAV_PARAM_TYPE_INT32),
+        Param("SYS_FAILURE_EN", 0, MAV_PARAM_TYPE_INT32),
     )
     air_start_mode = "AUTO.LOITER"
     ground_start_mode = "AUTO.LOITER"
@@ -233,6 +248,11 @@ class Px4Flavour(Flavour):
         # (tests/test_autopilot_failsafes.py)
         hold = "AUTO.LOITER" if mode is not None and delay > 0 else None
         return BatteryReaction(self._BAT_TEXTS[level], mode, delay, hold)
+
+    def position_lost(self, p: dict[str, float]) -> tuple[float, str | None]:
+        # EKF2 dead-reckons for EKF2_NOAID_TOUT; then no mode that needs a position can run, and real
+        # PX4 1.15 in OFFBOARD fell back to ALTCTL (tests/test_autopilot_failsafes.py)
+        return p["EKF2_NOAID_TOUT"] / 1e6, "ALTCTL"
 
     def tunables(self, p: dict[str, float]) -> Tunables:
         return Tunables(
@@ -294,6 +314,10 @@ class ArduPilotFlavour(Flavour):
         Param("BATT_CRT_MAH", 0.0, MAV_PARAM_TYPE_REAL32),
         Param("BATT_FS_LOW_ACT", 0, MAV_PARAM_TYPE_INT32),
         Param("BATT_FS_CRT_ACT", 0, MAV_PARAM_TYPE_INT32),
+        # the EKF failsafe (FS_EKF_ACTION: 1 land, 2 AltHold, 3 land even in STABILIZE) and SITL's own
+        # GPS switch, SIM_GPS1_ENABLE, as real ArduCopter SITL has it (0: the GPS stops)
+        Param("FS_EKF_ACTION", 1, MAV_PARAM_TYPE_INT32),
+        Param("SIM_GPS1_ENABLE", 1, MAV_PARAM_TYPE_INT32),
     )
     air_start_mode = "LOITER"
     ground_start_mode = "LOITER"
@@ -332,6 +356,14 @@ class ArduPilotFlavour(Flavour):
             f"used {battery.consumed_mah:.0f} mAh"
         )
         return BatteryReaction(text, self._BATT_ACTIONS.get(int(act)))
+
+    # ArduCopter's EKF failsafe: its variances over FS_EKF_THRESH for a second; without GPS that takes
+    # a few seconds of dead reckoning (2 s here)
+    _EKF_FS_S = 2.0
+    _EKF_ACTIONS: ClassVar[dict[int, str]] = {1: "LAND", 2: "ALT_HOLD", 3: "LAND"}
+
+    def position_lost(self, p: dict[str, float]) -> tuple[float, str | None]:
+        return self._EKF_FS_S, self._EKF_ACTIONS.get(int(p["FS_EKF_ACTION"]))
 
     def decode_set_mode(self, base_mode: float, main: float, sub: float) -> ModeSpec | int:
         mode_number = int(main)

@@ -168,7 +168,9 @@ class AutopilotServer:
             M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
         ):
             msg_id = int(p[0]) if cmd == M.MAV_CMD_REQUEST_MESSAGE else M.MAVLINK_MSG_ID_AUTOPILOT_VERSION
-            self._send(self.tm.build(msg_id))
+            msg = self.tm.build(msg_id)
+            if msg is not None:  # a position without an estimate is not sent
+                self._send(msg)
 
     def _dispatch(self, cmd: int, p: list[float], p5: float, p6: float, p7: float) -> CommandOutcome:
         ap = self.ap
@@ -189,6 +191,10 @@ class AutopilotServer:
             return CommandOutcome(MAV_RESULT_ACCEPTED if ok else MAV_RESULT_UNSUPPORTED)
         if cmd == M.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
             return CommandOutcome(MAV_RESULT_ACCEPTED)
+        if cmd == M.MAV_CMD_INJECT_FAILURE and ap.flavour.name == "px4":
+            if not all(math.isfinite(v) for v in p[:2]):
+                return CommandOutcome(MAV_RESULT_DENIED)
+            return ap.inject_failure(int(p[0]), int(p[1]))
         if cmd == M.MAV_CMD_SET_MESSAGE_INTERVAL:
             ok = math.isfinite(p[0]) and self.tm.set_interval(int(p[0]), p[1])
             return CommandOutcome(MAV_RESULT_ACCEPTED if ok else MAV_RESULT_UNSUPPORTED)
