@@ -96,6 +96,7 @@ class VehicleController:
         self._foreign_heartbeat: int | None = None  # ``tm.heartbeats`` at the first in another mode
         self.takeover: OperatorTakeover | None = None
         self.failsafe: AutopilotFailsafe | None = None
+        self.failsafe_modes: list[int] = []  # the modes the last failsafe went through (its grace period)
         self.longest_stream_gap_s = 0.0  # wall seconds between two setpoints: the event loop's health
 
     # ------------------------------------------------------------------ basics
@@ -327,10 +328,13 @@ class VehicleController:
         n, e, d = self.tm.state.pos_ned_m
         self.set_target(n, e, d)
         start = time.monotonic()
+        self.failsafe_modes = [self.failsafe.custom_mode]
         while (remaining := start + grace_s - time.monotonic()) > 0:
             with contextlib.suppress(TimeoutError):
                 await self.tm.wait_update(min(remaining, 0.5))
             s = self.tm.state
+            if s.custom_mode != self.failsafe_modes[-1]:
+                self.failsafe_modes.append(s.custom_mode)
             if s.on_ground:
                 break
             if s.stamps.get("heartbeat", 0.0) > start and s.custom_mode == self._engaged_mode:

@@ -193,8 +193,13 @@ class Recovery(Searching, SiteChoice, Looking):
             return None
         now = self.tm.state
         mode = flavour.lands_or_returns(now.custom_mode)
-        if mode is not None or now.on_ground:
-            return await self._leave_to_autopilot(mode or seen)
+        if now.on_ground and mode is None:
+            # down already (an autopilot may leave its landing mode as it disarms): the landing mode
+            # it came down in, if the grace period saw one
+            landed_in = [m for m in map(flavour.lands_or_returns, self.ctl.failsafe_modes) if m is not None]
+            mode = landed_in[-1] if landed_in else seen
+        if mode is not None:
+            return await self._leave_to_autopilot(mode)
         try:
             await self._reengage(AutopilotFailsafe(now.custom_mode))
         except CommandRefused as refused:
