@@ -39,8 +39,10 @@ class CommandRefused(ControlError):
 class OperatorTakeover(ControlError):
     """Someone else changed the mode: the companion stops commanding at once."""
 
-    def __init__(self, mode: int) -> None:
-        super().__init__(f"mode changed to custom_mode {mode} by someone else: operator takeover")
+    def __init__(self, mode: int, name: str | None = None) -> None:
+        super().__init__(
+            f"mode changed to {name or f'custom_mode {mode}'} by someone else: operator takeover"
+        )
         self.custom_mode = mode
 
 
@@ -237,7 +239,8 @@ class VehicleController:
             self.failsafe = AutopilotFailsafe(self.tm.state.custom_mode)
             self._log.warning("%s", self.failsafe)
         else:
-            self.takeover = OperatorTakeover(self.tm.state.custom_mode)
+            mode = self.tm.state.custom_mode
+            self.takeover = OperatorTakeover(mode, self.flavour.mode_name(mode))
             self._log.warning("%s", self.takeover)
         self._target = None  # stop commanding at once
 

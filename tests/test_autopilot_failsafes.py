@@ -415,3 +415,29 @@ def test_real_px4s_gps_failure_leaves_it_to_px4_which_takes_no_landing_command(
     assert any(e["kind"] == "released" and e["to"] == "ALTCTL" for e in events)
     assert "ALTCTL" in events[-1]["reason"]
     assert _modes_after(rig, "ALTCTL")[:2] != ["ALTCTL", "OFFBOARD"]  # never taken back in flight
+
+
+@pytest.mark.sitl
+def test_real_arducopters_fence_breach_reads_as_a_takeover_that_the_record_explains(
+    arducopter: Path, start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """Real ArduCopter: mid-descent its fence is enabled with a ceiling below the vehicle and the land
+    action (FENCE_ALT_MAX 10, FENCE_ACTION 2, FENCE_ENABLE 1). Its fence switches to LAND without the
+    critical status its other failsafes set, so to the companion it is someone else's mode: it stops
+    commanding at once, and the record and the outcome carry what ArduCopter said ("Max Alt fence
+    breached"); ArduCopter lands the vehicle."""
+    rig, log, events, touchdown = _real_firmware_failsafe(
+        start_rig,
+        tmp_path,
+        ["--autopilot", "ardupilot-sitl", "--sitl", str(arducopter), "--scenario", "scenario2"],
+        {"FENCE_ALT_MAX": (10.0, REAL32), "FENCE_ACTION": (2, INT32), "FENCE_ENABLE": (1, INT32)},
+        bytewise=False,
+    )
+    assert "mode changed to LAND by someone else: operator takeover" in log, log[-3000:]
+    assert "Max Alt fence breached" in log
+    takeover = next(e for e in events if e["kind"] == "takeover")
+    assert "Max Alt fence breached" in takeover["autopilot_said"]
+    assert events[-1]["state"] == "aborted"
+    timed = [(e["t_s"], e["mode"]) for e in rig.sim.events("mode")]
+    landing = next(t for t, m in timed if m == "LAND")
+    assert [m for t, m in timed if landing <= t <= touchdown] == ["LAND"], timed

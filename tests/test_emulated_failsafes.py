@@ -142,3 +142,20 @@ def test_px4_without_gps_falls_back_to_altitude_control_and_refuses_offboard_and
     assert ap.position_valid
     assert ap.mode.name == "AUTO.LOITER"
     assert not ap.failsafe
+
+
+def test_arducopter_lands_on_breaching_its_enabled_fence_and_reports_a_breach_once() -> None:
+    ap, v, log = _rig("ardupilot")  # 40 m up
+    ap.set_param("FENCE_ALT_MAX", 30)
+    _fly(ap, v, 1.0)
+    assert log.failsafes() == []  # FENCE_ENABLE 0: ArduCopter's default
+    ap.set_param("FENCE_ACTION", 2)  # always land
+    ap.set_param("FENCE_ENABLE", 1)
+    _fly(ap, v, 1.0)
+    assert ap.mode.name == "LAND"
+    assert not ap.failsafe  # ArduCopter's heartbeat does not say critical for its fence
+    assert log.failsafes() == [("geofence", "LAND")]
+    assert "Max Alt fence breached" in log.texts
+    assert [f["what"] for e, f in log.events if e == "fence_breach"] == ["altitude"]
+    _fly(ap, v, 5.0)
+    assert [e for e, _ in log.events].count("fence_breach") == 1

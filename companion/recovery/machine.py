@@ -18,6 +18,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
+import time
 import traceback
 
 from companion.control import (
@@ -39,6 +40,8 @@ from companion.recovery.core import MAX_REENGAGE, SEVERITY_CRITICAL, Outcome, Se
 from companion.recovery.looking import Looking, lidar_silent
 from companion.recovery.searching import Searching
 from companion.recovery.site_choice import SiteChoice
+
+TAKEOVER_TEXTS_S = 5.0  # the autopilot's texts this recent go with a takeover into the record
 
 
 class Recovery(Searching, SiteChoice, Looking):
@@ -99,7 +102,15 @@ class Recovery(Searching, SiteChoice, Looking):
             self._set(State.ABORTED)
             self._say(4, "operator took over: stopped commanding")
             await self.ctl.release()
-            return Outcome(State.ABORTED, self.round, None, str(exc))
+            # what the autopilot said just before may be the real cause: ArduCopter's fence breach
+            # switches to LAND or RTL without the critical status of its other failsafes
+            said = [text for t, _, text in self.tm.texts if time.monotonic() - t < TAKEOVER_TEXTS_S]
+            said = [t for t in said if not t.startswith("Landfall:")]
+            self.record.record_event(
+                "takeover", {"round": self.round, "mode": str(exc), "autopilot_said": said}
+            )
+            why = f"{exc} (the autopilot said: {'; '.join(said)})" if said else str(exc)
+            return Outcome(State.ABORTED, self.round, None, why)
         except ControlError as exc:
             self._set(State.ABORTED)
             self._say(2, f"aborted: {exc}")

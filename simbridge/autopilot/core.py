@@ -120,6 +120,7 @@ class Autopilot:
         self.position_valid = True  # False: no position estimate, none sent (LOCAL_POSITION_NED, ...)
         self._gps_off_at: float | None = None
         self._before_position_loss: ModeSpec | None = None
+        self._fence_breached = False  # latched for the flight: one breach, one action
         self._apply_limits()
 
     # ------------------------------------------------------------------ spawn
@@ -325,6 +326,7 @@ class Autopilot:
             return None
         if not self.landed:
             self._watch_battery(s)
+            self._watch_fence(s)
         if self.landed:
             return self._on_ground(s)
         return self._fly(s)
@@ -489,10 +491,38 @@ class Autopilot:
         return sp
 
     # ------------------------------------------------------------------ battery failsafe
+    def _watch_fence(self, s: VehicleState) -> None:
+        """The fence around home (the flavour's, when enabled): the vehicle itself beyond its radius or
+        above its altitude is a breach, said and recorded (``fence_breach``) once a flight; with an
+        action, the autopilot switches to that mode in a failsafe."""
+        enabled, mode = self.flavour.fence_breach_action(self.params)
+        if not enabled or self._fence_breached:
+            return
+        hn, he, hd = self.home_ned_m
+        n, e, d = s.pos_ned_m
+        if math.hypot(n - hn, e - he) > self.tun.fence_radius_m:
+            what = "radius"
+        elif hd - d > self.tun.fence_alt_m:
+            what = "altitude"
+        else:
+            return
+        self._fence_breached = True
+        self._emit_event("fence_breach", {"what": what, "action": mode})
+        self._emit_text(
+            SEV_CRITICAL, "Max Alt fence breached" if what == "altitude" else "Circle fence breached"
+        )
+        if mode is None or self.mode.name == mode or self.mode.nav is Nav.LAND:
+            return
+        # not "critical" in the heartbeat: real ArduCopter's fence is not among the failsafes that make
+        # its system status critical (tests/test_autopilot_failsafes.py)
+        self._set_mode(self.flavour.mode(mode), s, announce=False)
+        self._emit_event("failsafe", {"reason": "geofence", "action": mode})
+
     def _arm_battery_watch(self) -> None:
         level = self.flavour.battery_level(self.params, self.vehicle.battery)
         self._battery_level = self._battery_level_at_arming = level
         self._battery_action = None
+        self._fence_breached = False
 
     def _watch_battery(self, s: VehicleState) -> None:
         """The autopilot's battery failsafe (flavour rules): a warning level worse than the flight's

@@ -146,6 +146,11 @@ class Flavour:
         None keeps the mode)."""
         raise NotImplementedError
 
+    def fence_breach_action(self, p: dict[str, float]) -> tuple[bool, str | None]:
+        """(whether a breach of the fence around home is acted on at all, the failsafe's mode: None
+        reports it only). Base: not emulated (targets beyond the fence are refused all the same)."""
+        return False, None
+
     def external_mode_name(self) -> str:
         return next(m.name for m in self.modes if m.nav is Nav.EXTERNAL)
 
@@ -317,6 +322,9 @@ class ArduPilotFlavour(Flavour):
         # the EKF failsafe (FS_EKF_ACTION: 1 land, 2 AltHold, 3 land even in STABILIZE) and SITL's own
         # GPS switch, SIM_GPS1_ENABLE, as real ArduCopter SITL has it (0: the GPS stops)
         Param("FS_EKF_ACTION", 1, MAV_PARAM_TYPE_INT32),
+        # the fence's breach (ArduCopter's defaults: disabled; when enabled, RTL or land)
+        Param("FENCE_ENABLE", 0, MAV_PARAM_TYPE_INT32),
+        Param("FENCE_ACTION", 1, MAV_PARAM_TYPE_INT32),
         Param("SIM_GPS1_ENABLE", 1, MAV_PARAM_TYPE_INT32),
     )
     air_start_mode = "LOITER"
@@ -364,6 +372,13 @@ class ArduPilotFlavour(Flavour):
 
     def position_lost(self, p: dict[str, float]) -> tuple[float, str | None]:
         return self._EKF_FS_S, self._EKF_ACTIONS.get(int(p["FS_EKF_ACTION"]))
+
+    # FENCE_ACTION: 0 report only, 1 RTL or land, 2 always land, 3 SmartRTL or RTL or land, 4 brake or
+    # land, 5 SmartRTL or land (no SmartRTL path here: its fallbacks)
+    _FENCE_ACTIONS: ClassVar[dict[int, str]] = {1: "RTL", 2: "LAND", 3: "RTL", 4: "BRAKE", 5: "LAND"}
+
+    def fence_breach_action(self, p: dict[str, float]) -> tuple[bool, str | None]:
+        return p["FENCE_ENABLE"] != 0, self._FENCE_ACTIONS.get(int(p["FENCE_ACTION"]))
 
     def decode_set_mode(self, base_mode: float, main: float, sub: float) -> ModeSpec | int:
         mode_number = int(main)
