@@ -120,7 +120,7 @@ def test_an_offboard_loss_set_to_land_clears_when_the_link_returns_and_the_recov
     record = tmp_path / "record"
     try:
         rig = start_rig(
-            ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "4"],
+            ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "8"],
             ["--record", str(record)],
             mavlink_via=_via(relays, _clean_relay),
         )
@@ -211,7 +211,7 @@ def test_a_gps_loss_hands_the_vehicle_to_the_estimators_failsafe(
     whose position telemetry stops while heartbeats go on, leaves the vehicle to it and records why."""
     record = tmp_path / "record"
     rig = start_rig(
-        ["--scenario", "scenario2", "--autopilot", "ardupilot", "--speed", "4"],
+        ["--scenario", "scenario2", "--autopilot", "ardupilot", "--speed", "8"],
         ["--record", str(record)],
     )
     _raise_alarm(rig, "GPS spoofing", "high")
@@ -275,7 +275,7 @@ def _real_firmware_failsafe(
     record = tmp_path / "record"
     try:
         rig = start_rig(
-            [*sim_args, "--speed", "4"],
+            [*sim_args, "--speed", "8"],
             ["--record", str(record)],
             env=env,
             mavlink_via=_via(relays, _clean_relay),
@@ -395,7 +395,7 @@ def test_real_px4s_gps_failure_leaves_it_to_px4_which_takes_no_landing_command(
     stick input here: in two flights one descended blind within 140 s simulated, the other drifted
     1.6 km and came down after 700 s). After its grace period the companion cannot have OFFBOARD back
     (refused without a position); it asks for PX4's land mode where the vehicle is, which PX4 refuses
-    too, so it leaves the vehicle to PX4 and watches for a landing (``recovery.land_timeout_s``, 20 s
+    too, so it leaves the vehicle to PX4 and watches for a landing (``recovery.land_timeout_s``, 10 s
     here), then records why it ended."""
     rig, log, events, _ = _real_firmware_failsafe(
         start_rig,
@@ -404,7 +404,7 @@ def test_real_px4s_gps_failure_leaves_it_to_px4_which_takes_no_landing_command(
         {"SYS_FAILURE_EN": (1, INT32)},
         bytewise=True,
         commands=[(420, (4.0, 1.0))],  # MAV_CMD_INJECT_FAILURE: FAILURE_UNIT_SENSOR_GPS, FAILURE_TYPE_OFF
-        env={"LANDFALL_RECOVERY_LAND_TIMEOUT_S": "20"},
+        env={"LANDFALL_RECOVERY_LAND_TIMEOUT_S": "10"},
         until_touchdown=False,
     )
     assert "autopilot failsafe: ALTCTL; waiting 6 s for it to clear" in log, log[-3000:]

@@ -131,7 +131,7 @@ class Autopilot:
         self.landed = False
         self.landed_state = LANDED_IN_AIR
         self._armed_at_s = state.t_s
-        self._arm_battery_watch()
+        self._arm_watches()
         self._set_mode(self.flavour.mode(self.flavour.air_start_mode), state, announce=False)
 
     # ------------------------------------------------------------------ parameters
@@ -191,7 +191,7 @@ class Autopilot:
                 return self._refuse("Arming denied: vehicle not landed", self._arm_refusal())
             self.armed = True
             self._armed_at_s = s.t_s
-            self._arm_battery_watch()
+            self._arm_watches()
             self._has_flown = False
             self._landed_since = s.t_s
             self.vehicle.controller.reset()
@@ -490,7 +490,7 @@ class Autopilot:
             return self._external
         return sp
 
-    # ------------------------------------------------------------------ battery failsafe
+    # ------------------------------------------------------------------ fence and battery failsafes
     def _watch_fence(self, s: VehicleState) -> None:
         """The fence around home (the flavour's, when enabled): the vehicle itself beyond its radius or
         above its altitude is a breach, said and recorded (``fence_breach``) once a flight; with an
@@ -518,7 +518,9 @@ class Autopilot:
         self._set_mode(self.flavour.mode(mode), s, announce=False)
         self._emit_event("failsafe", {"reason": "geofence", "action": mode})
 
-    def _arm_battery_watch(self) -> None:
+    def _arm_watches(self) -> None:
+        """At arming: the battery level the flight starts with (PX4 acts only on a worse one), no
+        action pending, the fence not breached."""
         level = self.flavour.battery_level(self.params, self.vehicle.battery)
         self._battery_level = self._battery_level_at_arming = level
         self._battery_action = None
@@ -567,8 +569,8 @@ class Autopilot:
     # ------------------------------------------------------------------ GPS and estimator
     def _watch_estimator(self, s: VehicleState) -> None:
         """Without GPS the estimator dead-reckons for the flavour's time, then has no position: none
-        is sent, and in flight the flavour's failsafe takes a mode that needs none (PX4: Descend,
-        reported as AUTO.LAND; ArduCopter's EKF failsafe: FS_EKF_ACTION). GPS back: the position
+        is sent, and in flight the flavour's failsafe takes a mode that needs none (PX4: ALTCTL, as
+        real PX4 1.15 fell back to; ArduCopter's EKF failsafe: FS_EKF_ACTION). GPS back: the position
         returns; PX4's fallback clears back to the mode it replaced, ArduCopter stays in its mode."""
         if self.gps_enabled:
             self._gps_off_at = None
