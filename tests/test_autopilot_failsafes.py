@@ -31,9 +31,22 @@ INT32 = 6  # MAV_PARAM_TYPE_INT32
 REAL32 = 9
 
 
+def _wire(value: float, kind: int, *, bytewise: bool) -> float:
+    """A parameter's value as PARAM_SET carries it: PX4 puts an INT32's bytes in the float field
+    (``bytewise``), ArduPilot casts it."""
+    if kind == INT32 and bytewise:
+        return float(struct.unpack("<f", struct.pack("<i", int(value)))[0])
+    return value
+
+
+def _emulated(start_rig: Callable[..., Rig], tmp_path: Path, *sim_args: str) -> tuple[Rig, Path]:
+    """simbridge's emulation at 8x (``sim_args``) and a companion keeping a flight record."""
+    record = tmp_path / "record"
+    return start_rig([*sim_args, "--speed", "8"], ["--record", str(record)]), record
+
+
 def _set_params(rig: Rig, params: dict[str, tuple[float, int]], *, bytewise: bool) -> None:
-    """PARAM_SET from a ground station of its own, each confirmed by its PARAM_VALUE echo. PX4 carries
-    an INT32 bytewise in the float field (``bytewise``), ArduPilot casts it."""
+    """PARAM_SET from a ground station of its own, each confirmed by its PARAM_VALUE echo (:func:`_wire`)."""
     from pymavlink import mavutil
 
     gcs = mavutil.mavlink_connection(
@@ -41,9 +54,7 @@ def _set_params(rig: Rig, params: dict[str, tuple[float, int]], *, bytewise: boo
     )
     try:
         for name, (value, kind) in params.items():
-            wire = value
-            if kind == INT32 and bytewise:
-                wire = struct.unpack("<f", struct.pack("<i", int(value)))[0]
+            wire = _wire(value, kind, bytewise=bytewise)
             for _ in range(5):
                 gcs.mav.param_set_send(1, 1, name.encode(), wire, kind)
                 echo = gcs.recv_match(type="PARAM_VALUE", blocking=True, timeout=2)
@@ -69,10 +80,8 @@ def test_a_battery_failsafe_that_lands_keeps_the_vehicle_and_the_companion_stand
     cancels the action), then switches to AUTO.LAND. The companion commands nothing for its grace
     period; the failsafe does not clear, so it stops commanding, says so, watches the landing down and
     records how the flight ended."""
-    record = tmp_path / "record"
-    rig = start_rig(
-        ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "8", "--battery", "40"],
-        ["--record", str(record)],
+    rig, record = _emulated(
+        start_rig, tmp_path, "--scenario", "scenario1", "--autopilot", "px4", "--battery", "40"
     )
     _wait_for_companion(rig)
     _set_params(rig, {"COM_LOW_BAT_ACT": (2, INT32)}, bytewise=True)
@@ -155,11 +164,7 @@ def test_a_battery_warning_leaves_room_and_the_recovery_goes_on(
 ) -> None:
     """ArduCopter's low-battery level with no action (BATT_FS_LOW_ACT 0, its default) crossed mid-descent:
     a warning only. The companion records the autopilot's words and lands where it chose."""
-    record = tmp_path / "record"
-    rig = start_rig(
-        ["--scenario", "scenario2", "--autopilot", "ardupilot", "--speed", "8"],
-        ["--record", str(record)],
-    )
+    rig, record = _emulated(start_rig, tmp_path, "--scenario", "scenario2", "--autopilot", "ardupilot")
     _raise_alarm(rig, "GPS spoofing", "high")
     rig.wait_log("m, ", timeout_s=120)
     _set_params(rig, {"BATT_LOW_MAH": (4999.0, REAL32)}, bytewise=False)  # less than that left: low
@@ -184,11 +189,7 @@ def test_an_alarm_while_the_autopilots_failsafe_lands_does_not_take_the_vehicle(
     """ArduCopter set to land at a critical battery (BATT_FS_CRT_ACT 1) before any alarm: its failsafe
     lands the vehicle and says so, which the companion's watcher takes as an alarm. The recovery that
     starts finds the autopilot's failsafe in charge and leaves the vehicle to it."""
-    record = tmp_path / "record"
-    rig = start_rig(
-        ["--scenario", "scenario2", "--autopilot", "ardupilot", "--speed", "8"],
-        ["--record", str(record)],
-    )
+    rig, record = _emulated(start_rig, tmp_path, "--scenario", "scenario2", "--autopilot", "ardupilot")
     _wait_for_companion(rig)
     _set_params(rig, {"BATT_FS_CRT_ACT": (1, INT32), "BATT_CRT_MAH": (4999.0, REAL32)}, bytewise=False)
     _wait_touchdown(rig, timeout_s=200)
@@ -209,11 +210,7 @@ def test_a_gps_loss_hands_the_vehicle_to_the_estimators_failsafe(
     """ArduCopter's GPS switched off mid-descent (SITL's SIM_GPS1_ENABLE 0): its estimator dead-reckons,
     then has no position, and its EKF failsafe (FS_EKF_ACTION 1) lands where it is. The companion,
     whose position telemetry stops while heartbeats go on, leaves the vehicle to it and records why."""
-    record = tmp_path / "record"
-    rig = start_rig(
-        ["--scenario", "scenario2", "--autopilot", "ardupilot", "--speed", "8"],
-        ["--record", str(record)],
-    )
+    rig, record = _emulated(start_rig, tmp_path, "--scenario", "scenario2", "--autopilot", "ardupilot")
     _raise_alarm(rig, "GPS spoofing", "high")
     rig.wait_log("m, ", timeout_s=120)
     _set_params(rig, {"SIM_GPS1_ENABLE": (0, INT32)}, bytewise=False)
@@ -244,9 +241,7 @@ def _gcs_frames(
     mav = mavlink2.MAVLink(None, srcSystem=255, srcComponent=190)
     frames = []
     for name, (value, kind) in params.items():
-        wire = value
-        if kind == INT32 and bytewise:
-            wire = struct.unpack("<f", struct.pack("<i", int(value)))[0]
+        wire = _wire(value, kind, bytewise=bytewise)
         frames.append(mav.param_set_encode(1, 1, name.encode(), wire, kind).pack(mav))
     for command, args in commands:
         p = [*args, *[0.0] * (7 - len(args))]
