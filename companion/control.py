@@ -16,6 +16,7 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.flavour import Flavour, Mode, flavour_for
+from companion.precision import PrecisionLanding
 from companion.telemetry import TelemetryCache
 
 POSITION_YAW_MASK = 2552  # use x, y, z and yaw
@@ -90,6 +91,7 @@ class VehicleController:
         self._mav = mav
         self._log = logger or logging.getLogger("companion.control")
         self._acks: dict[int, asyncio.Future[int]] = {}
+        self._params: dict[str, asyncio.Future[float]] = {}
         self._target: tuple[float, float, float, float] | None = None  # n, e, d, yaw
         self._streamer: asyncio.Task[None] | None = None
         self._engaged_mode: int | None = None
@@ -99,6 +101,8 @@ class VehicleController:
         self.takeover: OperatorTakeover | None = None
         self.failsafe: AutopilotFailsafe | None = None
         self.failsafe_modes: list[int] = []  # the modes the last failsafe went through (its grace period)
+        # the autopilot's precision landing, read from its parameters once it is heard (the daemon)
+        self.precision: PrecisionLanding | None = None
         self.longest_stream_gap_s = 0.0  # wall seconds between two setpoints: the event loop's health
 
     # ------------------------------------------------------------------ basics
@@ -117,25 +121,89 @@ class VehicleController:
         if fut is not None and not fut.done():
             fut.set_result(int(msg.result))
 
+    def on_param_value(self, msg: Any) -> None:
+        """Feed every PARAM_VALUE the link receives (answers to :meth:`read_param`)."""
+        if (msg.get_srcSystem(), msg.get_srcComponent()) != self.vehicle:
+            return
+        name = msg.param_id if isinstance(msg.param_id, str) else bytes(msg.param_id).decode(errors="replace")
+        fut = self._params.get(name.rstrip("\x00"))
+        if fut is not None and not fut.done():
+            fut.set_result(float(msg.param_value))
+
+    async def read_param(self, name: str, *, timeout_s: float = 1.5, tries: int = 3) -> float | None:
+        """One parameter's value as its PARAM_VALUE carries it (ArduPilot sends integers as floats,
+        PX4 bytewise); None when the autopilot does not answer (no such parameter: both stay silent
+        then)."""
+        sys_id, comp_id = self.vehicle
+        request = self._mav.param_request_read_encode(sys_id, comp_id, name.encode(), -1)
+        value: float | None = await self._ask(self._params, name, lambda _attempt: request, timeout_s, tries)
+        return value
+
+    def send_landing_target(self, target_frd_m: tuple[float, float, float], time_usec: int) -> None:
+        """LANDING_TARGET: where the landing site is from the vehicle now, body FRD metres (the
+        frame ArduPilot's precision landing reads; the angles say the same for older firmware)."""
+        x, y, z = target_frd_m
+        distance = math.sqrt(x * x + y * y + z * z)
+        if not (math.isfinite(distance) and distance > 0 and z > 0):
+            raise ControlError(f"refusing a landing target not below the vehicle ({x}, {y}, {z})")
+        sys_id, comp_id = self.vehicle
+        msg = self._mav.landing_target_encode(
+            time_usec,
+            0,  # target_num
+            mavlink2.MAV_FRAME_BODY_FRD,
+            math.atan2(y, z),  # angle_x: image right (body right) ...
+            math.atan2(-x, z),  # ... angle_y: image down (body aft), as ArduPilot reads them
+            distance,
+            0.0,
+            0.0,
+            x,
+            y,
+            z,
+            [1.0, 0.0, 0.0, 0.0],
+            mavlink2.LANDING_TARGET_TYPE_VISION_OTHER,
+            1,  # position_valid: x, y, z hold
+        )
+        self._send_to(msg, sys_id, comp_id)
+
     async def command(self, command: int, *params: float, timeout_s: float = 1.5, tries: int = 3) -> int:
         """COMMAND_LONG to the autopilot; returns its MAV_RESULT (retried on silence)."""
         p = [*params, *([0.0] * (7 - len(params)))]
+        sys_id, comp_id = self.vehicle
+        result: int | None = await self._ask(
+            self._acks,
+            command,
+            lambda attempt: self._mav.command_long_encode(sys_id, comp_id, command, attempt, *p),
+            timeout_s,
+            tries,
+        )
+        if result is None:
+            raise ControlError(f"no COMMAND_ACK for command {command} after {tries} tries")
+        return result
+
+    async def _ask(
+        self,
+        pending: dict[Any, asyncio.Future[Any]],
+        key: Any,
+        encode: Callable[[int], Any],
+        timeout_s: float,
+        tries: int,
+    ) -> Any:
+        """Send ``encode(attempt)`` until the answer filed under ``key`` in ``pending`` comes (its
+        value), at most ``tries`` times ``timeout_s``; None when none came."""
         loop = asyncio.get_running_loop()
         for attempt in range(tries):
-            fut: asyncio.Future[int] = loop.create_future()
-            self._acks[command] = fut
+            fut: asyncio.Future[Any] = loop.create_future()
+            pending[key] = fut
             sys_id, comp_id = self.vehicle
-            self._send_to(
-                self._mav.command_long_encode(sys_id, comp_id, command, attempt, *p), sys_id, comp_id
-            )
+            self._send_to(encode(attempt), sys_id, comp_id)
             try:
                 async with asyncio.timeout(timeout_s):
                     return await fut
             except TimeoutError:
                 continue
             finally:
-                self._acks.pop(command, None)
-        raise ControlError(f"no COMMAND_ACK for command {command} after {tries} tries")
+                pending.pop(key, None)
+        return None
 
     async def _heard_in_mode(self, custom_mode: int, heartbeats: int = 2) -> int:
         """Return MAV_RESULT_ACCEPTED once ``heartbeats`` heartbeats in a row, all received from now

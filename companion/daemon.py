@@ -19,6 +19,7 @@ from companion.camera import stream_capture_time
 from companion.control import VehicleController
 from companion.ground import GroundFeed, TeeRecord, telemetry_snapshot
 from companion.guidance.frames import quat_to_matrix
+from companion.precision import check_precision_landing
 from companion.reasoning.base import Reasoner
 from companion.reasoning.cascade import Cascade
 from companion.reasoning.onboard import OnboardReasoner
@@ -132,6 +133,8 @@ class Companion:
         kind = msg.get_type()
         if kind == "COMMAND_ACK":
             self.ctl.on_command_ack(msg)
+        elif kind == "PARAM_VALUE":
+            self.ctl.on_param_value(msg)
         elif kind == "COMMAND_LONG":
             self._on_command(msg)
         elif kind == "STATUSTEXT" and str(msg.text).startswith(ALARM_TEXT_PREFIX):
@@ -436,6 +439,23 @@ class Companion:
                 asked = True
             await asyncio.sleep(STREAM_CHECK_S)
 
+    async def _precision_check(self) -> None:
+        """Once the autopilot is heard: read whether it will land on the companion's LANDING_TARGET
+        (:mod:`companion.precision`), and say so; a recovery reads ``ctl.precision``. Read again
+        should the autopilot change (a reboot into another firmware)."""
+        checked_for: int | None = None
+        while True:
+            if self.tm.age_s("heartbeat") < 3.0 and self.tm.state.autopilot != checked_for:
+                autopilot = self.tm.state.autopilot
+                setup = await check_precision_landing(self.ctl, autopilot)
+                self.ctl.precision = setup
+                checked_for = autopilot
+                level = logging.INFO if setup.ready else logging.WARNING
+                self.log.log(
+                    level, "precision landing %s: %s", "ready" if setup.ready else "not used", setup.why
+                )
+            await asyncio.sleep(STREAM_CHECK_S)
+
     async def _watchers(self) -> None:
         """Raise alarms from autopilot signals: battery critical, failsafe text, GPS fix lost."""
         while True:
@@ -517,6 +537,7 @@ class Companion:
                 asyncio.create_task(self._heartbeats(), name="heartbeat"),
                 asyncio.create_task(self._streams(), name="streams"),
                 asyncio.create_task(self._watchers(), name="watchers"),
+                asyncio.create_task(self._precision_check(), name="precision-check"),
             ]
             if self._sensors is not None:
                 tasks.append(asyncio.create_task(self._connect_sensors(stack, SensorClient), name="sensors"))

@@ -537,6 +537,7 @@ def run_episode(
     entry.update(_grade(log.states, takeover, log.touchdown, events))
     entry["touchdown_to_site_m"] = touchdown_to_site_m(log.touchdown, log.header, events)
     entry.update(_landing_distance(log, events, spec))
+    entry["precision_landing"] = precision_landing_summary(events)
     entry["outcome"] = outcome if log.touchdown is None or outcome != "timeout" else "landed"
     entry["error"] = error if log.touchdown is None else None
     entry["error_kind"] = "infrastructure" if infrastructure and log.touchdown is None else None
@@ -571,6 +572,24 @@ def touchdown_to_site_m(
         return None
     td = touchdown["pos_ned_m"]
     return round(math.hypot(td[0] - home[0] - site[0], td[1] - home[1] - site[1]), 2)
+
+
+def precision_landing_summary(events: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """What the companion's record says of its precision landing: whether the autopilot's was used
+    (and why, or why not), how many LANDING_TARGET it sent, and how often the site was found again
+    in a frame before each descent step (``site_track``). None when the recovery never landed on a
+    site through the companion (no ``precision_landing`` event)."""
+    last = next((e for e in reversed(events) if e.get("kind") == "precision_landing"), None)
+    if last is None:
+        return None
+    tracks = [e for e in events if e.get("kind") == "site_track"]
+    return {
+        "used": bool(last.get("used")),
+        "why": str(last.get("why", "")),
+        "targets_sent": int(last.get("targets_sent", 0)),
+        "tracks_found": sum(bool(e.get("found")) for e in tracks),
+        "tracks_lost": sum(not e.get("found") for e in tracks),
+    }
 
 
 def _landing_distance(log: LogWatch, events: list[dict[str, Any]], spec: EpisodeSpec) -> dict[str, Any]:

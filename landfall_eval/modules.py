@@ -8,7 +8,7 @@ iteration feeds all three experiments:
    (:func:`~landfall_eval.surfaces.best_jaccard`, LiDAR depth).
 2. **Landing distance**: the reasoner ranks the candidates (``crop`` context), the chosen candidate's
    centre pixel goes through the LiDAR IPM as the recovery loop does it (``LidarPixelIndex`` and
-   ``pixel_to_ned``), and simbridge's JSBSim F450 with its PX4-flavoured autopilot (the objects the
+   ``pixel_to_ned_surface``), and simbridge's JSBSim F450 with its PX4-flavoured autopilot (the objects the
    ``simbridge`` process steps, here in-process, unpaced, without MAVLink) flies there at the launch
    altitude, descends over it in the recovery loop's steps (0.8 of the rangefinder distance per step,
    arrival by position and speed) and hands over to the autopilot's land mode at 5 m. The figure is
@@ -45,7 +45,7 @@ import numpy as np
 
 from companion.config import load_config
 from companion.guidance.frames import PinholeCamera
-from companion.guidance.ipm import IpmError, LidarPixelIndex, pixel_to_ned
+from companion.guidance.ipm import IpmError, LidarPixelIndex, pixel_to_ned_surface
 from companion.perception.crops import pad_of, rank_crops
 from companion.perception.depth import LidarDepth
 from companion.perception.site_check import check_site
@@ -375,7 +375,7 @@ def _landing(
     if estimate is not None:
         pos, quat = estimate.perturb(lf.pos_ned_m, lf.quat_wxyz)
     try:
-        ipm = pixel_to_ned(u, v, LidarPixelIndex(lf.lidar_frd, lf.camera), pos, quat)
+        ipm = pixel_to_ned_surface(u, v, LidarPixelIndex(lf.lidar_frd, lf.camera), pos, quat)
     except IpmError as exc:
         return Landing(None, None, f"seed {lf.seed}: IPM failed ({exc})")
     n, e = sc.launch_ne_m

@@ -96,6 +96,9 @@ PARAMS: dict[str, float] = {
     "RNGFND1_MIN": RANGEFINDER_MIN_CM / 100,
     "RNGFND1_MAX": RANGE_MAX_M,
     "RNGFND1_ORIENT": 25,  # pointing down
+    # precision landing on the companion's LANDING_TARGET (docs/companion.md, "Precision landing")
+    "PLND_ENABLED": 1,
+    "PLND_TYPE": 1,
 }
 # The flight envelope the emulated ArduPilot flies (and companion-bench's kinematic bound assumes) in
 # place of airsim-quadX.parm's (20 m/s across, 3 m/s down, 4 m/s2): the same F450 whoever flies it.

@@ -20,6 +20,7 @@ from companion.guidance import (
     ground_down_from_range,
     pixel_to_ned,
     pixel_to_ned_flat,
+    pixel_to_ned_surface,
     quat_to_matrix,
 )
 from simbridge.geo import euler_to_quat, rotate_body_to_ned
@@ -258,6 +259,28 @@ def test_nearest_nan_pixel_raises_geometry_input_error() -> None:
     index = LidarPixelIndex(np.array([[0.0, 0.0, 50.0]]), CAM)
     with pytest.raises(GeometryInputError, match="u"):
         index.nearest(math.nan, 10.0)
+
+
+def test_pixel_to_ned_surface_is_the_pixels_own_point_between_sparse_returns() -> None:
+    """A 2 m grid of returns on the ground seen from 100 m (about 10 px apart): a pixel between them
+    maps to its own point on the ground, where the nearest return is up to a metre off."""
+    pos = np.array([10.0, -5.0, -100.0])
+    index = LidarPixelIndex(_ground_grid_frd(pos, YAWED_TILTED), CAM)
+    target_ned = np.array([25.3, 14.7, 0.0])  # between grid points (even metres)
+    target_frd = quat_to_matrix(YAWED_TILTED).T @ (target_ned - pos)
+    ((u, v),), _ = CAM.project_frd(target_frd[None, :])
+    nearest = pixel_to_ned(u, v, index, pos, YAWED_TILTED)
+    assert math.dist(nearest[:2], target_ned[:2]) > 0.5  # the return, not the pixel's point
+    out = pixel_to_ned_surface(u, v, index, pos, YAWED_TILTED)
+    np.testing.assert_allclose(out, target_ned, atol=1e-6)
+
+
+def test_pixel_to_ned_surface_without_a_return_near_raises_like_pixel_to_ned() -> None:
+    pos = np.array([0.0, 0.0, -100.0])
+    one = quat_to_matrix(LEVEL).T @ (np.array([[0.0, 0.0, 0.0]]) - pos).T
+    index = LidarPixelIndex(one.T, CAM)
+    with pytest.raises(NoReturnNearPixel):
+        pixel_to_ned_surface(10.0, 10.0, index, pos, LEVEL)
 
 
 # ------------------------------------------------------------------------------------ degraded mode

@@ -18,6 +18,7 @@ from companion.guidance.ipm import (
     ground_down_from_range,
     pixel_to_ned,
     pixel_to_ned_flat,
+    pixel_to_ned_surface,
 )
 
 __all__ = [
@@ -35,5 +36,6 @@ __all__ = [
     "ground_down_from_range",
     "pixel_to_ned",
     "pixel_to_ned_flat",
+    "pixel_to_ned_surface",
     "quat_to_matrix",
 ]

@@ -38,6 +38,7 @@ __all__ = [
     "ground_down_from_range",
     "pixel_to_ned",
     "pixel_to_ned_flat",
+    "pixel_to_ned_surface",
 ]
 
 DEFAULT_MAX_PX = 25.0
@@ -263,6 +264,35 @@ def pixel_to_ned(
     hit = index.nearest(u, v, max_px)
     out: np.ndarray = pos + rot @ np.asarray(hit.point_frd)
     return out
+
+
+def pixel_to_ned_surface(
+    u: float,
+    v: float,
+    index: LidarPixelIndex,
+    pos_ned_m: Vec3Like,
+    quat_wxyz: Sequence[float] | npt.ArrayLike,
+    max_px: float = DEFAULT_MAX_PX,
+) -> np.ndarray:
+    """World point seen at pixel ``(u, v)`` on a level surface: the pixel's own ray meets the
+    horizontal plane through the nearest LiDAR return.
+
+    :func:`pixel_to_ned` answers with the return itself, which lies up to ``max_px`` pixels from the
+    pixel (the sweep is sparser than the image: at 90 m one return every metre or so); on the flat
+    surfaces Surface ID proposes, the ray through the pixel meets the surface at the return's height
+    where the pixel shows. A ray that does not descend to that plane gets the return itself.
+
+    Returns:
+        (3,) float64 NED metres.
+
+    Raises:
+        NoReturnNearPixel: no return projects within ``max_px`` of the pixel.
+    """
+    hit = pixel_to_ned(u, v, index, pos_ned_m, quat_wxyz, max_px)
+    try:
+        return pixel_to_ned_flat(u, v, index.camera, pos_ned_m, quat_wxyz, float(hit[2]))
+    except RayDoesNotDescend:
+        return hit
 
 
 def pixel_to_ned_flat(

@@ -18,10 +18,12 @@ from companion.faults import FaultHook
 from companion.guidance.frames import PinholeCamera
 from companion.perception.depth import DepthSource, LidarDepth
 from companion.perception.site_check import SiteCheck
+from companion.perception.site_track import SiteView
 from companion.perception.surface_id import (
     Candidate,
     SurfaceParams,
 )
+from companion.precision import PrecisionLanding
 from companion.reasoning.base import Decision, Ranking, Reasoner
 from companion.reasoning.onboard import OnboardReasoner
 from companion.search import Leg, SearchLimits, SearchPlanner, Verdict
@@ -168,6 +170,8 @@ class RecoveryBase:
         self._onboard = onboard if isinstance(onboard, OnboardReasoner) else OnboardReasoner()
         self._fault = FaultHook.from_env()
         self._roofs_seen = False  # a roof measured during this recovery: a built-up area
+        # the site being followed: the last frame it was found in, and where it was then (following.py)
+        self._track: tuple[SiteView, tuple[float, float, float]] | None = None
         self._first_look: asyncio.Task[Any] | None = None  # the first frame, asked for while engaging
 
     @property
@@ -213,6 +217,9 @@ class RecoveryBase:
         raise NotImplementedError
 
     async def _land(self) -> bool:
+        raise NotImplementedError
+
+    async def _land_on_site(self, setup: PrecisionLanding | None) -> None:
         raise NotImplementedError
 
     async def _final_land(self) -> None:

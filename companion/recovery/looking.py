@@ -13,7 +13,7 @@ import numpy as np
 
 from companion.alarms import Criticality
 from companion.guidance.frames import PinholeCamera, quat_to_matrix
-from companion.guidance.ipm import IpmError, LidarPixelIndex, pixel_to_ned, pixel_to_ned_flat
+from companion.guidance.ipm import IpmError, LidarPixelIndex, pixel_to_ned_flat, pixel_to_ned_surface
 from companion.perception.appearance import appearance_candidates, clear_cells
 from companion.perception.crops import crop, pad_of, rank_crops, site_box
 from companion.perception.depth import DepthError
@@ -281,7 +281,7 @@ class Looking(RecoveryBase):
         u, v = c.centre_px
         try:
             index = LidarPixelIndex(frame.lidar_frd, camera)
-            p = pixel_to_ned(u, v, index, frame.pos_ned_m, frame.quat_wxyz)
+            p = pixel_to_ned_surface(u, v, index, frame.pos_ned_m, frame.quat_wxyz)
         except IpmError as exc:
             ground_d = frame.pos_ned_m[2] + frame.rangefinder_m
             self.log.warning(

@@ -33,10 +33,12 @@ from companion.control import (
 )
 from companion.guidance.descent import height_above_site
 from companion.guidance.frames import PinholeCamera, compass_point
+from companion.perception.site_check import check_site
 from companion.perception.surface_id import (
     Candidate,
 )
 from companion.recovery.core import MAX_REENGAGE, SEVERITY_CRITICAL, Outcome, SensorsLost, Site, State
+from companion.recovery.following import Following
 from companion.recovery.looking import Looking, lidar_silent
 from companion.recovery.searching import Searching
 from companion.recovery.site_choice import SiteChoice
@@ -44,7 +46,7 @@ from companion.recovery.site_choice import SiteChoice
 TAKEOVER_TEXTS_S = 5.0  # the autopilot's texts this recent go with a takeover into the record
 
 
-class Recovery(Searching, SiteChoice, Looking):
+class Recovery(Searching, SiteChoice, Following, Looking):
     """One recovery, from the alarm to the ground (module docstring): the state machine; its parts
     (:class:`Looking`, :class:`SiteChoice`, :class:`Searching`) each hold one idea of it."""
 
@@ -146,6 +148,7 @@ class Recovery(Searching, SiteChoice, Looking):
         # a STATUSTEXT holds 50 characters: what happened and what the vehicle does come first
         self._say(SEVERITY_CRITICAL, f"internal error, landing: {type(exc).__name__} in {where}: {exc}"[:150])
         site = self._fallback_site()
+        self._track = None  # nothing measured anew, the camera's view of a site included
         try:
             try:
                 if site is not None:
@@ -316,6 +319,7 @@ class Recovery(Searching, SiteChoice, Looking):
 
     async def _round(self) -> bool:
         look, self._first_look = self._first_look, None
+        self._track = None  # a new round, a new site
         frame = await (look if look is not None else self._acquire())
         self._set(State.SURFACE_ID)
         camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
@@ -344,6 +348,7 @@ class Recovery(Searching, SiteChoice, Looking):
         if target is None:
             self._say(4, f"site {choice.index} cannot be placed in the world: next round")
             return False
+        self._follow_from(frame, target)
         n, e, d = self.tm.state.pos_ned_m
         dist = math.hypot(target[0] - n, target[1] - e)
         bearing = compass_point(math.degrees(math.atan2(target[1] - e, target[0] - n)))
@@ -370,6 +375,13 @@ class Recovery(Searching, SiteChoice, Looking):
         self._descending = (target, choice)  # what a link loss resumes: this site, confirmed again
         while True:
             frame, check = await self._measure_site(target)
+            followed = await self._follow(frame, target)
+            if followed != target:  # the site where the camera sees it now: measured there
+                target = followed
+                self._descending = (target, choice)
+                check = await asyncio.to_thread(
+                    check_site, frame.lidar_frd, frame.pos_ned_m, frame.quat_wxyz, (target[0], target[1])
+                )
             decision = await self._confirm(check, frame, target, choice)
             if not decision.accept and decision.contested:
                 # a lone "no" on a clear site: ask again next round (the cascade's lone-"no" rule)

@@ -35,7 +35,7 @@ class SiteChoice(RecoveryBase):
     async def _final_land(self) -> None:
         self._set(State.LAND)
         self._say(5, "final approach: autopilot land mode")
-        await self.ctl.land(self.p.land_timeout_s)
+        await self._land_on_site(self.ctl.precision)
         self._set(State.LANDED)
         self._say(5, "landed")
 
@@ -43,6 +43,7 @@ class SiteChoice(RecoveryBase):
         """Land at the accepted site, else at the least bad one measured (:mod:`companion.site_ledger`),
         judging the spot under the vehicle too when sensors allow (``measure_here``); "here" only when
         nothing at all was measured, and said so."""
+        self._track = None  # the site it lands on may not be the one last followed
         if measure_here and self.best is None:
             await self._look_around()
             await self._measure_here()

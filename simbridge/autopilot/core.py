@@ -30,7 +30,7 @@ from simbridge.autopilot.flavours import (
 )
 from simbridge.control import Setpoint
 from simbridge.estimate import EstimateError
-from simbridge.geo import Vec3
+from simbridge.geo import Vec3, rotate_body_to_ned
 from simbridge.physics import CONTACT_MARGIN_M, GEAR_HEIGHT_M, VehicleState
 from simbridge.vehicle import Vehicle
 
@@ -121,6 +121,11 @@ class Autopilot:
         self._gps_off_at: float | None = None
         self._before_position_loss: ModeSpec | None = None
         self._fence_breached = False  # latched for the flight: one breach, one action
+        # precision landing: the last LANDING_TARGET (when, the line of sight in body FRD, its
+        # distance) and the target's world position estimated from it (held through the landing)
+        self._plnd_seen: tuple[float, Vec3, float] | None = None
+        self._plnd_target_ne: tuple[float, float] | None = None
+        self._plnd_wait_d: float | None = None  # the height held while the target is too far across
         self._apply_limits()
 
     # ------------------------------------------------------------------ spawn
@@ -339,7 +344,7 @@ class Autopilot:
         if nav is Nav.TAKEOFF:
             return self._fly_takeoff(s)
         if nav is Nav.LAND:
-            return self._fly_land(s, self._hold)
+            return self._fly_land(s, self._hold, self._precision_target(s))
         if nav is Nav.RTL:
             return self._fly_rtl(s)
         if nav in PILOT_NAVS:
@@ -413,7 +418,42 @@ class Autopilot:
             self._emit_text(SEV_INFO, "Takeoff complete")
         return self._hold
 
-    def _fly_land(self, s: VehicleState, over: Setpoint | None) -> Setpoint:
+    # ------------------------------------------------------------------ precision landing
+    def landing_target(self, los_frd: Vec3, distance_m: float) -> None:
+        """A LANDING_TARGET: the line of sight to the target in body FRD (any length) and its
+        distance (0: unknown, the height above the ground scales it)."""
+        norm = math.sqrt(sum(v * v for v in los_frd))
+        if not (math.isfinite(norm) and norm > 0 and math.isfinite(distance_m)):
+            return
+        unit = (los_frd[0] / norm, los_frd[1] / norm, los_frd[2] / norm)
+        self._plnd_seen = (self.vehicle.state.t_s, unit, max(0.0, distance_m))
+
+    def _precision_target(self, s: VehicleState) -> tuple[float, float] | None:
+        """Where land mode goes (world north, east) on the companion's target: each fresh line of sight
+        between PLND_ALT_MIN and PLND_ALT_MAX places the target from the estimated pose (as the
+        firmware does: an attitude or position error moves the target with it); the last place holds
+        for the rest of the landing. None: no target (land where the vehicle is)."""
+        tune = self.flavour.precision_landing(self.params)
+        if tune is None:
+            self._plnd_target_ne = None
+            return None
+        seen = self._plnd_seen
+        agl = s.height_agl_m
+        if seen is not None and s.t_s - seen[0] <= tune.timeout_s and tune.alt_min_m <= agl <= tune.alt_max_m:
+            _t, unit, distance = seen
+            if unit[2] > 0.05:
+                est = self.estimated_state
+                rng = distance if distance > 0 else agl / unit[2]
+                dn, de, _dd = rotate_body_to_ned(est.quat, (unit[0] * rng, unit[1] * rng, unit[2] * rng))
+                bn, be = self.estimate.bias_ned_m[:2] if self.estimate is not None else (0.0, 0.0)
+                # estimated target -> world: the estimator's bias is where the vehicle flies it
+                self._plnd_target_ne = (est.pos_ned_m[0] + dn - bn, est.pos_ned_m[1] + de - be)
+            self._plnd_seen = None  # each line of sight places the target once
+        return self._plnd_target_ne
+
+    def _fly_land(
+        self, s: VehicleState, over: Setpoint | None, target_ne: tuple[float, float] | None = None
+    ) -> Setpoint:
         t = self.tun
         agl = s.height_agl_m
         if agl > 2 * t.land_slow_below_m:
@@ -429,7 +469,19 @@ class Autopilot:
             vn, ve, _ = s.vel_ned_m_s
             return Setpoint(vel_ned_m_s=(vn, ve, vz), yaw_rad=yaw)
         ne = over.pos_ne_m if over is not None else (s.pos_ned_m[0], s.pos_ned_m[1])
-        return Setpoint(pos_ne_m=ne, pos_d_m=None, vel_ned_m_s=(0.0, 0.0, vz), yaw_rad=yaw)
+        hold_d = None
+        if target_ne is not None:
+            tune = self.flavour.precision_landing(self.params)
+            away = math.hypot(target_ne[0] - s.pos_ned_m[0], target_ne[1] - s.pos_ned_m[1])
+            if tune is not None and tune.xy_dist_max_m > 0 and away > tune.xy_dist_max_m:
+                # ArduCopter holds its height until the target is near enough across
+                if self._plnd_wait_d is None:
+                    self._plnd_wait_d = s.pos_ned_m[2]
+                hold_d, vz = self._plnd_wait_d, 0.0
+            else:
+                self._plnd_wait_d = None
+            ne = target_ne
+        return Setpoint(pos_ne_m=ne, pos_d_m=hold_d, vel_ned_m_s=(0.0, 0.0, vz), yaw_rad=yaw)
 
     def _fly_rtl(self, s: VehicleState) -> Setpoint:
         hn, he, hd = self.home_ned_m
@@ -645,6 +697,9 @@ class Autopilot:
         self._hold = Setpoint.hold(self._stopping_point(s), s.euler_rad[2])
         if spec.nav is not Nav.TAKEOFF:
             self._takeoff_target_d = None
+        if changed:
+            self._plnd_target_ne = None  # a target is followed within one landing only
+            self._plnd_wait_d = None
         if spec.nav is Nav.RTL:
             self._rtl_phase = "climb"
         if spec.nav is Nav.EXTERNAL and not self.flavour.offboard_needs_stream:

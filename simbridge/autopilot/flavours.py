@@ -15,6 +15,7 @@ from simbridge.control import ControlLimits
 # MAVLink enum values used here (common.xml)
 MAV_AUTOPILOT_ARDUPILOTMEGA = 3
 MAV_AUTOPILOT_PX4 = 12
+MAV_PARAM_TYPE_INT8 = 2
 MAV_PARAM_TYPE_INT32 = 6
 MAV_PARAM_TYPE_REAL32 = 9
 MAV_RESULT_ACCEPTED = 0
@@ -151,8 +152,25 @@ class Flavour:
         reports it only). Base: not emulated (targets beyond the fence are refused all the same)."""
         return False, None
 
+    def precision_landing(self, p: dict[str, float]) -> PrecisionLandingTune | None:
+        """How land mode follows a companion's LANDING_TARGET; None: it does not (PX4's precision
+        landing, AUTO.PRECLAND, is not emulated)."""
+        return None
+
     def external_mode_name(self) -> str:
         return next(m.name for m in self.modes if m.nav is Nav.EXTERNAL)
+
+
+@dataclass(frozen=True, slots=True)
+class PrecisionLandingTune:
+    """ArduCopter's precision landing as land mode flies it: measurements are taken between
+    ``alt_min_m`` and ``alt_max_m`` above the ground; the descent waits while the target is farther
+    than ``xy_dist_max_m`` across (0: never waits); a target unheard for ``timeout_s`` is lost."""
+
+    alt_min_m: float
+    alt_max_m: float
+    xy_dist_max_m: float
+    timeout_s: float = 1.0  # AC_PrecLand's backends drop a line of sight older than 1 s
 
 
 def _px4_custom(main: int, sub: int = 0) -> int:
@@ -326,6 +344,14 @@ class ArduPilotFlavour(Flavour):
         Param("FENCE_ENABLE", 0, MAV_PARAM_TYPE_INT32),
         Param("FENCE_ACTION", 1, MAV_PARAM_TYPE_INT32),
         Param("SIM_GPS1_ENABLE", 1, MAV_PARAM_TYPE_INT32),
+        # precision landing on a companion's LANDING_TARGET: ArduCopter ships with it off
+        # (PLND_ENABLED 0, PLND_TYPE 0); simbridge's vehicle is set up for Landfall's (as the SITL
+        # runs with simbridge.sitl.PARAMS); PLND_ALT_MIN / MAX and PLND_XY_DIST_MAX as the firmware's
+        Param("PLND_ENABLED", 1, MAV_PARAM_TYPE_INT8),
+        Param("PLND_TYPE", 1, MAV_PARAM_TYPE_INT8),
+        Param("PLND_ALT_MIN", 0.75, MAV_PARAM_TYPE_REAL32),
+        Param("PLND_ALT_MAX", 8.0, MAV_PARAM_TYPE_REAL32),
+        Param("PLND_XY_DIST_MAX", 2.5, MAV_PARAM_TYPE_REAL32),
     )
     air_start_mode = "LOITER"
     ground_start_mode = "LOITER"
@@ -379,6 +405,11 @@ class ArduPilotFlavour(Flavour):
 
     def fence_breach_action(self, p: dict[str, float]) -> tuple[bool, str | None]:
         return p["FENCE_ENABLE"] != 0, self._FENCE_ACTIONS.get(int(p["FENCE_ACTION"]))
+
+    def precision_landing(self, p: dict[str, float]) -> PrecisionLandingTune | None:
+        if int(p["PLND_ENABLED"]) != 1 or int(p["PLND_TYPE"]) != 1:
+            return None
+        return PrecisionLandingTune(p["PLND_ALT_MIN"], p["PLND_ALT_MAX"], p["PLND_XY_DIST_MAX"])
 
     def decode_set_mode(self, base_mode: float, main: float, sub: float) -> ModeSpec | int:
         mode_number = int(main)

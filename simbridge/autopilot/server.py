@@ -114,6 +114,7 @@ class AutopilotServer:
             "PARAM_REQUEST_READ": self._on_param_read,
             "PARAM_SET": self._on_param_set,
             "PING": self._on_ping,
+            "LANDING_TARGET": self._on_landing_target,
             "REQUEST_DATA_STREAM": self._on_request_data_stream,
             "TIMESYNC": self._on_timesync,
         }
@@ -292,6 +293,20 @@ class AutopilotServer:
         value = self._decode_param(name, float(msg.param_value), int(msg.param_type))
         self.ap.set_param(name, value)
         self._send(self._param_value(name))  # echo the value in force, accepted or not
+
+    # ------------------------------------------------------------------ precision landing
+    def _on_landing_target(self, msg: Any) -> None:
+        """LANDING_TARGET (addressed to no one): x, y, z in body FRD with position_valid, else the
+        angles (ArduPilot's reading: angle_x right, angle_y aft); other frames are refused as
+        ArduCopter does ("Plnd: Frame not supported")."""
+        if int(msg.position_valid) == 1:
+            if int(msg.frame) != mavlink2.MAV_FRAME_BODY_FRD:
+                self.ap.text_warning("Plnd: Frame not supported")
+                return
+            los = (float(msg.x), float(msg.y), float(msg.z))
+        else:
+            los = (-math.tan(float(msg.angle_y)), math.tan(float(msg.angle_x)), 1.0)
+        self.ap.landing_target(los, float(msg.distance))
 
     # ------------------------------------------------------------------ liveness
     def _on_ping(self, msg: Any) -> None:

@@ -1,0 +1,303 @@
+"""Keeping the chosen site in view: where the surface the reasoner chose lies in a newer camera frame.
+
+The site is the world point the chosen pixel showed (inverse perspective mapping through the LiDAR).
+That point was placed with the pose estimate of the frame it was chosen in: a heading error of one
+degree moves a site 40 m away by 0.7 m, and an estimate that drifts moves it with it. The surface
+itself stays in the camera's view on the way down, so each newer frame finds it again.
+
+Both frames are resampled onto the same grid on the site's surface (a horizontal plane at the site's
+height: Surface ID proposed it flat): ``ortho`` cells ``cell_m`` wide, rows north, columns east. On
+that grid the two views differ by a shift only (scale and perspective are gone), which normalised
+cross-correlation finds. The reference patch's centre is the site; where that patch sits in the newer
+frame's grid is where the site is in the newer frame's estimate. A patch with too little texture, a
+weak or ambiguous peak, or a site outside either view gives no answer (``TrackResult.found`` False,
+``reason`` says which): the caller keeps its last target then.
+
+Frames: NED world, FRD body, the camera of :mod:`companion.guidance.frames`. Images: (H, W, 3) uint8
+RGB or (H, W) grey.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from companion.guidance.frames import PinholeCamera, quat_to_matrix
+
+__all__ = ["SiteView", "TrackParams", "TrackResult", "track_site"]
+
+
+@dataclass(frozen=True, slots=True)
+class TrackParams:
+    """How far around the site the tracker looks, and what counts as found.
+
+    Attributes:
+        patch_half_m: half the width of the reference patch on the surface (its texture: roof edges,
+            fittings, markings), at least; ``patch_per_m`` of the reference frame's distance to the
+            site when that is more (from far away fine texture blurs: a roof's outline is what shows).
+        search_m: how far from the predicted position the site may have moved (the estimate's
+            error), and ``search_per_m`` of the newer frame's distance to it more (an attitude
+            estimate two degrees off: a frame taken while the vehicle rocks in a gust or brakes).
+        max_cells: the patch's half width in grid cells at most (the cell grows beyond it).
+        min_cell_m: the finest grid cell (a few centimetres: gravel grains, pixel noise and the
+            sampling of texture that fine differ from frame to frame).
+        min_texture: the reference patch's least grey-level standard deviation (0-255 scale).
+        min_score: the least normalised cross-correlation at the peak.
+        min_margin: how much higher the peak must be than the best match ``ambiguity_m`` from it
+            (or at the search's edge when that is nearer): a uniform roof along an edge, or a road,
+            matches everywhere along it.
+        min_isotropy: and the least it falls off that far, against the most: along a road or a
+            straight edge the score falls steeply across and hardly at all along (a large patch's
+            peak is broad every way: its fall-off is small but alike all round).
+        ambiguity_m: see ``min_margin``.
+        min_patch_half_m: a view that holds less than this much around the site is too close to track.
+        blur_cells: both grids are smoothed this much (Gaussian sigma, cells) before matching: pixel
+            noise and texture finer than a cell differ between views; what is coarser does not.
+        flatten_m: and lose what varies more slowly than this (Gaussian sigma, metres on the
+            surface; 0 keeps it): vignetting and light falling off across a frame differ between
+            views.
+    """
+
+    patch_half_m: float = 4.0
+    patch_per_m: float = 0.08
+    search_m: float = 1.5
+    search_per_m: float = 0.035
+    max_cells: int = 60
+    min_cell_m: float = 0.06
+    min_texture: float = 2.0
+    min_score: float = 0.5
+    min_margin: float = 0.02
+    min_isotropy: float = 0.25
+    ambiguity_m: float = 1.5
+    min_patch_half_m: float = 0.6
+    blur_cells: float = 1.5
+    flatten_m: float = 5.0
+
+
+@dataclass(frozen=True, slots=True)
+class SiteView:
+    """A frame the site is looked for in (or was found in).
+
+    Attributes:
+        image: (H, W, 3) uint8 RGB or (H, W) grey.
+        camera: its pinhole model.
+        pos_ned_m: the vehicle's estimated position when it was taken.
+        quat_wxyz: its estimated attitude then (body FRD -> NED).
+    """
+
+    image: np.ndarray
+    camera: PinholeCamera
+    pos_ned_m: tuple[float, float, float]
+    quat_wxyz: tuple[float, float, float, float]
+
+
+@dataclass(frozen=True, slots=True)
+class TrackResult:
+    """Where the site is in the newer frame's estimate.
+
+    Attributes:
+        found: whether the site was found.
+        site_ned_m: the site in the newer frame's estimate (the old one when not found).
+        shift_m: (north, east) metres the site moved against where the estimate put it.
+        score: normalised cross-correlation at the peak (NaN when no match was tried).
+        margin: the peak's lead over the best match ``ambiguity_m`` from it (NaN likewise).
+        cell_m: the grid's cell.
+        reason: why it was not found ("" when found).
+    """
+
+    found: bool
+    site_ned_m: tuple[float, float, float]
+    shift_m: tuple[float, float]
+    score: float
+    margin: float
+    cell_m: float
+    reason: str = ""
+
+
+_THIN = np.ones((3, 3), np.uint8)
+THIN_LINE_M = 0.04  # seams, joints and cracks: about this wide
+
+
+def _grey(image: np.ndarray, close_thin: bool) -> np.ndarray:
+    """Grey levels; with ``close_thin`` without thin dark lines (a grey-level closing over 3 x 3
+    pixels): a seam, a joint or a crack narrower than a pixel comes and goes between views (where it
+    falls on the sensor's grid), the surfaces between do not. Both frames of a match are read alike,
+    by the coarser one's pixel."""
+    grey = np.ascontiguousarray(image)
+    if grey.ndim == 3:
+        grey = cv2.cvtColor(grey, cv2.COLOR_RGB2GRAY)
+    if grey.dtype != np.uint8:
+        grey = np.clip(grey, 0, 255).astype(np.uint8)
+    if close_thin:
+        grey = cv2.morphologyEx(grey, cv2.MORPH_CLOSE, _THIN)
+    return grey.astype(np.float32)
+
+
+def _range_to(view: SiteView, point_ned: np.ndarray) -> tuple[float, tuple[float, float] | None]:
+    """Camera depth of ``point_ned`` and its pixel (None when behind the camera)."""
+    rot = quat_to_matrix(view.quat_wxyz)
+    frd = rot.T @ (point_ned - np.asarray(view.pos_ned_m, dtype=np.float64))
+    uv, in_front = view.camera.project_frd(frd[None, :])
+    if not in_front[0]:
+        return math.nan, None
+    return float(frd[2]), (float(uv[0, 0]), float(uv[0, 1]))
+
+
+def _ortho(
+    grey: np.ndarray, view: SiteView, centre_ned: np.ndarray, half_cells: int, cell_m: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """``grey`` resampled on a (2 * half_cells + 1)^2 grid of the plane through ``centre_ned``
+    (rows north, columns east); and the mask of cells the camera saw."""
+    offsets = np.arange(-half_cells, half_cells + 1, dtype=np.float64) * cell_m
+    north = centre_ned[0] + offsets[:, None] * np.ones((1, offsets.size))
+    east = centre_ned[1] + np.ones((offsets.size, 1)) * offsets[None, :]
+    pts = np.stack([north.ravel(), east.ravel(), np.full(north.size, centre_ned[2])], axis=1)
+    rot = quat_to_matrix(view.quat_wxyz)
+    frd = (pts - np.asarray(view.pos_ned_m, dtype=np.float64)) @ rot
+    uv, in_front = view.camera.project_frd(frd)
+    # continuous pixel coordinates -> cv2's sample positions (pixel centres at integers)
+    map_x = (uv[:, 0] - 0.5).reshape(north.shape).astype(np.float32)
+    map_y = (uv[:, 1] - 0.5).reshape(north.shape).astype(np.float32)
+    seen = (
+        in_front.reshape(north.shape)
+        & (map_x >= 0)
+        & (map_x <= grey.shape[1] - 1)
+        & (map_y >= 0)
+        & (map_y <= grey.shape[0] - 1)
+    )
+    map_x[~seen] = -1.0
+    map_y[~seen] = -1.0
+    out = cv2.remap(grey, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return out, seen
+
+
+def _smoothed(grey: np.ndarray, gsd_m: float, cell_m: float) -> np.ndarray:
+    """Blur an image whose pixels are finer than the grid's cells, so that resampling does not alias."""
+    ratio = cell_m / max(gsd_m, 1e-6)
+    if ratio <= 1.5:
+        return grey
+    sigma = 0.5 * ratio
+    return cv2.GaussianBlur(grey, (0, 0), sigmaX=sigma, sigmaY=sigma)
+
+
+def _band(grid: np.ndarray, p: TrackParams, cell_m: float) -> np.ndarray:
+    """What both views share: texture between ``blur_cells`` and ``flatten_m`` (lighting that
+    changes across the frame, the lens's vignetting and exposure are broader; pixel noise finer)."""
+    out = grid
+    if p.blur_cells > 0:
+        out = cv2.GaussianBlur(out, (0, 0), sigmaX=p.blur_cells, sigmaY=p.blur_cells)
+    if p.flatten_m > 0:
+        broad = p.flatten_m / cell_m
+        out = out - cv2.GaussianBlur(grid, (0, 0), sigmaX=broad, sigmaY=broad)
+    return out
+
+
+def _subcell(scores: np.ndarray, row: int, col: int) -> tuple[float, float]:
+    """Parabolic refinement of an integer peak (rows, columns)."""
+
+    def vertex(a: float, b: float, c: float) -> float:
+        denom = a - 2 * b + c
+        return 0.0 if denom >= 0 or not math.isfinite(denom) else 0.5 * (a - c) / denom
+
+    dr = dc = 0.0
+    if 0 < row < scores.shape[0] - 1:
+        dr = vertex(float(scores[row - 1, col]), float(scores[row, col]), float(scores[row + 1, col]))
+    if 0 < col < scores.shape[1] - 1:
+        dc = vertex(float(scores[row, col - 1]), float(scores[row, col]), float(scores[row, col + 1]))
+    return max(-0.5, min(0.5, dr)), max(-0.5, min(0.5, dc))
+
+
+def track_site(
+    reference: SiteView,
+    site_ned_m: Sequence[float],
+    current: SiteView,
+    params: TrackParams | None = None,
+) -> TrackResult:
+    """Find the site that ``reference`` showed at ``site_ned_m`` in ``current``.
+
+    Args:
+        reference: the frame the site was chosen (or last found) in.
+        site_ned_m: the site in ``reference``'s estimate: (north, east, down) metres; down is the
+            surface's height, where both views are resampled.
+        current: the newer frame.
+        params: thresholds (:class:`TrackParams` defaults).
+
+    Returns:
+        A :class:`TrackResult`; ``site_ned_m`` there keeps ``site_ned_m``'s down coordinate.
+    """
+    p = params or TrackParams()
+    site = np.asarray(site_ned_m, dtype=np.float64)
+    if site.shape != (3,) or not np.isfinite(site).all():
+        raise ValueError(f"site_ned_m must be three finite numbers, got {site_ned_m!r}")
+    keep = (float(site[0]), float(site[1]), float(site[2]))
+
+    def lost(reason: str, cell_m: float = math.nan) -> TrackResult:
+        return TrackResult(False, keep, (0.0, 0.0), math.nan, math.nan, cell_m, reason)
+
+    depth_ref, px_ref = _range_to(reference, site)
+    depth_cur, px_cur = _range_to(current, site)
+    if px_ref is None or not reference.camera.in_image(np.array([px_ref]))[0]:
+        return lost("the site is not in the reference frame")
+    if px_cur is None or not current.camera.in_image(np.array([px_cur]))[0]:
+        return lost("the site is out of the camera's view")
+    gsd_ref = depth_ref / reference.camera.fx
+    gsd_cur = depth_cur / current.camera.fx
+    # patch and search must fit the newer view: near the ground the camera sees little around the site
+    margin_px = min(px_cur[0], current.camera.width - px_cur[0], px_cur[1], current.camera.height - px_cur[1])
+    seen_m = 0.95 * margin_px * gsd_cur
+    search_m = min(p.search_m + p.search_per_m * depth_cur, 0.3 * seen_m)
+    patch_half_m = min(max(p.patch_half_m, p.patch_per_m * depth_ref), seen_m - search_m)
+    if patch_half_m < p.min_patch_half_m:
+        return lost("too close to the surface to see around the site")
+    cell_m = max(gsd_ref, gsd_cur, p.min_cell_m, patch_half_m / p.max_cells)
+    patch_cells = max(3, round(patch_half_m / cell_m))
+    search_cells = max(1, round(search_m / cell_m))
+
+    thin = max(gsd_ref, gsd_cur) > THIN_LINE_M
+    ref_grey = _smoothed(_grey(reference.image, thin), gsd_ref, cell_m)
+    cur_grey = _smoothed(_grey(current.image, thin), gsd_cur, cell_m)
+    templ, templ_seen = _ortho(ref_grey, reference, site, patch_cells, cell_m)
+    area, area_seen = _ortho(cur_grey, current, site, patch_cells + search_cells, cell_m)
+    if templ_seen.mean() < 0.9:
+        return lost("the reference frame saw too little around the site", cell_m)
+    if area_seen.mean() < 0.8:
+        return lost("the camera sees too little around the site", cell_m)
+    if float(templ[templ_seen].std()) < p.min_texture:
+        return lost("too little texture around the site to follow it", cell_m)
+
+    templ, area = _band(templ, p, cell_m), _band(area, p, cell_m)
+    scores = cv2.matchTemplate(area, templ, cv2.TM_CCOEFF_NORMED)
+    scores = np.nan_to_num(scores, nan=-1.0)
+    _lo, best, _lo_at, (col, row) = cv2.minMaxLoc(scores)
+    # the score must fall off every way from the peak: along a straight edge or a road it does not
+    away = max(1, min(round(p.ambiguity_m / cell_m), search_cells))
+    rows, cols = np.ogrid[: scores.shape[0], : scores.shape[1]]
+    ring = np.maximum(np.abs(rows - row), np.abs(cols - col)) == away
+    around = scores[ring] if ring.any() else np.array([-1.0])
+    margin = float(best) - float(around.max())  # the least the score falls, whichever way
+    steepest = float(best) - float(around.min())  # the most it falls
+    if best < p.min_score:
+        return TrackResult(False, keep, (0.0, 0.0), float(best), margin, cell_m, "no good match")
+    if margin < p.min_margin or margin < p.min_isotropy * steepest:
+        return TrackResult(
+            False,
+            keep,
+            (0.0, 0.0),
+            float(best),
+            margin,
+            cell_m,
+            "the match is ambiguous",
+        )
+    if row in (0, scores.shape[0] - 1) or col in (0, scores.shape[1] - 1):
+        return TrackResult(
+            False, keep, (0.0, 0.0), float(best), margin, cell_m, "the best match is at the search's edge"
+        )
+    dr, dc = _subcell(scores, row, col)
+    shift_n = (row + dr - search_cells) * cell_m
+    shift_e = (col + dc - search_cells) * cell_m
+    found = (keep[0] + shift_n, keep[1] + shift_e, keep[2])
+    return TrackResult(True, found, (shift_n, shift_e), float(best), margin, cell_m)

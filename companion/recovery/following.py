@@ -1,0 +1,165 @@
+"""Following the chosen site down: the site found again in each newer frame
+(:mod:`companion.perception.site_track`), the descent's target moved onto it, and during the
+autopilot's land mode LANDING_TARGET for its precision landing (docs/companion.md, "Precision
+landing").
+
+A frame where the site is not found keeps the last target (the absolute one, placed by the estimate)
+and the record says why; a later frame may find it again.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+import time
+from typing import Any
+
+import cv2
+import numpy as np
+
+from companion.guidance.frames import PinholeCamera, quat_to_matrix
+from companion.perception.site_track import SiteView, TrackParams, TrackResult, track_site
+from companion.precision import PrecisionLanding
+from companion.recovery.core import FrameUnavailable, RecoveryBase
+
+LAND_FEED_PERIOD_S = 0.2  # at most five targets a second (ArduPilot forgets one after 1 s)
+
+
+def site_view(frame: Any) -> SiteView | None:
+    """A sensor frame as the tracker reads it (None without a camera image)."""
+    if frame.image_rgb is None:
+        return None
+    camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
+    return SiteView(frame.image_rgb, camera, tuple(frame.pos_ned_m), tuple(frame.quat_wxyz))
+
+
+class Following(RecoveryBase):
+    """The site kept in view from its choice to the touchdown."""
+
+    _track_params = TrackParams()
+
+    def _follow_from(self, frame: Any, target: tuple[float, float, float]) -> None:
+        """The frame the site was chosen in, and where inverse perspective mapping put it."""
+        view = site_view(frame)
+        self._track = (view, target) if view is not None else None
+
+    def _track_once(self, frame: Any) -> TrackResult | None:
+        """The site in ``frame`` (a worker-thread job); None when there is nothing to follow."""
+        if self._track is None:
+            return None
+        view = site_view(frame)
+        if view is None:
+            return None
+        ref, site = self._track
+        result = track_site(ref, site, view, self._track_params)
+        if result.found:
+            self._track = (view, result.site_ned_m)
+        return result
+
+    async def _follow(self, frame: Any, target: tuple[float, float, float]) -> tuple[float, float, float]:
+        """The descent's target after looking for the site in ``frame``: moved onto it when found,
+        kept when not; recorded either way."""
+        result = await asyncio.to_thread(self._track_once, frame)
+        if result is None:
+            return target
+        self.record.record_event("site_track", self._track_fields(result, "descent"))
+        if not result.found:
+            self.log.info("site not found in the frame (%s): keeping the target", result.reason)
+            return target
+        return (result.site_ned_m[0], result.site_ned_m[1], target[2])
+
+    def _track_fields(self, result: TrackResult, phase: str) -> dict[str, Any]:
+        def r(v: float) -> float | None:
+            return round(v, 3) if math.isfinite(v) else None
+
+        return {
+            "round": self.round,
+            "phase": phase,
+            "found": result.found,
+            "site_ned_m": [round(v, 3) for v in result.site_ned_m],
+            "shift_m": [round(v, 3) for v in result.shift_m],
+            "score": r(result.score),
+            "margin": r(result.margin),
+            "cell_m": r(result.cell_m),
+            "reason": result.reason,
+        }
+
+    async def _feed_landing_target(self, stats: dict[str, Any]) -> None:
+        """While the autopilot lands: a frame, the site in it, LANDING_TARGET toward it; until the
+        task is cancelled. A frame without the site sends nothing (the autopilot keeps its last
+        estimate of the target for a second, then lands where it is) and the record says why, once
+        per reason."""
+        last_reason = ""
+        while True:
+            started = time.monotonic()
+            try:
+                frame = await self._frames()
+            except FrameUnavailable as exc:
+                result_reason = f"no frame: {exc}"
+                frame = None
+            if frame is not None:
+                try:
+                    result = await asyncio.to_thread(self._track_once, frame)
+                except (ValueError, cv2.error) as exc:  # a malformed frame: said, and the next one tried
+                    result, frame = None, None
+                    result_reason = f"frame not usable: {exc}"
+            if frame is not None:
+                result_reason = "no camera image" if result is None else result.reason
+                if result is not None and result.found:
+                    site = np.asarray(result.site_ned_m)
+                    s = self.tm.state
+                    # from where the vehicle is now (it moved since the frame), in its body axes now
+                    rel_ned = site - np.asarray(s.pos_ned_m)
+                    frd = quat_to_matrix(s.quat_wxyz).T @ rel_ned
+                    if frd[2] > 0.05:
+                        self.ctl.send_landing_target(
+                            (float(frd[0]), float(frd[1]), float(frd[2])), int(s.t_boot_s * 1e6)
+                        )
+                        stats["sent"] += 1
+                        stats["last_site_ned_m"] = [round(float(v), 3) for v in site]
+                        result_reason = ""
+                    else:
+                        result_reason = "the site is level with the vehicle"
+            if result_reason and result_reason != last_reason:
+                score = result.score if frame is not None and result is not None else math.nan
+                stats["lost"].append(
+                    {
+                        "t_boot_s": round(self.tm.state.t_boot_s, 2),
+                        "why": result_reason,
+                        "score": round(score, 3) if math.isfinite(score) else None,
+                    }
+                )
+                self.log.info("precision landing: no target sent (%s)", result_reason)
+            last_reason = result_reason
+            await asyncio.sleep(max(0.0, LAND_FEED_PERIOD_S - (time.monotonic() - started)))
+
+    async def _land_on_site(self, setup: PrecisionLanding | None) -> None:
+        """The autopilot's land mode; with its precision landing fed from the camera when it is set up
+        for one and the site is in view; recorded as ``precision_landing``."""
+        if setup is None:
+            why, ready = "the autopilot's parameters were not read", False
+        else:
+            why, ready = setup.why, setup.ready
+        if ready and self._track is None:
+            why, ready = "no camera view of the site to follow: the absolute target", False
+        stats: dict[str, Any] = {"sent": 0, "lost": [], "last_site_ned_m": None}
+        feed = asyncio.create_task(self._feed_landing_target(stats), name="landing-target") if ready else None
+        try:
+            await self.ctl.land(self.p.land_timeout_s)
+        finally:
+            if feed is not None:
+                feed.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await feed
+            self.record.record_event(
+                "precision_landing",
+                {
+                    "round": self.round,
+                    "used": ready,
+                    "why": why,
+                    "targets_sent": stats["sent"],
+                    "lost": stats["lost"],
+                    "last_site_ned_m": stats["last_site_ned_m"],
+                },
+            )

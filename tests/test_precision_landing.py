@@ -1,0 +1,95 @@
+"""Precision landing on the chosen site (issue 35): the parameter check the companion makes when it
+hears the autopilot, and a landing on simbridge's emulated ArduCopter with an estimator's errors,
+where the companion follows the site down in the camera and feeds LANDING_TARGET to land mode.
+The same on real ArduCopter: tests/test_bench.py (test_curated_episode_flies_real_arducopter)."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from pathlib import Path
+
+import pytest
+
+from companion.precision import check_precision_landing
+from companion.telemetry import MAV_AUTOPILOT_ARDUPILOTMEGA, MAV_AUTOPILOT_PX4
+from tests.test_bench import _log_tail, bench
+
+
+class _Params:
+    """An autopilot's parameters as ``read_param`` answers them (None: it stays silent)."""
+
+    def __init__(self, **values: float) -> None:
+        self.values = values
+        self.asked: list[str] = []
+
+    async def read_param(self, name: str, *, timeout_s: float = 1.5, tries: int = 3) -> float | None:
+        self.asked.append(name)
+        return self.values.get(name)
+
+
+def _check(params: _Params, autopilot: int = MAV_AUTOPILOT_ARDUPILOTMEGA) -> tuple[bool, str]:
+    setup = asyncio.run(check_precision_landing(params, autopilot))
+    return setup.ready, setup.why
+
+
+def test_check_precision_landing_ready_with_the_companion_backend() -> None:
+    params = _Params(PLND_ENABLED=1.0, PLND_TYPE=1.0)
+    assert _check(params) == (True, "PLND_ENABLED 1, PLND_TYPE 1")
+    assert params.asked == ["PLND_ENABLED", "PLND_TYPE"]
+
+
+@pytest.mark.parametrize(
+    ("values", "why"),
+    [
+        ({"PLND_ENABLED": 0.0, "PLND_TYPE": 0.0}, "PLND_ENABLED is 0 (set 1), PLND_TYPE is 0 (set 1)"),
+        ({"PLND_ENABLED": 1.0, "PLND_TYPE": 2.0}, "PLND_TYPE is 2 (set 1)"),  # IR-Lock, not the companion
+        ({"PLND_ENABLED": 1.0}, "PLND_TYPE is unknown (set 1)"),
+        ({}, "the autopilot has no PLND_ENABLED (built without precision landing)"),
+    ],
+)
+def test_check_precision_landing_says_what_is_missing(values: dict[str, float], why: str) -> None:
+    ready, said = _check(_Params(**values))
+    assert not ready
+    assert why in said
+    assert said.endswith("the absolute target")
+
+
+def test_check_precision_landing_px4_is_not_used_yet() -> None:
+    params = _Params(PLND_ENABLED=1.0, PLND_TYPE=1.0)
+    ready, why = _check(params, MAV_AUTOPILOT_PX4)
+    assert not ready
+    assert "not used yet" in why
+    assert params.asked == []  # nothing asked of PX4
+
+
+@pytest.mark.slow
+def test_precision_landing_on_emulated_arducopter_with_estimator_errors(tmp_path: Path) -> None:
+    """scenario1's gravel roof, the emulated ArduCopter flying on an estimate with an EKF's errors
+    (``--ekf-error nominal``: without the camera, 1.6 m from what the chosen pixel shows): the site is
+    found again before the descent steps, LANDING_TARGET goes to land mode while it is found, and the
+    touchdown is near what the chosen pixel shows (0.18-0.55 m measured)."""
+    out = tmp_path / "bench"
+    res = bench(
+        "curated", "--scenario", "scenario1", "--runs", "1", "--workers", "1", "--autopilot", "ardupilot",
+        "--ekf-error", "nominal", "--speed", "8", "--quiet", "--out", str(out),
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr[-3000:]
+    (e,) = json.loads((out / "results.json").read_text())["episodes"]
+    why = f"{e['error']}\n{_log_tail(out / 'episodes' / e['id'] / 'companion.log')}"
+    assert e["outcome"] == "landed", why
+    assert e["surface"] == "rooftop_clear", why
+    pl = e["precision_landing"]
+    assert pl["used"], pl
+    assert pl["why"] == "PLND_ENABLED 1, PLND_TYPE 1"  # read from the emulation over MAVLink
+    assert pl["tracks_found"] >= 1, why
+    assert e["landing_distance_m"] < 0.8, (e["landing_target_ned_m"], why)
+    # each frame of the landing that sent no target says why, in the record
+    (record,) = (out / "episodes" / e["id"] / "record").glob("*/events.jsonl")
+    events = [json.loads(x) for x in record.read_text().splitlines()]
+    (landing,) = [x for x in events if x["kind"] == "precision_landing"]
+    assert landing["targets_sent"] == pl["targets_sent"]
+    assert landing["targets_sent"] >= 1 or landing["lost"], landing
+    assert all(lost["why"] for lost in landing["lost"])
+    log = (out / "episodes" / e["id"] / "companion.log").read_text()
+    assert "precision landing ready: PLND_ENABLED 1, PLND_TYPE 1" in log
