@@ -104,7 +104,8 @@ def test_track_site_along_a_road_is_ambiguous(scenario1: LiveWorld) -> None:
     cur = _view(scenario1, (truth[0], truth[1], -20.0), q, (1.0, 0.0, 0.0))
     result = track_site(ref, truth, cur)
     assert not result.found
-    assert result.reason == "the match is ambiguous"
+    # the score hardly falls along the street: flat that way, or as high somewhere else along it
+    assert result.reason in ("the match is ambiguous", "another place matches as well")
     assert result.site_ned_m == tuple(truth)
     assert result.shift_m == (0.0, 0.0)
 

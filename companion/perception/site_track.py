@@ -40,8 +40,8 @@ class TrackParams:
             fittings, markings), at least; ``patch_per_m`` of the reference frame's distance to the
             site when that is more (from far away fine texture blurs: a roof's outline is what shows).
         search_m: how far from the predicted position the site may have moved (the estimate's
-            error), and ``search_per_m`` of the newer frame's distance to it more (an attitude
-            estimate two degrees off: a frame taken while the vehicle rocks in a gust or brakes).
+            error), and ``search_per_m`` of each frame's distance to it more (an attitude estimate
+            two degrees off: a frame taken while the vehicle rocks in a gust or brakes).
         max_cells: the patch's half width in grid cells at most (the cell grows beyond it).
         min_cell_m: the finest grid cell (a few centimetres: gravel grains, pixel noise and the
             sampling of texture that fine differ from frame to frame).
@@ -53,6 +53,9 @@ class TrackParams:
         min_isotropy: and the least it falls off that far, against the most: along a road or a
             straight edge the score falls steeply across and hardly at all along (a large patch's
             peak is broad every way: its fall-off is small but alike all round).
+        min_unique: how much higher the peak must be than the best match farther than
+            ``ambiguity_m`` from it anywhere in the search (texture that repeats: gravel's blotches,
+            tiles, a row of vents).
         ambiguity_m: see ``min_margin``.
         min_patch_half_m: a view that holds less than this much around the site is too close to track.
         blur_cells: both grids are smoothed this much (Gaussian sigma, cells) before matching: pixel
@@ -72,6 +75,7 @@ class TrackParams:
     min_score: float = 0.5
     min_margin: float = 0.02
     min_isotropy: float = 0.25
+    min_unique: float = 0.05
     ambiguity_m: float = 1.5
     min_patch_half_m: float = 0.6
     blur_cells: float = 1.5
@@ -249,7 +253,8 @@ def track_site(
     # patch and search must fit the newer view: near the ground the camera sees little around the site
     margin_px = min(px_cur[0], current.camera.width - px_cur[0], px_cur[1], current.camera.height - px_cur[1])
     seen_m = 0.95 * margin_px * gsd_cur
-    search_m = min(p.search_m + p.search_per_m * depth_cur, 0.3 * seen_m)
+    # the prediction carries both frames' attitude errors, each times its distance to the site
+    search_m = min(p.search_m + p.search_per_m * (depth_ref + depth_cur), 0.45 * seen_m)
     patch_half_m = min(max(p.patch_half_m, p.patch_per_m * depth_ref), seen_m - search_m)
     if patch_half_m < p.min_patch_half_m:
         return lost("too close to the surface to see around the site")
@@ -282,6 +287,12 @@ def track_site(
     steepest = float(best) - float(around.min())  # the most it falls
     if best < p.min_score:
         return TrackResult(False, keep, (0.0, 0.0), float(best), margin, cell_m, "no good match")
+    elsewhere = np.maximum(np.abs(rows - row), np.abs(cols - col)) > away
+    second = float(scores[elsewhere].max()) if elsewhere.any() else -1.0
+    if float(best) - second < p.min_unique:
+        return TrackResult(
+            False, keep, (0.0, 0.0), float(best), margin, cell_m, "another place matches as well"
+        )
     if margin < p.min_margin or margin < p.min_isotropy * steepest:
         return TrackResult(
             False,
