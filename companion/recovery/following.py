@@ -88,51 +88,49 @@ class Following(RecoveryBase):
     async def _feed_landing_target(self, stats: dict[str, Any]) -> None:
         """While the autopilot lands: a frame, the site in it, LANDING_TARGET toward it; until the
         task is cancelled. A frame without the site sends nothing (the autopilot keeps its last
-        estimate of the target for a second, then lands where it is) and the record says why, once
-        per reason."""
+        estimate of the target for a second, then lands where it is), and each change of the reason
+        goes into ``stats["lost"]`` with its time."""
         last_reason = ""
         while True:
             started = time.monotonic()
-            try:
-                frame = await self._frames()
-            except FrameUnavailable as exc:
-                result_reason = f"no frame: {exc}"
-                frame = None
-            if frame is not None:
-                try:
-                    result = await asyncio.to_thread(self._track_once, frame)
-                except (ValueError, cv2.error) as exc:  # a malformed frame: said, and the next one tried
-                    result, frame = None, None
-                    result_reason = f"frame not usable: {exc}"
-            if frame is not None:
-                result_reason = "no camera image" if result is None else result.reason
-                if result is not None and result.found:
-                    site = np.asarray(result.site_ned_m)
-                    s = self.tm.state
-                    # from where the vehicle is now (it moved since the frame), in its body axes now
-                    rel_ned = site - np.asarray(s.pos_ned_m)
-                    frd = quat_to_matrix(s.quat_wxyz).T @ rel_ned
-                    if frd[2] > 0.05:
-                        self.ctl.send_landing_target(
-                            (float(frd[0]), float(frd[1]), float(frd[2])), int(s.t_boot_s * 1e6)
-                        )
-                        stats["sent"] += 1
-                        stats["last_site_ned_m"] = [round(float(v), 3) for v in site]
-                        result_reason = ""
-                    else:
-                        result_reason = "the site is level with the vehicle"
-            if result_reason and result_reason != last_reason:
-                score = result.score if frame is not None and result is not None else math.nan
+            reason, score = await self._one_landing_target(stats)
+            if reason and reason != last_reason:
                 stats["lost"].append(
                     {
                         "t_boot_s": round(self.tm.state.t_boot_s, 2),
-                        "why": result_reason,
+                        "why": reason,
                         "score": round(score, 3) if math.isfinite(score) else None,
                     }
                 )
-                self.log.info("precision landing: no target sent (%s)", result_reason)
-            last_reason = result_reason
+                self.log.info("precision landing: no target sent (%s)", reason)
+            last_reason = reason
             await asyncio.sleep(max(0.0, LAND_FEED_PERIOD_S - (time.monotonic() - started)))
+
+    async def _one_landing_target(self, stats: dict[str, Any]) -> tuple[str, float]:
+        """One frame of the final approach: LANDING_TARGET sent (``("", score)``), or why not and the
+        match's score (NaN when no match was tried)."""
+        try:
+            frame = await self._frames()
+        except FrameUnavailable as exc:
+            return f"no frame: {exc}", math.nan
+        try:
+            result = await asyncio.to_thread(self._track_once, frame)
+        except (ValueError, cv2.error) as exc:  # a malformed frame: said, and the next one tried
+            return f"frame not usable: {exc}", math.nan
+        if result is None:
+            return "no camera image", math.nan
+        if not result.found:
+            return result.reason, result.score
+        site = np.asarray(result.site_ned_m)
+        s = self.tm.state
+        # from where the vehicle is now (it moved since the frame), in its body axes now
+        frd = quat_to_matrix(s.quat_wxyz).T @ (site - np.asarray(s.pos_ned_m))
+        if frd[2] <= 0.05:
+            return "the site is level with the vehicle", result.score
+        self.ctl.send_landing_target((float(frd[0]), float(frd[1]), float(frd[2])), int(s.t_boot_s * 1e6))
+        stats["sent"] += 1
+        stats["last_site_ned_m"] = [round(float(v), 3) for v in site]
+        return "", result.score
 
     async def _land_on_site(self, setup: PrecisionLanding | None) -> None:
         """The autopilot's land mode; with its precision landing fed from the camera when it is set up
