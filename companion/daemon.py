@@ -47,6 +47,10 @@ STREAMS_HZ: dict[int, float] = {
 }
 STREAM_PARTS = ("attitude", "position", "landed", "battery", "gps")  # TelemetryCache parts they feed
 STREAM_CHECK_S = 2.0
+# texts that say "failsafe" of something other than the vehicle: ArduCopter's precision landing says
+# "PrecLand: Failsafe Measures" when land mode has no target (it lands without one); an alarm from it
+# took a fence failsafe's landing back (found by tests/test_autopilot_failsafes.py's fence flight)
+NOT_A_VEHICLE_FAILSAFE = ("PrecLand:",)
 OWN_ALARM_RETRY_S = 30.0  # how long a watcher alarm refused for now is asked again
 MAV_CMD_SET_MESSAGE_INTERVAL = 511
 
@@ -487,7 +491,7 @@ class Companion:
             self._own_alarm(ReasonCode.LOW_BATTERY, Criticality.HIGH, f"battery {s.battery_pct:.0f} %")
         if self._watch_failsafe:
             for _, _, text in new_texts:
-                if "failsafe" in text.lower():
+                if "failsafe" in text.lower() and not text.startswith(NOT_A_VEHICLE_FAILSAFE):
                     self._own_alarm(ReasonCode.FAILSAFE, Criticality.HIGH, text)
         if self._watch_gps and s.gps_fix >= 0:
             if s.gps_fix >= 3:

@@ -42,6 +42,20 @@ def test_a_failsafe_text_after_fifty_others_still_raises_an_alarm(caplog: pytest
     assert raised == ["Failsafe: offboard lost, AUTO.LOITER"]
 
 
+def test_arducopters_precision_landing_failsafe_text_raises_no_alarm() -> None:
+    """ "PrecLand: Failsafe Measures" is ArduCopter's precision landing landing without a target, not
+    the vehicle's failsafe: an alarm from it took a fence failsafe's landing back from the autopilot."""
+    c = _flying()
+    raised: list[str] = []
+    c.raise_alarm = lambda alarm: raised.append(alarm.reason) or 0  # type: ignore[method-assign]
+    feed(c, AUTOPILOT.statustext_encode(6, b"PrecLand: Failsafe Measures"))
+    c.watch_once()
+    assert raised == []
+    feed(c, AUTOPILOT.statustext_encode(2, b"Failsafe: battery critical, LAND"))
+    c.watch_once()
+    assert raised == ["Failsafe: battery critical, LAND"]
+
+
 def test_a_watcher_alarm_refused_for_now_is_asked_again_until_taken(monkeypatch: pytest.MonkeyPatch) -> None:
     """A failsafe's STATUSTEXT comes once: an alarm raised from it while the companion cannot take one
     yet (no fresh telemetry, no frame: TEMPORARILY_REJECTED) is asked again at each look, for
