@@ -24,6 +24,7 @@ from tests.test_companion_e2e import (
     _wait_for_companion,
     _wait_touchdown,
 )
+from tests.test_sitl import _wait_event
 
 pytestmark = pytest.mark.slow
 
@@ -103,7 +104,8 @@ def test_a_battery_failsafe_that_lands_keeps_the_vehicle_and_the_companion_stand
     assert "recovery ended: aborted" not in log
     assert "(the autopilot's failsafe landed it (AUTO.LAND))" in log
     assert "OFFBOARD" not in _modes_after(rig, "AUTO.LAND")  # never taken back
-    assert rig.sim.events("disarmed"), "PX4 disarms after its landing"
+    # COM_DISARM_LAND after the touchdown, in the simulation's time: it may not have passed yet
+    assert _wait_event(rig.sim, "disarmed", 30)["reason"] == "landed"
     assert td["pos_ned_m"]
     events = _events(record)
     kinds = [e["kind"] for e in events]
@@ -264,8 +266,6 @@ def _real_firmware_failsafe(
     sharing the companion's link (real firmware has no other MAVLink port here); then the recovery
     ends and (``until_touchdown``) the vehicle is on the ground, disarmed. Returns the rig, the
     companion's log, the flight record's events and the touchdown's simulated time (nan without)."""
-    from tests.test_sitl import _wait_event
-
     relays: list[Any] = []
     record = tmp_path / "record"
     try:
