@@ -363,6 +363,14 @@ class VehicleController:
         self._target = (n, e, d, yaw)
         self._send_target()
 
+    def retarget(self, n: float, e: float) -> None:
+        """Move the current position target horizontally (its height and heading kept): the site
+        followed in the camera during a descent step. Nothing when there is no target."""
+        if self._target is None:
+            return
+        _n, _e, d, yaw = self._target
+        self.set_target(n, e, d, yaw)
+
     async def engage(self) -> None:
         """Hold where the vehicle is and take control: one hold setpoint, then OFFBOARD or GUIDED.
 
@@ -428,11 +436,14 @@ class VehicleController:
     async def goto(
         self, n: float, e: float, d: float, *, tolerance_m: float, speed_m_s: float, timeout_s: float
     ) -> None:
-        """Fly to a point; return when within ``tolerance_m`` and slower than ``speed_m_s``."""
+        """Fly to a point; return when within ``tolerance_m`` and slower than ``speed_m_s``. A target
+        moved meanwhile by :meth:`retarget` is the one flown to and waited for."""
         self.set_target(n, e, d)
         deadline = time.monotonic() + timeout_s
         err = math.inf
         while True:
+            if self._target is not None:
+                n, e, d = self._target[:3]
             self.check_interruption()
             remaining = deadline - time.monotonic()
             if remaining <= 0:

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import signal
 import sys
@@ -159,6 +160,15 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     _ekf_error_option(flying, "episodes (the emulation only)")
     flying.add_argument(
+        "--gps-fault", type=_ne_pair, default=None, metavar="N,E",
+        help="the GPS lies during each descent: its position moves N,E metres once the vehicle is below "
+        "40 m above the ground (simbridge --gps-fault; any autopilot)",
+    )  # fmt: skip
+    flying.add_argument(
+        "--gps-fault-ramp", type=float, default=0.0, metavar="S",
+        help="0 (default): --gps-fault jumps at once; S > 0: it drifts there over S simulated seconds",
+    )  # fmt: skip
+    flying.add_argument(
         "--camera", choices=("socket", "rtp"), default="socket",
         help="where the companion's images come from: simbridge's sensor stream (socket, default) or its "
         "camera as H.264 over RTP read like a real camera, the LiDAR still on the socket (rtp; the "
@@ -240,6 +250,16 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
+def _ne_pair(text: str) -> tuple[float, float]:
+    try:
+        n, e = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected N,E metres (two numbers), got {text!r}") from None
+    if not (math.isfinite(n) and math.isfinite(e)):
+        raise argparse.ArgumentTypeError(f"expected two finite numbers, got {text!r}")
+    return (n, e)
+
+
 def _ekf_error_option(parser: argparse.ArgumentParser, what: str) -> None:
     parser.add_argument(
         "--ekf-error", choices=("off", "nominal"), default="off",
@@ -257,9 +277,13 @@ def episode_specs(args: argparse.Namespace) -> list[EpisodeSpec]:
         raise ValueError("--ekf-error: real firmware has its own estimator (leave it off)")
     if args.camera == "rtp" and args.autopilot in FIRMWARE:
         raise ValueError("--camera rtp: simbridge streams its camera beside its own autopilots only")
+    if args.gps_fault is None and args.gps_fault_ramp != 0.0:
+        raise ValueError("--gps-fault-ramp goes with --gps-fault N,E")
+    if args.gps_fault_ramp < 0:
+        raise ValueError(f"--gps-fault-ramp must be >= 0 s, got {args.gps_fault_ramp}")
     base = dict(
         reasoner=args.reasoner, context=args.context, autopilot=args.autopilot, ekf_error=args.ekf_error,
-        camera=args.camera,
+        gps_fault=args.gps_fault, gps_fault_ramp_s=args.gps_fault_ramp, camera=args.camera,
     )  # fmt: skip
     if args.command == "curated":
         return [
@@ -405,6 +429,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         "weather",
         "autopilot",
         "ekf_error",
+        "gps_fault",
+        "gps_fault_ramp",
         "camera",
         "speed",
         "workers",

@@ -92,7 +92,16 @@ class EpisodeSpec:
     criticality: str = "high"
     reason: str = "GPS spoofing detected"
     ekf_error: str = "off"  # the emulation's estimator errors (simbridge --ekf-error)
+    gps_fault: tuple[float, float] | None = None  # the GPS's lie during the descent (simbridge --gps-fault)
+    gps_fault_ramp_s: float = 0.0  # 0: a jump; else a drift over this many seconds (--gps-fault-ramp)
     camera: str = "socket"  # socket: images on the sensor stream | rtp: H.264 over RTP (LiDAR on the socket)
+
+    @property
+    def gps_fault_entry(self) -> dict[str, Any] | None:
+        """The results' ``gps_fault``: {offset_ne_m, ramp_s}, or None without one."""
+        if self.gps_fault is None:
+            return None
+        return {"offset_ne_m": list(self.gps_fault), "ramp_s": self.gps_fault_ramp_s}
 
     @property
     def id(self) -> str:
@@ -104,7 +113,11 @@ class EpisodeSpec:
         )
         ekf = f"-ekf-{self.ekf_error}" if self.ekf_error != "off" else ""
         cam = f"-{self.camera}" if self.camera != "socket" else ""
-        return f"{where}-{self.reasoner}-{self.context}-{self.weather}-{self.autopilot}{ekf}{cam}"
+        gps = ""
+        if self.gps_fault is not None:
+            gps = f"-gps{self.gps_fault[0]:g},{self.gps_fault[1]:g}"
+            gps += f"r{self.gps_fault_ramp_s:g}" if self.gps_fault_ramp_s else ""
+        return f"{where}-{self.reasoner}-{self.context}-{self.weather}-{self.autopilot}{ekf}{gps}{cam}"
 
 
 @dataclass(frozen=True, slots=True)
@@ -300,6 +313,9 @@ def simbridge_command(
         cmd += ["--city-seed", str(spec.city_seed)]
     if spec.ekf_error != "off":
         cmd += ["--ekf-error", spec.ekf_error]
+    if spec.gps_fault is not None:
+        cmd.append("--gps-fault=" + ",".join(f"{v:g}" for v in spec.gps_fault))  # "=": it may start with "-"
+        cmd += ["--gps-fault-ramp", f"{spec.gps_fault_ramp_s:g}"]
     if spec.launch is not None:
         cmd.append("--launch=" + ",".join(f"{v:.2f}" for v in spec.launch))  # "=": it may start with "-"
     if spec.camera == "rtp":
@@ -429,6 +445,7 @@ def run_episode(
         "weather": spec.weather,
         "autopilot": spec.autopilot,
         "ekf_error": spec.ekf_error,
+        "gps_fault": spec.gps_fault_entry,
         "camera": spec.camera,
         "criticality": spec.criticality,
         "launch_height_m": spec.launch[2] if spec.launch is not None else None,

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from landfall_link.mavlink import LinkUrl, LinkUrlError, parse_signing_key
 from simbridge.args import non_negative_seed
-from simbridge.estimate import PRESETS
+from simbridge.estimate import PRESETS, GpsFaultConfig
 from simbridge.geo import GeoOrigin
 from simbridge.px4_sitl import ENV_BINARY as PX4_ENV_BINARY
 from simbridge.scenarios import scenario_names
@@ -164,6 +164,30 @@ def build_parser() -> argparse.ArgumentParser:
         "drift, noise, lag, attitude error; its telemetry and its position targets are in that frame)",
     )
     p.add_argument(
+        "--gps-fault",
+        type=lambda t: _floats(t, 2, "--gps-fault"),
+        default=None,
+        metavar="N,E",
+        help="the GPS lies during the descent: its position moves N,E metres (north, east) the first time "
+        "the vehicle descends below --gps-fault-below (the emulation's estimate follows at once; real "
+        "ArduCopter gets SIM_GPS1_GLTCH_X/Y, PX4 SITL its HIL_GPS moved)",
+    )
+    p.add_argument(
+        "--gps-fault-below",
+        type=float,
+        default=40.0,
+        metavar="M",
+        help="height above the ground whose first crossing downward starts --gps-fault (default 40)",
+    )
+    p.add_argument(
+        "--gps-fault-ramp",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="0 (default): --gps-fault jumps at once (a glitch); S > 0: it grows evenly over S "
+        "simulated seconds (a drift)",
+    )
+    p.add_argument(
         "--battery",
         type=float,
         default=100.0,
@@ -212,6 +236,12 @@ def config_from_args(args: argparse.Namespace) -> SimConfig:
     origin = GeoOrigin(*args.home) if args.home else GeoOrigin()
     if args.gusts < 0:
         raise ValueError(f"--gusts must be >= 0, got {args.gusts}")
+    gps_fault = None
+    if args.gps_fault is not None:
+        offset = (args.gps_fault[0], args.gps_fault[1])
+        gps_fault = GpsFaultConfig(offset, args.gps_fault_below, args.gps_fault_ramp)
+    elif args.gps_fault_below != 40.0 or args.gps_fault_ramp != 0.0:
+        raise ValueError("--gps-fault-below and --gps-fault-ramp: only with --gps-fault N,E")
     return SimConfig(
         mavlink=args.mavlink,
         autopilot=args.autopilot,
@@ -232,6 +262,7 @@ def config_from_args(args: argparse.Namespace) -> SimConfig:
         sitl=args.sitl,
         px4=args.px4,
         ekf_error=args.ekf_error,
+        gps_fault=gps_fault,
         battery_pct=args.battery,
         camera_stream=camera_stream,
         camera_fps=args.camera_fps,

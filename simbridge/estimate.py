@@ -13,6 +13,12 @@ white position noise ``pos_noise_m``; attitude bias Gauss-Markov (``att_bias_sig
 plus white noise ``att_noise_deg``, as a small rotation applied to the true attitude; the estimate follows
 the truth ``lag_s`` late. ``nominal`` is a healthy GPS + EKF multicopter (figures of the order ArduPilot
 and PX4 logs show with a u-blox M8/M9 receiver); ``off`` is the truth.
+
+A GPS fault (``--gps-fault``, issue 35) is a lie on top: the first time the vehicle descends below a
+height above the ground, the position the GPS reports moves by a fixed offset, at once (a glitch, a
+spoofer taking over) or growing evenly over some seconds (a slow drift). :class:`GpsFault` decides when
+and how much; the emulation's estimate follows the GPS at once (a real EKF takes a few seconds: with
+real ArduCopter simbridge sets the firmware's own ``SIM_GPS1_GLTCH_X/Y`` instead).
 """
 
 from __future__ import annotations
@@ -20,6 +26,7 @@ from __future__ import annotations
 import collections
 import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -28,7 +35,7 @@ import numpy as np
 from simbridge.geo import Quat, Vec3, quat_to_euler
 from simbridge.physics import VehicleState
 
-__all__ = ["PRESETS", "EstimateError", "EstimateErrorConfig", "estimate_preset"]
+__all__ = ["PRESETS", "EstimateError", "EstimateErrorConfig", "GpsFault", "GpsFaultConfig", "estimate_preset"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -44,6 +51,54 @@ class EstimateErrorConfig:
 
 
 PRESETS: dict[str, EstimateErrorConfig | None] = {"off": None, "nominal": EstimateErrorConfig()}
+TRUTH = EstimateErrorConfig(0.0, 0.0, 60.0, 0.0, 0.0, 30.0, 0.0, 0.0)  # no error of its own
+
+
+@dataclass(frozen=True, slots=True)
+class GpsFaultConfig:
+    """``offset_ne_m``: where the GPS's position moves (north, east metres); ``below_m``: the height
+    above the ground whose first crossing downward starts it; ``ramp_s``: 0 a jump, else the seconds
+    over which it grows evenly to the full offset (a drift)."""
+
+    offset_ne_m: tuple[float, float]
+    below_m: float = 40.0
+    ramp_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not all(math.isfinite(v) for v in self.offset_ne_m):
+            raise ValueError(f"--gps-fault must be two finite numbers N,E, got {self.offset_ne_m}")
+        if not self.below_m > 0:
+            raise ValueError(f"--gps-fault-below must be > 0 m, got {self.below_m}")
+        if not self.ramp_s >= 0:
+            raise ValueError(f"--gps-fault-ramp must be >= 0 s, got {self.ramp_s}")
+
+
+class GpsFault:
+    """The GPS fault's offset now, fed each physics step's truth (:meth:`update`). ``on_start`` is
+    called once, with the simulated time and the height, when it starts."""
+
+    def __init__(
+        self, config: GpsFaultConfig, on_start: Callable[[float, float], None] | None = None
+    ) -> None:
+        self.config = config
+        self.on_start = on_start
+        self.started_at_s: float | None = None
+        self.offset_ne_m: tuple[float, float] = (0.0, 0.0)
+        self._was_above = False
+
+    def update(self, s: VehicleState) -> tuple[float, float]:
+        c = self.config
+        if self.started_at_s is None:
+            above = s.height_agl_m >= c.below_m
+            if self._was_above and not above:
+                self.started_at_s = s.t_s
+                if self.on_start is not None:
+                    self.on_start(s.t_s, s.height_agl_m)
+            self._was_above = self._was_above or above
+        if self.started_at_s is not None:
+            k = 1.0 if c.ramp_s <= 0 else min(1.0, (s.t_s - self.started_at_s) / c.ramp_s)
+            self.offset_ne_m = (k * c.offset_ne_m[0], k * c.offset_ne_m[1])
+        return self.offset_ne_m
 
 
 def estimate_preset(name: str) -> EstimateErrorConfig | None:
@@ -73,9 +128,12 @@ def _small_rotation(q: Quat, rx: float, ry: float, rz: float) -> Quat:
 class EstimateError:
     """Advance with :meth:`step` once per physics step; read :meth:`estimate` and :attr:`bias_ned_m`."""
 
-    def __init__(self, config: EstimateErrorConfig, rng: np.random.Generator) -> None:
+    def __init__(
+        self, config: EstimateErrorConfig, rng: np.random.Generator, fault: GpsFault | None = None
+    ) -> None:
         self.config = config
         self.rng = rng
+        self.fault = fault
         c = config
         sig = np.array([c.pos_bias_sigma_m, c.pos_bias_sigma_m, c.vert_bias_sigma_m])
         self._pos_sigma = sig
@@ -88,16 +146,19 @@ class EstimateError:
 
     @property
     def bias_ned_m(self) -> Vec3:
-        """The position bias now: the autopilot's frame is shifted by it, so a target ``p`` in that
-        frame is flown to ``p - bias`` in the world."""
+        """The position bias now (with the GPS fault's offset): the autopilot's frame is shifted by
+        it, so a target ``p`` in that frame is flown to ``p - bias`` in the world."""
         b = self.pos_bias
-        return (float(b[0]), float(b[1]), float(b[2]))
+        fn, fe = self.fault.offset_ne_m if self.fault is not None else (0.0, 0.0)
+        return (float(b[0]) + fn, float(b[1]) + fe, float(b[2]))
 
     def step(self, s: VehicleState) -> VehicleState:
         """The estimate at ``s.t_s`` given the truth ``s`` (this step's state)."""
         c = self.config
         dt = 0.0 if self._t_last is None else max(0.0, s.t_s - self._t_last)
         self._t_last = s.t_s
+        if self.fault is not None:
+            self.fault.update(s)
         if dt > 0.0:
             self.pos_bias = self._gauss_markov(self.pos_bias, self._pos_sigma, c.pos_bias_tau_s, dt)
             self.att_bias = self._gauss_markov(self.att_bias, self._att_sigma, c.att_bias_tau_s, dt)
@@ -125,7 +186,7 @@ class EstimateError:
         """The bias and a fresh draw of noise, on position and attitude."""
         c = self.config
         noise = self.rng.normal(0.0, c.pos_noise_m, 3)
-        p0, p1, p2 = (float(p + b + n) for p, b, n in zip(pos_ned_m, self.pos_bias, noise, strict=True))
+        p0, p1, p2 = (float(p + b + n) for p, b, n in zip(pos_ned_m, self.bias_ned_m, noise, strict=True))
         att = self.att_bias + self.rng.normal(0.0, math.radians(c.att_noise_deg), 3)
         return (p0, p1, p2), _small_rotation(quat, float(att[0]), float(att[1]), float(att[2]))
 

@@ -58,6 +58,11 @@ class Px4SitlBridge(FirmwareBridge):
     def _estimator_ready(self, pilot: SitlPilot) -> bool:
         return pilot.can_start() and pilot.view.heartbeat
 
+    def _gps_offset(self, offset_ne_m: tuple[float, float]) -> None:
+        """simbridge is PX4's GPS (HIL_GPS): its next fixes carry the offset."""
+        if self.lockstep is not None:
+            self.lockstep.gps_offset_ne_m = offset_ne_m
+
     def _stop_fields(self) -> dict[str, Any]:
         lock = self.lockstep
         pace = lock.lockstep_rate() if lock else None

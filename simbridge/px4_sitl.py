@@ -377,6 +377,7 @@ class HilLockStep(LockStepThread):
         self.actuator_msgs = 0
         self.connected_wall_s: float | None = None
         self.first_answer: tuple[float, int] | None = None  # (monotonic, steps) at PX4's first answer
+        self.gps_offset_ne_m = (0.0, 0.0)  # a GPS fault: HIL_GPS positions this far off (north, east)
         self._mav = M.MAVLink(None, srcSystem=1, srcComponent=51)
         self._mav.robust_parsing = True
         self._wire = HilWire(self._mav)
@@ -530,8 +531,9 @@ class HilLockStep(LockStepThread):
         vn, ve, vd = s.vel_ned_m_s
         if step % GPS_EVERY == 0:
             g = rng.normal(0.0, 1.0, 6)
+            fn, fe = self.gps_offset_ne_m
             glat, glon, galt = self.origin.to_geodetic(
-                s.pos_ned_m[0] + GPS_NOISE_M * g[0], s.pos_ned_m[1] + GPS_NOISE_M * g[1],
+                s.pos_ned_m[0] + fn + GPS_NOISE_M * g[0], s.pos_ned_m[1] + fe + GPS_NOISE_M * g[1],
                 s.pos_ned_m[2] + 2 * GPS_NOISE_M * g[2],
             )  # fmt: skip
             gvn, gve, gvd = vn + GPS_VEL_NOISE * g[3], ve + GPS_VEL_NOISE * g[4], vd + GPS_VEL_NOISE * g[5]

@@ -20,7 +20,7 @@ from simbridge.autopilot.flavours import flavour_named
 from simbridge.autopilot.server import AutopilotServer
 from simbridge.battery import BatteryConfig
 from simbridge.episode_log import EpisodeLog
-from simbridge.estimate import EstimateError, estimate_preset
+from simbridge.estimate import TRUTH, EstimateError, GpsFault, GpsFaultConfig, estimate_preset
 from simbridge.geo import GeoOrigin
 from simbridge.physics import GEAR_HEIGHT_M
 from simbridge.scenarios import Scenario, load_scenario
@@ -56,6 +56,7 @@ class SimConfig:
     sitl: str | None = None  # ArduCopter SITL binary (autopilot "ardupilot-sitl"; default: find_arducopter)
     px4: str | None = None  # PX4 SITL binary (autopilot "px4-sitl"; default: simbridge.px4_sitl.find_px4)
     ekf_error: str = "off"  # the emulation's estimator errors (simbridge.estimate.PRESETS)
+    gps_fault: GpsFaultConfig | None = None  # the GPS lies during the descent (simbridge.estimate)
     battery_pct: float = 100.0  # the pack's charge at the start (a low-battery alarm's flight)
     camera_stream: tuple[str, int] | None = None  # send the camera as H.264 over RTP to this UDP endpoint
     camera_fps: float = 5.0  # the stream's frames per simulated second
@@ -144,6 +145,7 @@ class SimBridge:
                 "start": config.start,
                 "home_ned_m": list(self.home_ned_m),
                 "ekf_error": config.ekf_error,
+                "gps_fault": _fault_fields(config.gps_fault),
             },
         )
         self._init_autopilot()
@@ -152,7 +154,11 @@ class SimBridge:
         """The emulated autopilot, its telemetry, link and server; ready at once."""
         config = self.config
         preset = estimate_preset(config.ekf_error)
-        estimate = EstimateError(preset, np.random.default_rng([config.seed, 7])) if preset else None
+        fault = self._gps_fault()
+        if fault is not None and preset is None:
+            preset = TRUTH  # the fault's lie on an estimate that is otherwise the truth
+        rng = np.random.default_rng([config.seed, 7])
+        estimate = EstimateError(preset, rng, fault) if preset else None
         self.autopilot = Autopilot(
             flavour_named(config.autopilot),
             self.vehicle,
@@ -176,6 +182,23 @@ class SimBridge:
         if config.start == "air":
             self.autopilot.spawn_in_air(self.vehicle.state)
         self.episode.event(0.0, "ready", self.ready_fields())
+
+    def _gps_fault(self) -> GpsFault | None:
+        """The configured GPS fault, its start written to the episode log and said in simbridge's log."""
+        cfg = self.config.gps_fault
+        if cfg is None:
+            return None
+
+        def started(t_s: float, height_m: float) -> None:
+            fields = {
+                "offset_ne_m": [round(v, 3) for v in cfg.offset_ne_m],
+                "ramp_s": cfg.ramp_s,
+                "height_agl_m": round(height_m, 2),
+            }
+            self.episode.event(t_s, "gps_fault", fields)
+            self.log.info("t=%.2f GPS fault starts at %.1f m above the ground: %s", t_s, height_m, fields)
+
+        return GpsFault(cfg, started)
 
     def ready_fields(self) -> dict[str, Any]:
         """The ``ready`` event's fields: the vehicle holds at its launch pose (air) or can arm (ground)."""
@@ -455,6 +478,12 @@ class SimBridge:
                 self.vehicle.state.t_s / max(self.wall_elapsed_s, 1e-9),
                 st,
             )
+
+
+def _fault_fields(cfg: GpsFaultConfig | None) -> dict[str, Any] | None:
+    if cfg is None:
+        return None
+    return {"offset_ne_m": list(cfg.offset_ne_m), "below_m": cfg.below_m, "ramp_s": cfg.ramp_s}
 
 
 async def _cancelled(task: asyncio.Task[Any]) -> None:

@@ -39,6 +39,7 @@ _LANDED_CONFIRM_S = 0.3
 _AIRBORNE_M = 0.25
 _EKF_GOOD = 0x33F  # attitude, velocities, positions (rel/abs, vertical), predicted positions
 _EKF_CONST_POS = 0x80
+GPS_FAULT_STEP_M = 0.25  # a drifting GPS fault reaches the firmware in steps this big
 
 
 class TouchdownWatch:
@@ -103,6 +104,8 @@ class FirmwareBridge(SimBridge):
         self.lockstep: Any = None
         self.ready = asyncio.Event()
         self.failure: SitlError | None = None
+        self.gps_fault = self._gps_fault()
+        self._fault_sent: tuple[float, float] = (0.0, 0.0)
 
     def _find_binary(self) -> None:
         raise NotImplementedError
@@ -137,6 +140,11 @@ class FirmwareBridge(SimBridge):
         )  # fmt: skip
 
     def _stop_fields(self) -> dict[str, Any]:
+        raise NotImplementedError
+
+    def _gps_offset(self, offset_ne_m: tuple[float, float]) -> None:
+        """The firmware's GPS reports positions ``offset_ne_m`` away from now on (the lock step's
+        thread: keep it cheap)."""
         raise NotImplementedError
 
     # ------------------------------------------------------------------ clocks
@@ -176,6 +184,14 @@ class FirmwareBridge(SimBridge):
             )
         if self.touchdown.update(s):
             self._call(self._on_event, "touchdown", {"pos_ned_m": [round(c, 3) for c in s.pos_ned_m]})
+        fault = self.gps_fault
+        if fault is not None and self.ready.is_set():
+            offset = fault.update(s)
+            if math.dist(offset, self._fault_sent) >= GPS_FAULT_STEP_M or (
+                offset == fault.config.offset_ne_m and offset != self._fault_sent
+            ):
+                self._fault_sent = offset
+                self._gps_offset(offset)
         if self.config.duration_s is not None and s.t_s >= self.config.duration_s:
             self._call(self._stop.set)
 
@@ -291,6 +307,15 @@ class SitlBridge(FirmwareBridge):
 
     def _estimator_ready(self, pilot: SitlPilot) -> bool:
         return _ekf_ready(pilot.view.ekf_flags, pilot.view.gps_fix)
+
+    def _gps_offset(self, offset_ne_m: tuple[float, float]) -> None:
+        """SITL's own GPS glitch: ``SIM_GPS1_GLTCH_X/Y`` are added to the fix's latitude and
+        longitude, in degrees."""
+        origin = self.config.origin
+        lat, lon, _alt = origin.to_geodetic(offset_ne_m[0], offset_ne_m[1], 0.0)
+        glitch = {"SIM_GPS1_GLTCH_X": lat - origin.lat_deg, "SIM_GPS1_GLTCH_Y": lon - origin.lon_deg}
+        if self.pilot is not None:
+            self._call(self.pilot.set_params, glitch)
 
     def _stop_fields(self) -> dict[str, Any]:
         lock = self.lockstep

@@ -179,6 +179,15 @@ class SitlPilot:
         self._acks.pop(command, None)
         self.link.send(self.link.mav.command_long_encode(self.sysid, 1, command, 0, *p))
 
+    def set_params(self, params: dict[str, float]) -> None:
+        """PARAM_SET each (REAL32), unconfirmed: simulation knobs (``SIM_*``) set while it flies."""
+        for name, value in params.items():
+            self.link.send(
+                self.link.mav.param_set_encode(
+                    self.sysid, 1, name.encode(), value, M.MAV_PARAM_TYPE_REAL32
+                )
+            )
+
     async def _wait(self, until: Callable[[], bool], deadline_s: float, what: str) -> None:
         while not until():
             if self.sim_time() > deadline_s:

@@ -96,18 +96,26 @@ def test_track_site_chained_down_to_two_metres_stays_on_the_membrane_roof() -> N
     assert found >= 5
 
 
-def test_track_site_along_a_road_is_ambiguous(scenario1: LiveWorld) -> None:
-    """Quay Street looks the same along its length: no answer rather than a guess."""
+def test_track_site_along_a_road_is_ambiguous_alone_and_placed_by_what_lies_beside_it(
+    scenario1: LiveWorld,
+) -> None:
+    """Quay Street looks the same along its length: the patch around the site alone gives no answer
+    rather than a guess; the wide search's patch (the newer view around its centre: kerbs, cars,
+    the roofs beside the street) places it, to its coarser cell."""
     truth = np.array([-40.0, 0.0, 0.0])
     q = euler_to_quat(0.0, 0.0, 0.0)
     ref = _view(scenario1, LAUNCH, q)
-    cur = _view(scenario1, (truth[0], truth[1], -20.0), q, (1.0, 0.0, 0.0))
-    result = track_site(ref, truth, cur)
-    assert not result.found
+    bias = (1.0, 0.0, 0.0)
+    cur = _view(scenario1, (truth[0], truth[1], -20.0), q, bias)
+    alone = track_site(ref, truth, cur, TrackParams(reacquire_m=0.0))
+    assert not alone.found
     # the score hardly falls along the street: flat that way, or as high somewhere else along it
-    assert result.reason in ("the match is ambiguous", "another place matches as well")
-    assert result.site_ned_m == tuple(truth)
-    assert result.shift_m == (0.0, 0.0)
+    assert alone.reason in ("the match is ambiguous", "another place matches as well")
+    assert alone.site_ned_m == tuple(truth)
+    assert alone.shift_m == (0.0, 0.0)
+    wide = track_site(ref, truth, cur)
+    assert wide.found and wide.reacquired
+    assert math.dist(wide.site_ned_m[:2], (truth + np.array(bias))[:2]) < max(0.3, wide.cell_m + 0.05)
 
 
 def test_track_site_out_of_view_and_too_close(scenario1: LiveWorld) -> None:

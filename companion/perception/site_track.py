@@ -19,6 +19,7 @@ RGB or (H, W) grey.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -28,7 +29,13 @@ import numpy as np
 
 from companion.guidance.frames import PinholeCamera, quat_to_matrix
 
-__all__ = ["SiteView", "TrackParams", "TrackResult", "track_site"]
+__all__ = ["SiteView", "TrackParams", "TrackResult", "centre_down", "track_site"]
+
+NO_MATCH = "no good match"
+AT_EDGE = "the best match is at the search's edge"
+OUT_OF_VIEW = "the site is out of the camera's view"
+NOT_IN_REFERENCE = "the site is not in the reference frame"
+REACQUIRE_PATCH_OF_VIEW = 0.7  # the wide search's patch, at most this much of the newer view's narrower half
 
 
 @dataclass(frozen=True, slots=True)
@@ -63,6 +70,19 @@ class TrackParams:
         flatten_m: and lose what varies more slowly than this (Gaussian sigma, metres on the
             surface; 0 keeps it): vignetting and light falling off across a frame differ between
             views.
+        reacquire_m: when the site is not where the estimate predicts it (no good match, the best
+            at the search's edge, or predicted out of view), look this far from the prediction, in
+            whatever the newer frame sees: a GPS that jumps moves the whole estimate (0: never).
+        reacquire_cells: that wide search runs on a coarser grid, this many cells from its centre
+            to its edge at most, then the usual search refines it.
+        reacquire_patch_m: its patch's half width (the newer view around its centre: a roof's
+            outline, not only its texture; a wide search has more places to mistake for the site),
+            or ``patch_per_m`` of the reference's distance when that is more, but at most
+            ``REACQUIRE_PATCH_OF_VIEW`` of the newer view's narrower half.
+        reacquire_min_patch_m: no wide search when that leaves less than this (close to the surface).
+        reacquire_min_score: the least score of the wide search's peak.
+        reacquire_min_unique: its lead over the best match farther than its patch's half width.
+            The wide search's answer is refined, and checked, by the usual search around it.
     """
 
     patch_half_m: float = 4.0
@@ -80,6 +100,12 @@ class TrackParams:
     min_patch_half_m: float = 0.6
     blur_cells: float = 1.5
     flatten_m: float = 5.0
+    reacquire_m: float = 30.0
+    reacquire_cells: int = 150
+    reacquire_patch_m: float = 6.0
+    reacquire_min_patch_m: float = 3.0
+    reacquire_min_score: float = 0.6
+    reacquire_min_unique: float = 0.1
 
 
 @dataclass(frozen=True, slots=True)
@@ -91,12 +117,15 @@ class SiteView:
         camera: its pinhole model.
         pos_ned_m: the vehicle's estimated position when it was taken.
         quat_wxyz: its estimated attitude then (body FRD -> NED).
+        centre_down_m: the surface's height (NED down) about the view's centre, from the LiDAR
+            (NaN when unknown: the site's surface is taken there).
     """
 
     image: np.ndarray
     camera: PinholeCamera
     pos_ned_m: tuple[float, float, float]
     quat_wxyz: tuple[float, float, float, float]
+    centre_down_m: float = math.nan
 
 
 @dataclass(frozen=True, slots=True)
@@ -111,6 +140,10 @@ class TrackResult:
         margin: the peak's lead over the best match ``ambiguity_m`` from it (NaN likewise).
         cell_m: the grid's cell.
         reason: why it was not found ("" when found).
+        reacquired: found by the wide search (:attr:`TrackParams.reacquire_m`), not where the
+            estimate predicted it.
+        coarse: the wide search's answer alone, to its coarser cell, the site itself not matched
+            (near the view's edge or beyond it): not a frame to follow the site from.
     """
 
     found: bool
@@ -120,6 +153,8 @@ class TrackResult:
     margin: float
     cell_m: float
     reason: str = ""
+    reacquired: bool = False
+    coarse: bool = False
 
 
 _THIN = np.ones((3, 3), np.uint8)
@@ -221,7 +256,8 @@ def track_site(
     current: SiteView,
     params: TrackParams | None = None,
 ) -> TrackResult:
-    """Find the site that ``reference`` showed at ``site_ned_m`` in ``current``.
+    """Find the site that ``reference`` showed at ``site_ned_m`` in ``current``: where the estimate
+    predicts it; and in a wide search around that, which checks the first answer or replaces it.
 
     Args:
         reference: the frame the site was chosen (or last found) in.
@@ -237,24 +273,58 @@ def track_site(
     site = np.asarray(site_ned_m, dtype=np.float64)
     if site.shape != (3,) or not np.isfinite(site).all():
         raise ValueError(f"site_ned_m must be three finite numbers, got {site_ned_m!r}")
+    first = _track(reference, site, current, p, site)
+    if p.reacquire_m <= 0 or first.reason == NOT_IN_REFERENCE:
+        return first
+    wide = _reacquire(reference, site, current, p)
+    if wide is None:
+        return first
+    centre, coarse_cell, wide_score = wide
+    agree_m = max(2.0 * coarse_cell, 2.0 * p.ambiguity_m)
+    if first.found and math.dist(first.site_ned_m[:2], centre[:2]) <= agree_m:
+        return first
+    # not where the estimate predicted it, or a match there that the whole view puts elsewhere
+    # (texture that repeats farther apart than the usual search): the usual search around the wide
+    # one's answer refines it; where it cannot (the site near the view's edge, or out of it), the
+    # wide answer stands, to its coarser cell
+    fine = _track(reference, site, current, p, centre, search_m=p.search_m + 2.0 * coarse_cell)
+    if fine.found:
+        return dataclasses.replace(fine, reacquired=True)
+    found = (float(centre[0]), float(centre[1]), float(site[2]))
+    shift = (found[0] - float(site[0]), found[1] - float(site[1]))
+    return TrackResult(True, found, shift, wide_score, math.nan, coarse_cell, reacquired=True, coarse=True)
+
+
+def _track(
+    reference: SiteView,
+    site: np.ndarray,
+    current: SiteView,
+    p: TrackParams,
+    centre: np.ndarray,
+    search_m: float | None = None,
+) -> TrackResult:
+    """The site looked for in ``current`` within a search around ``centre`` (the prediction: the
+    site itself, or where a wide search put it); ``search_m`` overrides the search's reach."""
     keep = (float(site[0]), float(site[1]), float(site[2]))
 
     def lost(reason: str, cell_m: float = math.nan) -> TrackResult:
         return TrackResult(False, keep, (0.0, 0.0), math.nan, math.nan, cell_m, reason)
 
     depth_ref, px_ref = _range_to(reference, site)
-    depth_cur, px_cur = _range_to(current, site)
+    depth_cur, px_cur = _range_to(current, centre)
     if px_ref is None or not reference.camera.in_image(np.array([px_ref]))[0]:
-        return lost("the site is not in the reference frame")
+        return lost(NOT_IN_REFERENCE)
     if px_cur is None or not current.camera.in_image(np.array([px_cur]))[0]:
-        return lost("the site is out of the camera's view")
+        return lost(OUT_OF_VIEW)
     gsd_ref = depth_ref / reference.camera.fx
     gsd_cur = depth_cur / current.camera.fx
     # patch and search must fit the newer view: near the ground the camera sees little around the site
     margin_px = min(px_cur[0], current.camera.width - px_cur[0], px_cur[1], current.camera.height - px_cur[1])
     seen_m = 0.95 * margin_px * gsd_cur
-    # the prediction carries both frames' attitude errors, each times its distance to the site
-    search_m = min(p.search_m + p.search_per_m * (depth_ref + depth_cur), 0.45 * seen_m)
+    if search_m is None:
+        # the prediction carries both frames' attitude errors, each times its distance to the site
+        search_m = p.search_m + p.search_per_m * (depth_ref + depth_cur)
+    search_m = min(search_m, 0.45 * seen_m)
     patch_half_m = min(max(p.patch_half_m, p.patch_per_m * depth_ref), seen_m - search_m)
     if patch_half_m < p.min_patch_half_m:
         return lost("too close to the surface to see around the site")
@@ -266,7 +336,7 @@ def track_site(
     ref_grey = _smoothed(_grey(reference.image, thin), gsd_ref, cell_m)
     cur_grey = _smoothed(_grey(current.image, thin), gsd_cur, cell_m)
     templ, templ_seen = _ortho(ref_grey, reference, site, patch_cells, cell_m)
-    area, area_seen = _ortho(cur_grey, current, site, patch_cells + search_cells, cell_m)
+    area, area_seen = _ortho(cur_grey, current, centre, patch_cells + search_cells, cell_m)
     if templ_seen.mean() < 0.9:
         return lost("the reference frame saw too little around the site", cell_m)
     if area_seen.mean() < 0.8:
@@ -285,30 +355,116 @@ def track_site(
     around = scores[ring] if ring.any() else np.array([-1.0])
     margin = float(best) - float(around.max())  # the least the score falls, whichever way
     steepest = float(best) - float(around.min())  # the most it falls
+
+    def refused(reason: str) -> TrackResult:
+        return TrackResult(False, keep, (0.0, 0.0), float(best), margin, cell_m, reason)
+
     if best < p.min_score:
-        return TrackResult(False, keep, (0.0, 0.0), float(best), margin, cell_m, "no good match")
+        return refused(NO_MATCH)
     elsewhere = np.maximum(np.abs(rows - row), np.abs(cols - col)) > away
     second = float(scores[elsewhere].max()) if elsewhere.any() else -1.0
     if float(best) - second < p.min_unique:
-        return TrackResult(
-            False, keep, (0.0, 0.0), float(best), margin, cell_m, "another place matches as well"
-        )
+        return refused("another place matches as well")
     if margin < p.min_margin or margin < p.min_isotropy * steepest:
-        return TrackResult(
-            False,
-            keep,
-            (0.0, 0.0),
-            float(best),
-            margin,
-            cell_m,
-            "the match is ambiguous",
-        )
+        return refused("the match is ambiguous")
     if row in (0, scores.shape[0] - 1) or col in (0, scores.shape[1] - 1):
-        return TrackResult(
-            False, keep, (0.0, 0.0), float(best), margin, cell_m, "the best match is at the search's edge"
-        )
+        return refused(AT_EDGE)
     dr, dc = _subcell(scores, row, col)
-    shift_n = (row + dr - search_cells) * cell_m
-    shift_e = (col + dc - search_cells) * cell_m
+    shift_n = float(centre[0] - site[0]) + (row + dr - search_cells) * cell_m
+    shift_e = float(centre[1] - site[1]) + (col + dc - search_cells) * cell_m
     found = (keep[0] + shift_n, keep[1] + shift_e, keep[2])
     return TrackResult(True, found, (shift_n, shift_e), float(best), margin, cell_m)
+
+
+def _reacquire(
+    reference: SiteView, site: np.ndarray, current: SiteView, p: TrackParams
+) -> tuple[np.ndarray, float, float] | None:
+    """The wide search. What the newer frame sees around its optical axis (on the site's surface) is
+    looked for in the reference frame, up to ``p.reacquire_m`` from where the estimates put it, on a
+    coarse grid: the offset between the two estimates, whatever moved them (a GPS that jumps moves
+    everything alike), and so where the site is in the newer one. The patch comes from the newer
+    frame because the reference was taken from higher up: it sees all the newer one does, and a patch
+    as wide as the newer view stands out where a small one around the site would not.
+
+    Returns the site's position in the newer frame's estimate, the grid's cell and the score, or None
+    when no place stands out."""
+    # what lies at the view's centre, on its own surface (a street beside the roof is 20 m lower:
+    # resampled at the roof's height it would not line up between two views)
+    plane_d = current.centre_down_m if math.isfinite(current.centre_down_m) else float(site[2])
+    depth_cur = _plane_depth(current, plane_d)
+    if not math.isfinite(depth_cur):
+        return None
+    rot = quat_to_matrix(current.quat_wxyz)
+    axis = rot @ np.array([0.0, 0.0, 1.0])
+    centre_cur = np.asarray(current.pos_ned_m, dtype=np.float64) + depth_cur * axis
+    centre_cur[2] = plane_d
+    depth_ref, px_ref = _range_to(reference, centre_cur)
+    if px_ref is None or not math.isfinite(depth_ref):
+        return None
+    gsd_ref = depth_ref / reference.camera.fx
+    gsd_cur = depth_cur / current.camera.fx
+    cam = current.camera
+    view_half_m = 0.5 * min(cam.width, cam.height) * gsd_cur  # the newer view's narrower half
+    patch_half_m = max(p.reacquire_patch_m, p.patch_per_m * depth_ref)
+    patch_half_m = min(patch_half_m, REACQUIRE_PATCH_OF_VIEW * view_half_m)
+    if patch_half_m < p.reacquire_min_patch_m:
+        return None  # too close: too little in view to stand out
+    reach_m = p.reacquire_m + patch_half_m
+    cell_m = max(gsd_ref, gsd_cur, p.min_cell_m, reach_m / p.reacquire_cells)
+    patch_cells = max(3, round(patch_half_m / cell_m))
+    reach_cells = max(patch_cells + 1, round(reach_m / cell_m))
+    ref_grey = _smoothed(_grey(reference.image, False), gsd_ref, cell_m)
+    cur_grey = _smoothed(_grey(current.image, False), gsd_cur, cell_m)
+    templ, templ_seen = _ortho(cur_grey, current, centre_cur, patch_cells, cell_m)
+    if templ_seen.mean() < 0.98 or float(templ.std()) < p.min_texture:
+        return None
+    area, area_seen = _ortho(ref_grey, reference, centre_cur, reach_cells, cell_m)
+    templ, area = _band(templ, p, cell_m), _band(area, p, cell_m)
+    scores = np.nan_to_num(cv2.matchTemplate(area, templ, cv2.TM_CCOEFF_NORMED), nan=-1.0)
+    # only places whose whole patch the reference saw
+    seen = cv2.matchTemplate(area_seen.astype(np.float32), np.ones_like(templ), cv2.TM_CCORR)
+    scores[seen < 0.98 * templ.size] = -1.0
+    _lo, best, _lo_at, (col, row) = cv2.minMaxLoc(scores)
+    if best < p.reacquire_min_score:
+        return None
+    rows, cols = np.ogrid[: scores.shape[0], : scores.shape[1]]
+    elsewhere = np.maximum(np.abs(rows - row), np.abs(cols - col)) > patch_cells
+    second = float(scores[elsewhere].max()) if elsewhere.any() else -1.0
+    if float(best) - second < p.reacquire_min_unique:
+        return None
+    dr, dc = _subcell(scores, row, col)
+    half = reach_cells - patch_cells  # the score map's centre: the estimates agree
+    # the newer view's centre lies this far from where the reference's estimate has it
+    offset = np.array([(row + dr - half) * cell_m, (col + dc - half) * cell_m, 0.0])
+    return site - offset, cell_m, float(best)
+
+
+def centre_down(lidar_frd: np.ndarray | None, view: SiteView, cone_deg: float = 6.0) -> float:
+    """The median height (NED down) of the LiDAR returns (body FRD metres in the first three
+    columns) within ``cone_deg`` of the camera's axis (body down), placed with ``view``'s pose; NaN
+    without any."""
+    if lidar_frd is None:
+        return math.nan
+    pts = np.asarray(lidar_frd, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] < 3 or not len(pts):
+        return math.nan
+    pts = pts[:, :3]  # x, y, z (a sweep may carry more per return)
+    pts = pts[np.isfinite(pts).all(axis=1)]
+    off_axis = np.hypot(pts[:, 0], pts[:, 1])
+    near = pts[(pts[:, 2] > 0) & (off_axis < math.tan(math.radians(cone_deg)) * pts[:, 2])]
+    if not len(near):
+        return math.nan
+    rot = quat_to_matrix(view.quat_wxyz)
+    down = near @ rot[2] + view.pos_ned_m[2]  # the NED down row of the rotation
+    return float(np.median(down))
+
+
+def _plane_depth(view: SiteView, down_m: float) -> float:
+    """The camera's depth to a horizontal plane at ``down_m`` along its optical axis (NaN when it
+    does not look down at it)."""
+    rot = quat_to_matrix(view.quat_wxyz)
+    axis = rot @ np.array([0.0, 0.0, 1.0])  # the optical axis (camera looks along body down)
+    height = down_m - view.pos_ned_m[2]
+    if axis[2] <= 0.1 or height <= 0:
+        return math.nan
+    return float(height / axis[2])

@@ -4,13 +4,17 @@ autopilot's land mode LANDING_TARGET for its precision landing (docs/companion.m
 landing").
 
 A frame where the site is not found keeps the last target (the absolute one, placed by the estimate)
-and the record says why; a later frame may find it again.
+and the record says why; a later frame may find it again. During each descent step the site is looked
+for twice a second as well, and the step's target follows it: a GPS that jumps mid-step moves the
+vehicle's whole frame of reference (and the vehicle, which holds its target in that frame), while the
+site stays where the camera sees it.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import math
 import time
 from typing import Any
@@ -19,11 +23,14 @@ import cv2
 import numpy as np
 
 from companion.guidance.frames import PinholeCamera, quat_to_matrix
-from companion.perception.site_track import SiteView, TrackParams, TrackResult, track_site
+from companion.perception.site_track import SiteView, TrackParams, TrackResult, centre_down, track_site
 from companion.precision import PrecisionLanding
 from companion.recovery.core import FrameUnavailable, RecoveryBase
 
 LAND_FEED_PERIOD_S = 0.2  # at most five targets a second (ArduPilot forgets one after 1 s)
+STEP_FOLLOW_PERIOD_S = 0.5  # during a descent step, a look for the site twice a second
+STEP_FOLLOW_MIN_M = 0.3  # and the step's target moved when it is this far from where the site is seen
+REACQUIRE_AGREE_M = 1.0  # a coarse answer counts when the next frame's agrees this well
 
 
 def site_view(frame: Any) -> SiteView | None:
@@ -31,21 +38,29 @@ def site_view(frame: Any) -> SiteView | None:
     if frame.image_rgb is None:
         return None
     camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
-    return SiteView(frame.image_rgb, camera, tuple(frame.pos_ned_m), tuple(frame.quat_wxyz))
+    view = SiteView(frame.image_rgb, camera, tuple(frame.pos_ned_m), tuple(frame.quat_wxyz))
+    return dataclasses.replace(view, centre_down_m=centre_down(getattr(frame, "lidar_frd", None), view))
 
 
 class Following(RecoveryBase):
     """The site kept in view from its choice to the touchdown."""
 
     _track_params = TrackParams()
+    # the frame the site was chosen in: the widest view of it, looked in when the last frame fails
+    _anchor: tuple[SiteView, tuple[float, float, float]] | None = None
+    _pending_site: tuple[float, float] | None = None  # a coarse answer awaiting a second frame
 
     def _follow_from(self, frame: Any, target: tuple[float, float, float]) -> None:
         """The frame the site was chosen in, and where inverse perspective mapping put it."""
         view = site_view(frame)
         self._track = (view, target) if view is not None else None
+        self._anchor = self._track
+        self._pending_site = None
 
     def _track_once(self, frame: Any) -> TrackResult | None:
-        """The site in ``frame`` (a worker-thread job); None when there is nothing to follow."""
+        """The site in ``frame`` (a worker-thread job); None when there is nothing to follow. Looked
+        for against the last frame it was found in, else against the one it was chosen in (from
+        higher up, it saw more: what a jump of the estimate took out of the last one's view)."""
         if self._track is None:
             return None
         view = site_view(frame)
@@ -53,9 +68,36 @@ class Following(RecoveryBase):
             return None
         ref, site = self._track
         result = track_site(ref, site, view, self._track_params)
-        if result.found:
+        anchor = self._anchor
+        if not result.found and anchor is not None and anchor[0] is not ref:
+            again = track_site(anchor[0], anchor[1], view, self._track_params)
+            result = again if again.found else result
+        if result.found and result.coarse:
+            result = self._confirmed(result, site)
+        elif result.found:
+            self._pending_site = None
+        if result.found and not result.coarse:  # a coarse answer: the site not seen well in this frame
             self._track = (view, result.site_ned_m)
         return result
+
+    def _confirmed(self, result: TrackResult, site: tuple[float, float, float]) -> TrackResult:
+        """A coarse answer (the wide search's alone: the site itself not matched in this frame) counts
+        once the next frame puts the site in the same place: a GPS that jumped moves every frame after
+        it alike, a place mistaken for the site is seldom mistaken twice the same way. Until then
+        the site stays at ``site``, not found."""
+        found = (result.site_ned_m[0], result.site_ned_m[1])
+        pending, self._pending_site = self._pending_site, found
+        if pending is not None and math.dist(pending, found) <= REACQUIRE_AGREE_M:
+            self._pending_site = None
+            return result
+        moved = math.hypot(*result.shift_m)
+        return dataclasses.replace(
+            result,
+            found=False,
+            site_ned_m=site,
+            shift_m=(0.0, 0.0),
+            reason=f"found roughly {moved:.1f} m from where the estimate had it: a second frame must agree",
+        )
 
     async def _follow(self, frame: Any, target: tuple[float, float, float]) -> tuple[float, float, float]:
         """The descent's target after looking for the site in ``frame``: moved onto it when found,
@@ -68,6 +110,53 @@ class Following(RecoveryBase):
             self.log.info("site not found in the frame (%s): keeping the target", result.reason)
             return target
         return (result.site_ned_m[0], result.site_ned_m[1], target[2])
+
+    async def _goto_following(
+        self, target: tuple[float, float, float], down_m: float, *, timeout_s: float
+    ) -> tuple[float, float, float]:
+        """A descent step: to ``target``'s north and east at ``down_m``, the site followed meanwhile
+        (module docstring). Returns the target as it ended, down at the step's start."""
+        moved = [target]
+        follower = asyncio.create_task(self._follow_during_step(moved), name="site-follow")
+        try:
+            await self.ctl.goto(
+                target[0],
+                target[1],
+                down_m,
+                tolerance_m=self.p.arrival_tolerance_m,
+                speed_m_s=self.p.arrival_speed_m_s,
+                timeout_s=timeout_s,
+            )
+        finally:
+            follower.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await follower
+        return moved[-1]
+
+    async def _follow_during_step(self, moved: list[tuple[float, float, float]]) -> None:
+        """Twice a second: a frame, the site in it, and the step's target onto it when it moved
+        (appended to ``moved``). Frames missing or unusable are skipped: the next one is tried."""
+        while self._track is not None:
+            await asyncio.sleep(STEP_FOLLOW_PERIOD_S)
+            try:
+                frame = await self._frames()
+                result = await asyncio.to_thread(self._track_once, frame)
+            except (FrameUnavailable, ValueError, cv2.error) as exc:
+                self.log.debug("site not looked for during the step: %s", exc)
+                continue
+            if result is None or not result.found:
+                continue
+            n, e, d = moved[-1]
+            if math.hypot(result.site_ned_m[0] - n, result.site_ned_m[1] - e) < STEP_FOLLOW_MIN_M:
+                continue
+            moved.append((result.site_ned_m[0], result.site_ned_m[1], d))
+            self.ctl.retarget(result.site_ned_m[0], result.site_ned_m[1])
+            self.record.record_event("site_track", self._track_fields(result, "step"))
+            if result.reacquired:
+                self.log.info(
+                    "site found %.1f m from where the estimate had it: the target follows it",
+                    math.hypot(result.shift_m[0], result.shift_m[1]),
+                )
 
     def _track_fields(self, result: TrackResult, phase: str) -> dict[str, Any]:
         def r(v: float) -> float | None:
@@ -83,6 +172,8 @@ class Following(RecoveryBase):
             "margin": r(result.margin),
             "cell_m": r(result.cell_m),
             "reason": result.reason,
+            "reacquired": result.reacquired,
+            "coarse": result.coarse,
         }
 
     async def _feed_landing_target(self, stats: dict[str, Any]) -> None:

@@ -421,14 +421,8 @@ class Recovery(Searching, SiteChoice, Following, Looking):
             closer = " (unsure: a closer look first)" if decision.unsure else ""
             self._say(6, f"descending {step_m:.0f} m{closer}, {decision.rationale[:80]}")
             try:
-                await self.ctl.goto(
-                    target[0],
-                    target[1],
-                    new_d,
-                    tolerance_m=self.p.arrival_tolerance_m,
-                    speed_m_s=self.p.arrival_speed_m_s,
-                    timeout_s=self.p.move_timeout_s + rng_m,
-                )
+                target = await self._goto_following(target, new_d, timeout_s=self.p.move_timeout_s + rng_m)
             except TargetTimeout as exc:
                 self._say(4, f"descent target not reached ({exc.error_m:.1f} m off): next round")
                 return False
+            self._descending = (target, choice)
