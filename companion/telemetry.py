@@ -8,6 +8,12 @@ boot clock (LOCAL_POSITION_NED and ATTITUDE_QUATERNION, both stamped ``time_boot
 frame is placed in the world with the pose the autopilot estimated at the frame's capture time
 (:meth:`PoseHistory.at`), never with a pose the sensor side claims: on a vehicle, the autopilot's EKF is
 all the companion has, in the autopilot's local frame (relative to its EKF origin).
+
+That frame can jump: an estimator that rejected a lying GPS for a while and then resets onto it (a
+glitch, a spoofer) moves its position by metres in one step, while its velocity stays smooth.
+:class:`ResetWatch` notices such a step (a position further from the last one than the velocities
+between carried it) and keeps it, so that what the companion placed in the old frame (its target, the
+site it follows) can be moved into the new one.
 """
 
 from __future__ import annotations
@@ -163,12 +169,45 @@ class PoseHistory:
         return (q[0] / norm, q[1] / norm, q[2] / norm, q[3] / norm)
 
 
+class ResetWatch:
+    """Horizontal resets of the estimate: ``resets`` holds ``(t_boot_s, (north, east))`` for each,
+    the step the position took beyond what the velocity carried it (module docstring)."""
+
+    MIN_M = 2.0  # a step this much beyond the velocity's carry is a reset (5 m/s^2 over 0.5 s: 0.6 m)
+    MAX_DT_S = 0.5  # two samples further apart than this are not compared (a gap, a lossy link)
+
+    def __init__(self) -> None:
+        self.resets: list[tuple[float, tuple[float, float]]] = []
+        self._last: tuple[float, Vec3, Vec3] | None = None
+
+    def add(self, t_s: float, pos: Vec3, vel: Vec3) -> None:
+        last = self._last
+        if last is not None and last[0] - PoseHistory.REBOOT_BACK_S < t_s <= last[0]:
+            return  # a repeated or reordered sample: the newest stays the reference
+        self._last = (t_s, pos, vel)
+        if last is None or not 0.0 < t_s - last[0] <= self.MAX_DT_S:
+            return  # the first sample, after a gap, or the autopilot's clock restarted
+        t0, p0, v0 = last
+        dt = t_s - t0
+        dn = pos[0] - (p0[0] + 0.5 * (v0[0] + vel[0]) * dt)
+        de = pos[1] - (p0[1] + 0.5 * (v0[1] + vel[1]) * dt)
+        if all(math.isfinite(v) for v in (dn, de)) and math.hypot(dn, de) >= self.MIN_M:
+            self.resets.append((t_s, (dn, de)))
+
+    def since(self, t_s: float) -> tuple[float, float]:
+        """The resets after ``t_s`` added up: what moves a position placed then into the frame now."""
+        dn = sum(r[1][0] for r in self.resets if r[0] > t_s)
+        de = sum(r[1][1] for r in self.resets if r[0] > t_s)
+        return (dn, de)
+
+
 class TelemetryCache:
     """Latest vehicle state; parts older than their use allows are reported by :meth:`age_s`."""
 
     def __init__(self, vehicle_system_id: int = 0) -> None:
         self.state = VehicleState(system_id=vehicle_system_id)
         self.poses = PoseHistory()
+        self.position_resets = ResetWatch()
         self.clock = BootClock()
         self._update = asyncio.Event()
         self.texts: list[tuple[float, int, str]] = []  # (monotonic, severity, text): the last 50
@@ -220,6 +259,7 @@ class TelemetryCache:
             s.vel_ned_m_s = (float(msg.vx), float(msg.vy), float(msg.vz))
             s.t_boot_s = msg.time_boot_ms / 1000.0
             self.poses.add_position(s.t_boot_s, s.pos_ned_m, s.vel_ned_m_s)
+            self.position_resets.add(s.t_boot_s, s.pos_ned_m, s.vel_ned_m_s)
             self._stamp("position")
             self.clock.add(s.stamps["position"], s.t_boot_s)
             self._update.set()

@@ -260,6 +260,40 @@ def test_curated_with_ekf_error_flies_the_emulation_on_its_estimate(tmp_path: Pa
         episode_specs(parse([*base, "--autopilot", "ardupilot-sitl", "--ekf-error", "nominal"]))
 
 
+def test_curated_with_a_gps_fault_passes_it_to_simbridge_and_names_its_episodes_apart(tmp_path: Path) -> None:
+    """``--gps-fault N,E`` (and a drift's ``--gps-fault-ramp``) reach simbridge with any autopilot,
+    real firmware included, and name the episodes apart; simbridge's own flags are checked too."""
+    from simbridge.cli import build_parser as sim_parser
+    from simbridge.cli import config_from_args
+
+    parse = build_parser().parse_args
+    base = ["curated", "--scenario", "scenario1", "--runs", "1", "--out", str(tmp_path)]
+    (spec,) = episode_specs(parse([*base, "--autopilot", "ardupilot-sitl", "--gps-fault=-15,10"]))
+    assert spec.id == "scenario1-r0-onboard-crop-clear-ardupilot-sitl-gps-15,10"
+    assert spec.gps_fault_entry == {"offset_ne_m": [-15.0, 10.0], "ramp_s": 0.0}
+    cmd = simbridge_command(spec, udp_port=1, sensors_port=2, episode_log=tmp_path / "e.jsonl", speed=4.0)
+    assert "--gps-fault=-15,10" in cmd
+    assert cmd[cmd.index("--gps-fault-ramp") + 1] == "0"
+    (drift,) = episode_specs(parse([*base, "--gps-fault", "20,0", "--gps-fault-ramp", "30"]))
+    assert drift.id.endswith("-px4-gps20,0r30")
+    plain = episode_specs(parse(base))[0]
+    assert plain.gps_fault_entry is None
+    assert "-gps" not in plain.id
+    cmd = simbridge_command(plain, udp_port=1, sensors_port=2, episode_log=tmp_path / "e.jsonl", speed=4.0)
+    assert not any(c.startswith("--gps-fault") for c in cmd)
+    with pytest.raises(ValueError, match="--gps-fault-ramp goes with --gps-fault"):
+        episode_specs(parse([*base, "--gps-fault-ramp", "30"]))
+    config = config_from_args(sim_parser().parse_args(["--gps-fault", "15,10", "--gps-fault-ramp", "20"]))
+    assert config.gps_fault is not None
+    assert (config.gps_fault.offset_ne_m, config.gps_fault.below_m, config.gps_fault.ramp_s) == (
+        (15.0, 10.0), 40.0, 20.0,
+    )
+    with pytest.raises(ValueError, match="only with --gps-fault"):
+        config_from_args(sim_parser().parse_args(["--gps-fault-below", "30"]))
+    with pytest.raises(ValueError, match="--gps-fault-ramp must be >= 0"):
+        config_from_args(sim_parser().parse_args(["--gps-fault", "1,1", "--gps-fault-ramp", "-1"]))
+
+
 def test_curated_with_an_rtp_camera_streams_it_and_grades_by_the_video_frames(tmp_path: Path) -> None:
     """``--camera rtp`` reaches simbridge (its camera as H.264 over RTP, two frames a wall second, its
     calibration written out), names its episodes apart, is refused with real firmware; the landing

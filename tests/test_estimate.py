@@ -13,7 +13,14 @@ import pytest
 from simbridge.autopilot.core import Autopilot
 from simbridge.autopilot.flavours import flavour_named
 from simbridge.control import Setpoint
-from simbridge.estimate import EstimateError, EstimateErrorConfig, estimate_preset
+from simbridge.estimate import (
+    TRUTH,
+    EstimateError,
+    EstimateErrorConfig,
+    GpsFault,
+    GpsFaultConfig,
+    estimate_preset,
+)
 from simbridge.geo import GeoOrigin
 from simbridge.terrain import FlatTerrain
 from simbridge.vehicle import Vehicle
@@ -26,6 +33,62 @@ def test_presets_and_a_clear_error_for_an_unknown_one() -> None:
     assert isinstance(estimate_preset("nominal"), EstimateErrorConfig)
     with pytest.raises(ValueError, match="--ekf-error"):
         estimate_preset("perfect")
+
+
+def _descend(v: Vehicle, fault: GpsFault, to_d: float, speed: float = 5.0) -> list[tuple[float, float]]:
+    """Down at ``speed`` m/s to ``to_d``, the fault fed each step; its offsets."""
+    out = []
+    while v.state.pos_ned_m[2] < to_d:
+        v.step(Setpoint(pos_ne_m=(0.0, 0.0), pos_d_m=None, vel_ned_m_s=(0.0, 0.0, speed)))
+        out.append(fault.update(v.state))
+    return out
+
+
+def test_a_gps_fault_starts_at_the_first_crossing_downward_and_jumps_or_drifts() -> None:
+    starts: list[tuple[float, float]] = []
+    v = Vehicle(GeoOrigin(), FlatTerrain())
+    v.reset((0.0, 0.0, -10.0), 0.0)  # below the threshold from the start: not a crossing
+    jump = GpsFault(GpsFaultConfig((15.0, 10.0), below_m=40.0), lambda t, h: starts.append((t, h)))
+    assert set(_descend(v, jump, -5.0)) == {(0.0, 0.0)}
+    v.reset((0.0, 0.0, -60.0), 0.0)
+    offsets = _descend(v, jump, -20.0)
+    assert offsets[0] == (0.0, 0.0)
+    assert offsets[-1] == (15.0, 10.0)
+    (_t0, h0), = starts
+    assert h0 == pytest.approx(40.0, abs=0.2)
+    assert len(set(offsets)) == 2  # nothing between: a jump
+    drift = GpsFault(GpsFaultConfig((-20.0, 0.0), below_m=40.0, ramp_s=10.0))
+    v.reset((0.0, 0.0, -60.0), 0.0)
+    offsets = _descend(v, drift, -15.0, speed=1.0)  # 25 s below the threshold
+    grown = [n for n, _e in offsets if n != 0.0]
+    assert len(grown) > 100
+    assert grown[-1] == -20.0
+    assert np.all(np.diff(grown) <= 0)  # growing evenly to the full offset, then holding it
+    assert -20.0 < grown[len(grown) // 4] < -1.0
+    for bad in ({"offset_ne_m": (math.nan, 0.0)}, {"offset_ne_m": (1.0, 0.0), "below_m": 0.0},
+                {"offset_ne_m": (1.0, 0.0), "ramp_s": -1.0}):  # fmt: skip
+        with pytest.raises(ValueError, match="--gps-fault"):
+            GpsFaultConfig(**bad)  # type: ignore[arg-type]
+
+
+def test_the_emulated_estimate_follows_the_gps_fault_and_the_autopilot_flies_in_it() -> None:
+    """With no estimator error of its own (``TRUTH``) the estimate is the truth until the fault,
+    then the truth plus its offset; a held target is then flown that far off in the world."""
+    v = Vehicle(GeoOrigin(), FlatTerrain())
+    v.reset((0.0, 0.0, -45.0), 0.0)
+    est = EstimateError(TRUTH, np.random.default_rng(1), GpsFault(GpsFaultConfig((15.0, 10.0))))
+    ap = Autopilot(
+        flavour_named("ardupilot"), v, (0.0, 0.0, 0.0), lambda *_: None, lambda *_: None, estimate=est
+    )
+    ap.spawn_in_air(v.state)
+    assert ap.set_mode(ap.flavour.mode("GUIDED")).result == 0
+    for k in range(120 * 25):  # down to 35 m, holding north/east 0
+        if k % 6 == 0:
+            ap.external_setpoint(Setpoint.hold((0.0, 0.0, -35.0)), False)
+        v.step(ap.tick(v.state), ap.armed)
+    assert est.bias_ned_m[:2] == (15.0, 10.0)
+    assert ap.estimated_state.pos_ned_m[:2] == pytest.approx((0.0, 0.0), abs=0.3)
+    assert v.state.pos_ned_m[:2] == pytest.approx((-15.0, -10.0), abs=0.3)  # where the lie put it
 
 
 def test_the_bias_wanders_with_its_sigma_and_the_estimate_lags() -> None:

@@ -93,3 +93,32 @@ async def test_the_companion_never_uses_the_pose_a_frame_claims() -> None:
     _feed(c2, t + 5_000, (0.0, 0.0, -50.0), 0.0)
     with pytest.raises(FrameUnavailable, match="no autopilot pose at the frame's capture time"):
         await asyncio.wait_for(c2._posed(old), 5.0)
+
+
+def test_a_reset_of_the_estimate_is_a_step_its_velocity_does_not_explain() -> None:
+    """ArduCopter's EKF resetting onto a GPS that jumped 18 m moves LOCAL_POSITION_NED 18 m in one
+    sample at an unchanged velocity: a reset. Flying fast, braking hard, a repeated or late sample, a
+    gap and the autopilot's reboot are not."""
+    from companion.telemetry import ResetWatch
+
+    watch = ResetWatch()
+    t, n = 0.0, 0.0
+    for k in range(100):  # 10 Hz: 8 m/s north, braking at 5 m/s^2 from the 50th sample
+        v = 8.0 if k < 50 else max(0.0, 8.0 - 5.0 * (k - 50) * 0.1)
+        t += 0.1
+        n += v * 0.1
+        watch.add(t, (n, 0.0, -40.0), (v, 0.0, 0.0))
+        watch.add(t - 0.05, (n - 5.0, 0.0, -40.0), (v, 0.0, 0.0))  # a late one
+        watch.add(t, (n, 0.0, -40.0), (v, 0.0, 0.0))  # a repeated one
+    assert watch.resets == []
+    watch.add(t + 0.1, (n + 15.0, 10.0, -40.0), (0.0, 0.0, 0.0))  # the reset
+    watch.add(t + 0.2, (n + 15.0, 10.0, -40.0), (0.0, 0.0, 0.0))
+    ((when, (dn, de)),) = watch.resets
+    assert when == pytest.approx(t + 0.1)
+    assert (dn, de) == pytest.approx((15.0, 10.0))
+    watch.add(t + 2.0, (n + 30.0, 10.0, -40.0), (0.0, 0.0, 0.0))  # after a gap: not compared
+    watch.add(0.5, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))  # the autopilot rebooted: its clock restarted
+    watch.add(0.6, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    assert len(watch.resets) == 1
+    assert watch.since(t) == pytest.approx((15.0, 10.0))
+    assert watch.since(t + 0.1) == (0.0, 0.0)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import asyncio
 import json
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -63,20 +64,26 @@ def test_check_precision_landing_px4_is_not_used_yet() -> None:
     assert params.asked == []  # nothing asked of PX4
 
 
+def _fly_scenario1(tmp_path: Path, *flags: str) -> tuple[dict[str, Any], Path, str]:
+    """One companion-bench episode of scenario1 on the emulated ArduCopter at 8x with ``flags``: its
+    results entry, the run's folder and what to show when an assertion fails."""
+    out = tmp_path / "bench"
+    res = bench(
+        "curated", "--scenario", "scenario1", "--runs", "1", "--workers", "1", "--autopilot", "ardupilot",
+        *flags, "--speed", "8", "--quiet", "--out", str(out),
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr[-3000:]
+    (e,) = json.loads((out / "results.json").read_text())["episodes"]
+    return e, out, f"{e['error']}\n{_log_tail(out / 'episodes' / e['id'] / 'companion.log')}"
+
+
 @pytest.mark.slow
 def test_precision_landing_on_emulated_arducopter_with_estimator_errors(tmp_path: Path) -> None:
     """scenario1's gravel roof, the emulated ArduCopter flying on an estimate with an EKF's errors
     (``--ekf-error nominal``: without the camera, 1.6 m from what the chosen pixel shows): the site is
     found again before the descent steps, LANDING_TARGET goes to land mode while it is found, and the
     touchdown is near what the chosen pixel shows (0.18-0.55 m measured)."""
-    out = tmp_path / "bench"
-    res = bench(
-        "curated", "--scenario", "scenario1", "--runs", "1", "--workers", "1", "--autopilot", "ardupilot",
-        "--ekf-error", "nominal", "--speed", "8", "--quiet", "--out", str(out),
-    )  # fmt: skip
-    assert res.returncode == 0, res.stderr[-3000:]
-    (e,) = json.loads((out / "results.json").read_text())["episodes"]
-    why = f"{e['error']}\n{_log_tail(out / 'episodes' / e['id'] / 'companion.log')}"
+    e, out, why = _fly_scenario1(tmp_path, "--ekf-error", "nominal")
     assert e["outcome"] == "landed", why
     assert e["surface"] == "rooftop_clear", why
     pl = e["precision_landing"]
@@ -93,3 +100,28 @@ def test_precision_landing_on_emulated_arducopter_with_estimator_errors(tmp_path
     assert all(lost["why"] for lost in landing["lost"])
     log = (out / "episodes" / e["id"] / "companion.log").read_text()
     assert "precision landing ready: PLND_ENABLED 1, PLND_TYPE 1" in log
+
+
+@pytest.mark.slow
+def test_a_gps_that_jumps_18_m_mid_descent_still_lands_on_the_chosen_site(tmp_path: Path) -> None:
+    """simbridge's ``--gps-fault 15,10``: 40 m above the ground the emulated ArduCopter's estimate
+    jumps 18 m, and the vehicle, holding its target in that estimate, would fly 18 m off the site
+    (18 m from what the chosen pixel shows, measured without the companion following it). The
+    companion sees the step in LOCAL_POSITION_NED that its velocity does not explain, moves its target
+    and the site it follows with it, says so and records it; the landing is on the chosen site."""
+    e, out, why = _fly_scenario1(tmp_path, "--gps-fault", "15,10")
+    assert e["gps_fault"] == {"offset_ne_m": [15.0, 10.0], "ramp_s": 0.0}
+    assert e["outcome"] == "landed", why
+    assert e["surface"] == "rooftop_clear", why
+    sim_log = [json.loads(x) for x in (out / "episodes" / e["id"] / "episode.jsonl").read_text().splitlines()]
+    (fault,) = [x for x in sim_log if x["event"] == "gps_fault"]
+    touchdown = next(x for x in sim_log if x["event"] == "touchdown")
+    assert fault["t_s"] < touchdown["t_s"]  # it happened during the descent
+    (record,) = (out / "episodes" / e["id"] / "record").glob("*/events.jsonl")
+    events = [json.loads(x) for x in record.read_text().splitlines()]
+    resets = [x for x in events if x["kind"] == "estimate_reset"]
+    assert len(resets) == 1, resets
+    assert resets[0]["shift_m"] == pytest.approx([15.0, 10.0], abs=0.5)
+    log = (out / "episodes" / e["id"] / "companion.log").read_text()
+    assert "position estimate jumped 18.0 m" in log
+    assert e["landing_distance_m"] < 0.8, (e["landing_target_ned_m"], why)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from companion.guidance.frames import PinholeCamera
-from companion.perception.site_track import SiteView, TrackParams, track_site
+from companion.perception.site_track import SiteView, TrackParams, centre_down, track_site
 from simbridge.geo import euler_to_quat
 from simbridge.world.live import LiveWorld
 from tests.views import world
@@ -96,6 +96,72 @@ def test_track_site_chained_down_to_two_metres_stays_on_the_membrane_roof() -> N
     assert found >= 5
 
 
+JUMP = (15.0, 10.0, 0.0)  # a GPS glitch: the estimate moved 18 m since the site was placed
+
+
+@pytest.mark.parametrize(
+    ("height_m", "moved"),
+    [(60.0, (0.0, 0.0)), (40.0, (-8.0, -5.0)), (40.0, (-15.0, -10.0)), (20.0, (0.0, 0.0))],
+)
+def test_after_the_gps_jumped_the_wide_search_finds_the_site_where_the_new_estimate_has_it(
+    scenario1: LiveWorld, height_m: float, moved: tuple[float, float]
+) -> None:
+    """Since the site was placed from the launch pose the estimate jumped 18 m (the vehicle, which
+    holds its target in that estimate, may have flown ``moved`` since): where the estimate predicts
+    the site, the usual search finds nothing; the wide search (the newer view's centre looked for in
+    the reference) finds where the newer estimate has it, and the usual search refines it there."""
+    truth = np.array([2.0, -25.0, -22.0])
+    ref = _view(scenario1, LAUNCH, euler_to_quat(0.0, 0.0, YAW))
+    here = (truth[0] + moved[0], truth[1] + moved[1], truth[2] - height_m)
+    cur = _view(scenario1, here, euler_to_quat(0.02, -0.01, 1.0), JUMP)
+    alone = track_site(ref, truth, cur, TrackParams(reacquire_m=0.0))
+    assert not alone.found
+    result = track_site(ref, truth, cur)
+    assert result.found, result
+    assert result.reacquired
+    assert not result.coarse
+    assert math.dist(result.site_ned_m[:2], (truth + np.array(JUMP))[:2]) < 0.25
+    assert result.shift_m == pytest.approx(JUMP[:2], abs=0.25)
+
+
+def test_without_a_jump_the_wide_search_agrees_and_the_usual_match_stands(scenario1: LiveWorld) -> None:
+    truth = np.array([2.0, -25.0, -22.0])
+    ref = _view(scenario1, LAUNCH, euler_to_quat(0.0, 0.0, YAW))
+    here = (truth[0], truth[1], truth[2] - 30.0)
+    cur = _view(scenario1, here, euler_to_quat(0.02, -0.01, 1.0), (0.4, -0.3, 0.0))
+    usual = track_site(ref, truth, cur, TrackParams(reacquire_m=0.0))
+    checked = track_site(ref, truth, cur)
+    assert usual.found
+    assert checked.found
+    assert not checked.reacquired
+    assert checked.site_ned_m == usual.site_ned_m
+
+
+def test_a_jump_seen_from_too_close_is_not_guessed(scenario1: LiveWorld) -> None:
+    """8 m above the roof the view holds too little for the wide search, and the site 18 m from its
+    prediction is out of it: not found, rather than a place that merely looks alike."""
+    truth = np.array([2.0, -25.0, -22.0])
+    ref = _view(scenario1, LAUNCH, euler_to_quat(0.0, 0.0, YAW))
+    cur = _view(scenario1, (truth[0], truth[1], truth[2] - 8.0), euler_to_quat(0.0, 0.0, 1.0), JUMP)
+    result = track_site(ref, truth, cur)
+    assert not result.found
+    assert result.site_ned_m == tuple(truth)
+
+
+def test_centre_down_is_the_lidars_surface_about_the_cameras_axis() -> None:
+    """Returns within a few degrees of the camera's axis give the surface there (a street 20 m below
+    a roof at the view's edge does not count); none there, none at all or a malformed sweep: NaN."""
+    view = SiteView(np.zeros((4, 4), np.uint8), PinholeCamera(4, 4, 2.0, 2.0, 2.0, 2.0), (0.0, 0.0, -50.0),
+                    euler_to_quat(0.0, 0.0, 0.7))  # fmt: skip
+    below = np.array([[0.5, -0.3, 30.0, 1.0], [-1.0, 0.8, 30.1, 1.0], [0.2, 0.1, 29.9, 1.0]])
+    aside = np.array([[20.0, 5.0, 50.0, 1.0], [-15.0, 0.0, 50.0, 1.0]])
+    assert centre_down(np.vstack([below, aside]), view) == pytest.approx(-20.0, abs=0.15)
+    assert math.isnan(centre_down(aside, view))
+    assert math.isnan(centre_down(None, view))
+    assert math.isnan(centre_down(np.zeros((0, 3)), view))
+    assert math.isnan(centre_down(np.zeros((5, 2)), view))
+
+
 def test_track_site_along_a_road_is_ambiguous_alone_and_placed_by_what_lies_beside_it(
     scenario1: LiveWorld,
 ) -> None:
@@ -114,7 +180,8 @@ def test_track_site_along_a_road_is_ambiguous_alone_and_placed_by_what_lies_besi
     assert alone.site_ned_m == tuple(truth)
     assert alone.shift_m == (0.0, 0.0)
     wide = track_site(ref, truth, cur)
-    assert wide.found and wide.reacquired
+    assert wide.found
+    assert wide.reacquired
     assert math.dist(wide.site_ned_m[:2], (truth + np.array(bias))[:2]) < max(0.3, wide.cell_m + 0.05)
 
 

@@ -30,6 +30,7 @@ from companion.recovery.core import FrameUnavailable, RecoveryBase
 LAND_FEED_PERIOD_S = 0.2  # at most five targets a second (ArduPilot forgets one after 1 s)
 STEP_FOLLOW_PERIOD_S = 0.5  # during a descent step, a look for the site twice a second
 STEP_FOLLOW_MIN_M = 0.3  # and the step's target moved when it is this far from where the site is seen
+RESET_CHECK_PERIOD_S = 0.1  # and for the estimate's resets ten times a second
 REACQUIRE_AGREE_M = 1.0  # a coarse answer counts when the next frame's agrees this well
 
 
@@ -42,6 +43,23 @@ def site_view(frame: Any) -> SiteView | None:
     return dataclasses.replace(view, centre_down_m=centre_down(getattr(frame, "lidar_frd", None), view))
 
 
+def _frame_time(frame: Any) -> float:
+    """A frame's capture time on the autopilot's boot clock (seconds; -inf when it has none)."""
+    t = getattr(frame, "time_boot_ms", None)
+    return float(t) / 1000.0 if t is not None else -math.inf
+
+
+def _moved(
+    track: tuple[SiteView, tuple[float, float, float]] | None, dn: float, de: float
+) -> tuple[SiteView, tuple[float, float, float]] | None:
+    """A followed site and its frame, both moved north ``dn`` and east ``de`` (an estimate's reset)."""
+    if track is None:
+        return None
+    view, (n, e, d) = track
+    p = view.pos_ned_m
+    return dataclasses.replace(view, pos_ned_m=(p[0] + dn, p[1] + de, p[2])), (n + dn, e + de, d)
+
+
 class Following(RecoveryBase):
     """The site kept in view from its choice to the touchdown."""
 
@@ -50,12 +68,39 @@ class Following(RecoveryBase):
     _anchor: tuple[SiteView, tuple[float, float, float]] | None = None
     _pending_site: tuple[float, float] | None = None  # a coarse answer awaiting a second frame
 
+    _resets_seen = 0  # the estimate's resets (``tm.position_resets``) the tracker's state has taken
+
     def _follow_from(self, frame: Any, target: tuple[float, float, float]) -> None:
         """The frame the site was chosen in, and where inverse perspective mapping put it."""
         view = site_view(frame)
         self._track = (view, target) if view is not None else None
         self._anchor = self._track
         self._pending_site = None
+        taken = _frame_time(frame)
+        self._resets_seen = sum(1 for t, _ in self.tm.position_resets.resets if t <= taken)
+
+    def _catch_up(self) -> tuple[float, float]:
+        """The estimate's resets not taken yet, added up (north, east): the followed site, the frames
+        it is looked for in and a pending answer move by them into the estimate's frame now. The
+        caller moves its target alike (a reset moves the vehicle's frame of reference, not the site)."""
+        resets = self.tm.position_resets.resets
+        new, self._resets_seen = resets[self._resets_seen :], len(resets)
+        if not new:
+            return (0.0, 0.0)
+        dn, de = sum(r[1][0] for r in new), sum(r[1][1] for r in new)
+        self._track = _moved(self._track, dn, de)
+        self._anchor = _moved(self._anchor, dn, de)
+        if self._pending_site is not None:
+            self._pending_site = (self._pending_site[0] + dn, self._pending_site[1] + de)
+        shift = [round(dn, 3), round(de, 3)]
+        when = round(new[-1][0], 2)
+        self.record.record_event("estimate_reset", {"round": self.round, "t_boot_s": when, "shift_m": shift})
+        self.log.info(
+            "the autopilot's position estimate jumped %.1f m (north %.1f, east %.1f): the site and the "
+            "target move with it",
+            math.hypot(dn, de), dn, de,
+        )  # fmt: skip
+        return (dn, de)
 
     def _track_once(self, frame: Any) -> TrackResult | None:
         """The site in ``frame`` (a worker-thread job); None when there is nothing to follow. Looked
@@ -66,6 +111,12 @@ class Following(RecoveryBase):
         view = site_view(frame)
         if view is None:
             return None
+        # a frame placed before a reset the tracker has taken: into the tracker's frame
+        taken = _frame_time(frame)
+        later = [r for t, r in self.tm.position_resets.resets[: self._resets_seen] if t > taken]
+        if later:
+            (n, e, d), dn, de = view.pos_ned_m, sum(r[0] for r in later), sum(r[1] for r in later)
+            view = dataclasses.replace(view, pos_ned_m=(n + dn, e + de, d))
         ref, site = self._track
         result = track_site(ref, site, view, self._track_params)
         anchor = self._anchor
@@ -102,6 +153,8 @@ class Following(RecoveryBase):
     async def _follow(self, frame: Any, target: tuple[float, float, float]) -> tuple[float, float, float]:
         """The descent's target after looking for the site in ``frame``: moved onto it when found,
         kept when not; recorded either way."""
+        dn, de = self._catch_up()
+        target = (target[0] + dn, target[1] + de, target[2])
         result = await asyncio.to_thread(self._track_once, frame)
         if result is None:
             return target
@@ -137,7 +190,14 @@ class Following(RecoveryBase):
         """Twice a second: a frame, the site in it, and the step's target onto it when it moved
         (appended to ``moved``). Frames missing or unusable are skipped: the next one is tried."""
         while self._track is not None:
-            await asyncio.sleep(STEP_FOLLOW_PERIOD_S)
+            started = time.monotonic()
+            while time.monotonic() - started < STEP_FOLLOW_PERIOD_S:
+                await asyncio.sleep(RESET_CHECK_PERIOD_S)
+                dn, de = self._catch_up()
+                if dn or de:  # the estimate jumped: the target with it, at once
+                    n, e, d = moved[-1]
+                    moved.append((n + dn, e + de, d))
+                    self.ctl.retarget(n + dn, e + de)
             try:
                 frame = await self._frames()
                 result = await asyncio.to_thread(self._track_once, frame)
@@ -204,6 +264,7 @@ class Following(RecoveryBase):
             frame = await self._frames()
         except FrameUnavailable as exc:
             return f"no frame: {exc}", math.nan
+        self._catch_up()
         try:
             result = await asyncio.to_thread(self._track_once, frame)
         except (ValueError, cv2.error) as exc:  # a malformed frame: said, and the next one tried
