@@ -13,6 +13,7 @@ site stays where the camera sees it.
 from __future__ import annotations
 
 import asyncio
+import collections
 import contextlib
 import dataclasses
 import math
@@ -31,6 +32,11 @@ LAND_FEED_PERIOD_S = 0.2  # at most five targets a second (ArduPilot forgets one
 STEP_FOLLOW_PERIOD_S = 0.5  # during a descent step, a look for the site twice a second
 STEP_FOLLOW_MIN_M = 0.3  # and the step's target moved when it is this far from where the site is seen
 RESET_CHECK_PERIOD_S = 0.1  # and for the estimate's resets ten times a second
+DRIFT_WINDOW_S = 12.0  # the site's drift in the estimate: a line fitted to its last seconds of frames
+DRIFT_MIN_SPAN_S = 2.5  # ... at least three frames this far apart (autopilot seconds)
+DRIFT_MIN_M_S = 0.15  # drifting faster than this: the final approach waits, following the site
+DRIFT_WAIT_S = 60.0  # a round holds for at most this long (autopilot seconds): a drift that never stops
+DRIFT_BLIND_S = 8.0  # a hold ends when no frame found the site for this long (autopilot seconds)
 REACQUIRE_AGREE_M = 1.0  # a coarse answer counts when the next frame's agrees this well
 
 
@@ -41,6 +47,23 @@ def site_view(frame: Any) -> SiteView | None:
     camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
     view = SiteView(frame.image_rgb, camera, tuple(frame.pos_ned_m), tuple(frame.quat_wxyz))
     return dataclasses.replace(view, centre_down_m=centre_down(getattr(frame, "lidar_frd", None), view))
+
+
+def site_drift_m_s(seen: list[tuple[float, float, float]], since_s: float = -math.inf) -> float:
+    """How fast a site moves in the autopilot's estimate (m/s), from where frames found it
+    (``(t_boot_s, north, east)``, oldest first): a line fitted to those of the last ``DRIFT_WINDOW_S``
+    (and after ``since_s``); NaN with fewer than three spanning ``DRIFT_MIN_SPAN_S``. A GPS that drifts
+    moves the estimate, and the vehicle holding its target in it, while the site stays put."""
+    if not seen:
+        return math.nan
+    newest = seen[-1][0]
+    pts = np.array([p for p in seen if p[0] >= max(newest - DRIFT_WINDOW_S, since_s)])
+    if len(pts) < 3 or pts[-1, 0] - pts[0, 0] < DRIFT_MIN_SPAN_S:
+        return math.nan
+    t = pts[:, 0] - pts[:, 0].mean()
+    vn = float(np.dot(t, pts[:, 1] - pts[:, 1].mean()) / np.dot(t, t))
+    ve = float(np.dot(t, pts[:, 2] - pts[:, 2].mean()) / np.dot(t, t))
+    return math.hypot(vn, ve)
 
 
 def _frame_time(frame: Any) -> float:
@@ -69,6 +92,8 @@ class Following(RecoveryBase):
     _pending_site: tuple[float, float] | None = None  # a coarse answer awaiting a second frame
 
     _resets_seen = 0  # the estimate's resets (``tm.position_resets``) the tracker's state has taken
+    _site_seen: collections.deque[tuple[float, float, float]] | None = None  # (t_boot_s, north, east)
+    _drift_budget_s = DRIFT_WAIT_S  # what is left of the round's time for holding over a drifting site
 
     def _follow_from(self, frame: Any, target: tuple[float, float, float]) -> None:
         """The frame the site was chosen in, and where inverse perspective mapping put it."""
@@ -78,6 +103,8 @@ class Following(RecoveryBase):
         self._pending_site = None
         taken = _frame_time(frame)
         self._resets_seen = sum(1 for t, _ in self.tm.position_resets.resets if t <= taken)
+        self._site_seen = collections.deque(maxlen=64)
+        self._drift_budget_s = DRIFT_WAIT_S
 
     def _catch_up(self) -> tuple[float, float]:
         """The estimate's resets not taken yet, added up (north, east): the followed site, the frames
@@ -92,6 +119,9 @@ class Following(RecoveryBase):
         self._anchor = _moved(self._anchor, dn, de)
         if self._pending_site is not None:
             self._pending_site = (self._pending_site[0] + dn, self._pending_site[1] + de)
+        if self._site_seen is not None:  # a reset is not a drift
+            moved = ((t, n + dn, e + de) for t, n, e in self._site_seen)
+            self._site_seen = collections.deque(moved, maxlen=64)
         shift = [round(dn, 3), round(de, 3)]
         when = round(new[-1][0], 2)
         self.record.record_event("estimate_reset", {"round": self.round, "t_boot_s": when, "shift_m": shift})
@@ -129,6 +159,8 @@ class Following(RecoveryBase):
             self._pending_site = None
         if result.found and not result.coarse:  # a coarse answer: the site not seen well in this frame
             self._track = (view, result.site_ned_m)
+            if self._site_seen is not None and math.isfinite(taken):
+                self._site_seen.append((taken, result.site_ned_m[0], result.site_ned_m[1]))
         return result
 
     def _confirmed(self, result: TrackResult, site: tuple[float, float, float]) -> TrackResult:
@@ -217,6 +249,55 @@ class Following(RecoveryBase):
                     "site found %.1f m from where the estimate had it: the target follows it",
                     math.hypot(result.shift_m[0], result.shift_m[1]),
                 )
+
+    def _site_drift_m_s(self, since_s: float = -math.inf) -> float:
+        return site_drift_m_s(list(self._site_seen or ()), since_s)
+
+    async def _settle(self, target: tuple[float, float, float]) -> tuple[float, float, float]:
+        """Before a descent step or the final approach: while the site drifts in the estimate
+        (``DRIFT_MIN_M_S``), hold over it, following it, until it stops; the autopilot holds its own
+        estimate, which would carry the vehicle off the site as it drifts, and from lower down the
+        site is harder to follow. A round holds ``DRIFT_WAIT_S`` in all at most, and a hold ends
+        when no frame has found the site for ``DRIFT_BLIND_S``. Returns the target then."""
+        drift = self._site_drift_m_s()
+        if not drift >= DRIFT_MIN_M_S or self._drift_budget_s <= 0:  # NaN: too few frames to say
+            return target
+        self._say(
+            5, f"the site drifts {drift:.1f} m/s in the autopilot's estimate (a GPS drifting?): "
+            "holding over it until it stops",
+        )  # fmt: skip
+        start = self.tm.state.t_boot_s
+        moved = [target]
+        follower = asyncio.create_task(self._follow_during_step(moved), name="site-follow")
+        why = "it stopped"
+        try:
+            while True:
+                await asyncio.sleep(STEP_FOLLOW_PERIOD_S)
+                self.ctl.check_interruption()
+                now = self.tm.state.t_boot_s
+                seen = [p for p in (self._site_seen or ()) if p[0] > start]
+                if self._site_drift_m_s(since_s=start) < DRIFT_MIN_M_S:  # False while NaN
+                    break
+                if now - (seen[-1][0] if seen else start) > DRIFT_BLIND_S:
+                    why = "the site is not found from here"
+                    break
+                if now - start >= self._drift_budget_s:
+                    why = "the round's time for holding is spent"
+                    break
+        finally:
+            follower.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await follower
+        waited = self.tm.state.t_boot_s - start
+        self._drift_budget_s -= waited
+        still = self._site_drift_m_s(since_s=start)
+        self.record.record_event(
+            "drift_hold",
+            {"round": self.round, "drift_m_s": round(drift, 3), "waited_s": round(waited, 1), "why": why,
+             "drift_after_m_s": round(still, 3) if math.isfinite(still) else None},
+        )  # fmt: skip
+        self._say(5, f"held {waited:.0f} s over the site ({why}): going on")
+        return moved[-1]
 
     def _track_fields(self, result: TrackResult, phase: str) -> dict[str, Any]:
         def r(v: float) -> float | None:

@@ -411,6 +411,11 @@ class Recovery(Searching, SiteChoice, Following, Looking):
             if not math.isfinite(height_m):
                 self._say(4, "no height above the site measured: next round")
                 return False
+            settled = await self._settle(target)
+            if settled != target:  # held over a drifting site: measured and confirmed again there
+                target = settled
+                self._descending = (target, choice)
+                continue
             if height_m <= self.p.final_land_m:
                 return await self._land()
             self._set(State.DESCEND)
