@@ -13,6 +13,12 @@ frame's grid is where the site is in the newer frame's estimate. A patch with to
 weak or ambiguous peak, or a site outside either view gives no answer (``TrackResult.found`` False,
 ``reason`` says which): the caller keeps its last target then.
 
+A wide search (:func:`_reacquire`) checks every answer: the newer view about its centre, on the
+surface the LiDAR finds there, looked for in the reference up to ``reacquire_m`` from where the two
+estimates put it. It measures the offset between the two estimates whatever caused it (a GPS that
+jumped), so it finds the site where the usual search cannot, and catches a match on texture that
+repeats beyond the usual search; the usual search then refines its answer there.
+
 Frames: NED world, FRD body, the camera of :mod:`companion.guidance.frames`. Images: (H, W, 3) uint8
 RGB or (H, W) grey.
 """
@@ -70,9 +76,10 @@ class TrackParams:
         flatten_m: and lose what varies more slowly than this (Gaussian sigma, metres on the
             surface; 0 keeps it): vignetting and light falling off across a frame differ between
             views.
-        reacquire_m: when the site is not where the estimate predicts it (no good match, the best
-            at the search's edge, or predicted out of view), look this far from the prediction, in
-            whatever the newer frame sees: a GPS that jumps moves the whole estimate (0: never).
+        reacquire_m: how far from the prediction the wide search looks (0: no wide search). It runs
+            with every frame: it checks the usual search's match (one the newer view as a whole
+            places elsewhere is replaced) and finds the site where the usual search cannot (a GPS
+            that jumps moves the whole estimate).
         reacquire_cells: that wide search runs on a coarser grid, this many cells from its centre
             to its edge at most, then the usual search refines it.
         reacquire_patch_m: its patch's half width (the newer view around its centre: a roof's

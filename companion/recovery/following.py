@@ -7,7 +7,10 @@ A frame where the site is not found keeps the last target (the absolute one, pla
 and the record says why; a later frame may find it again. During each descent step the site is looked
 for twice a second as well, and the step's target follows it: a GPS that jumps mid-step moves the
 vehicle's whole frame of reference (and the vehicle, which holds its target in that frame), while the
-site stays where the camera sees it.
+site stays where the camera sees it. The estimate's resets (``TelemetryCache.position_resets``: a
+jump its velocity does not explain) move the target and the followed site at once, camera or not;
+a site that drifts steadily in the estimate (a GPS drifting) is held over until it stops
+(docs/companion.md, "Under a lying GPS").
 """
 
 from __future__ import annotations
@@ -132,10 +135,12 @@ class Following(RecoveryBase):
         )  # fmt: skip
         return (dn, de)
 
-    def _track_once(self, frame: Any) -> TrackResult | None:
+    def _track_once(self, frame: Any, adopt: bool = True) -> TrackResult | None:
         """The site in ``frame`` (a worker-thread job); None when there is nothing to follow. Looked
         for against the last frame it was found in, else against the one it was chosen in (from
-        higher up, it saw more: what a jump of the estimate took out of the last one's view)."""
+        higher up, it saw more: what a jump of the estimate took out of the last one's view). Found,
+        ``frame`` becomes the one to look against next when ``adopt``: each such link adds its match's
+        error to the chain, so the looks during a descent step, twice a second, do not."""
         if self._track is None:
             return None
         view = site_view(frame)
@@ -158,7 +163,8 @@ class Following(RecoveryBase):
         elif result.found:
             self._pending_site = None
         if result.found and not result.coarse:  # a coarse answer: the site not seen well in this frame
-            self._track = (view, result.site_ned_m)
+            if adopt:
+                self._track = (view, result.site_ned_m)
             if self._site_seen is not None and math.isfinite(taken):
                 self._site_seen.append((taken, result.site_ned_m[0], result.site_ned_m[1]))
         return result
@@ -218,9 +224,12 @@ class Following(RecoveryBase):
                 await follower
         return moved[-1]
 
-    async def _follow_during_step(self, moved: list[tuple[float, float, float]]) -> None:
+    async def _follow_during_step(
+        self, moved: list[tuple[float, float, float]], adopt: bool = False
+    ) -> None:
         """Twice a second: a frame, the site in it, and the step's target onto it when it moved
-        (appended to ``moved``). Frames missing or unusable are skipped: the next one is tried."""
+        (appended to ``moved``); the estimate's resets at once. Frames missing or unusable are
+        skipped: the next one is tried. ``adopt``: see :meth:`_track_once`."""
         while self._track is not None:
             started = time.monotonic()
             while time.monotonic() - started < STEP_FOLLOW_PERIOD_S:
@@ -232,7 +241,7 @@ class Following(RecoveryBase):
                     self.ctl.retarget(n + dn, e + de)
             try:
                 frame = await self._frames()
-                result = await asyncio.to_thread(self._track_once, frame)
+                result = await asyncio.to_thread(self._track_once, frame, adopt)
             except (FrameUnavailable, ValueError, cv2.error) as exc:
                 self.log.debug("site not looked for during the step: %s", exc)
                 continue
@@ -268,7 +277,9 @@ class Following(RecoveryBase):
         )  # fmt: skip
         start = self.tm.state.t_boot_s
         moved = [target]
-        follower = asyncio.create_task(self._follow_during_step(moved), name="site-follow")
+        # holding while the estimate drifts away from the last frame it was found in: each look
+        # becomes the next one's reference, or the drift would outrun the usual search
+        follower = asyncio.create_task(self._follow_during_step(moved, adopt=True), name="site-follow")
         why = "it stopped"
         try:
             while True:
