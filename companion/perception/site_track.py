@@ -13,11 +13,11 @@ frame's grid is where the site is in the newer frame's estimate. A patch with to
 weak or ambiguous peak, or a site outside either view gives no answer (``TrackResult.found`` False,
 ``reason`` says which): the caller keeps its last target then.
 
-A wide search (:func:`_reacquire`) checks every answer: the newer view about its centre, on the
-surface the LiDAR finds there, looked for in the reference up to ``reacquire_m`` from where the two
-estimates put it. It measures the offset between the two estimates whatever caused it (a GPS that
-jumped), so it finds the site where the usual search cannot, and catches a match on texture that
-repeats beyond the usual search; the usual search then refines its answer there.
+Where the usual search finds nothing, a wide search (:func:`_reacquire`) looks for the newer view
+about its centre, on the surface the LiDAR finds there, in the reference up to ``reacquire_m`` from
+where the two estimates put it: the offset between the two estimates, whatever caused it (a GPS that
+jumped). The usual search then looks for the site itself there; without it, nothing is found (a
+city repeats its roofs, and a whole view can match another block as well).
 
 Frames: NED world, FRD body, the camera of :mod:`companion.guidance.frames`. Images: (H, W, 3) uint8
 RGB or (H, W) grey.
@@ -76,10 +76,9 @@ class TrackParams:
         flatten_m: and lose what varies more slowly than this (Gaussian sigma, metres on the
             surface; 0 keeps it): vignetting and light falling off across a frame differ between
             views.
-        reacquire_m: how far from the prediction the wide search looks (0: no wide search). It runs
-            with every frame: it checks the usual search's match (one the newer view as a whole
-            places elsewhere is replaced) and finds the site where the usual search cannot (a GPS
-            that jumps moves the whole estimate).
+        reacquire_m: how far from the prediction the wide search looks (0: no wide search), when
+            the usual search finds nothing there (a GPS that jumps moves the whole estimate); its
+            answer counts only where the usual search then finds the site itself.
         reacquire_cells: that wide search runs on a coarser grid, this many cells from its centre
             to its edge at most, then the usual search refines it.
         reacquire_patch_m: its patch's half width (the newer view around its centre: a roof's
@@ -149,8 +148,6 @@ class TrackResult:
         reason: why it was not found ("" when found).
         reacquired: found by the wide search (:attr:`TrackParams.reacquire_m`), not where the
             estimate predicted it.
-        coarse: the wide search's answer alone, to its coarser cell, the site itself not matched
-            (near the view's edge or beyond it): not a frame to follow the site from.
     """
 
     found: bool
@@ -161,7 +158,6 @@ class TrackResult:
     cell_m: float
     reason: str = ""
     reacquired: bool = False
-    coarse: bool = False
 
 
 _THIN = np.ones((3, 3), np.uint8)
@@ -264,7 +260,7 @@ def track_site(
     params: TrackParams | None = None,
 ) -> TrackResult:
     """Find the site that ``reference`` showed at ``site_ned_m`` in ``current``: where the estimate
-    predicts it; and in a wide search around that, which checks the first answer or replaces it.
+    predicts it, else around where a wide search puts it.
 
     Args:
         reference: the frame the site was chosen (or last found) in.
@@ -281,25 +277,18 @@ def track_site(
     if site.shape != (3,) or not np.isfinite(site).all():
         raise ValueError(f"site_ned_m must be three finite numbers, got {site_ned_m!r}")
     first = _track(reference, site, current, p, site)
-    if p.reacquire_m <= 0 or first.reason == NOT_IN_REFERENCE:
+    if first.found or p.reacquire_m <= 0 or first.reason == NOT_IN_REFERENCE:
         return first
     wide = _reacquire(reference, site, current, p)
     if wide is None:
         return first
-    centre, coarse_cell, wide_score = wide
-    agree_m = max(2.0 * coarse_cell, 2.0 * p.ambiguity_m)
-    if first.found and math.dist(first.site_ned_m[:2], centre[:2]) <= agree_m:
-        return first
-    # not where the estimate predicted it, or a match there that the whole view puts elsewhere
-    # (texture that repeats farther apart than the usual search): the usual search around the wide
-    # one's answer refines it; where it cannot (the site near the view's edge, or out of it), the
-    # wide answer stands, to its coarser cell
+    centre, coarse_cell, _score = wide
+    # the usual search around the wide one's answer: the site itself must match there, or nothing
+    # (a city repeats its roofs: the whole view can match another block as well, twice running)
     fine = _track(reference, site, current, p, centre, search_m=p.search_m + 2.0 * coarse_cell)
-    if fine.found:
-        return dataclasses.replace(fine, reacquired=True)
-    found = (float(centre[0]), float(centre[1]), float(site[2]))
-    shift = (found[0] - float(site[0]), found[1] - float(site[1]))
-    return TrackResult(True, found, shift, wide_score, math.nan, coarse_cell, reacquired=True, coarse=True)
+    if not fine.found:
+        return first
+    return dataclasses.replace(fine, reacquired=True)
 
 
 def _track(

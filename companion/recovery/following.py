@@ -40,7 +40,6 @@ DRIFT_MIN_SPAN_S = 2.5  # ... at least three frames this far apart (autopilot se
 DRIFT_MIN_M_S = 0.15  # drifting faster than this: the final approach waits, following the site
 DRIFT_WAIT_S = 60.0  # a round holds for at most this long (autopilot seconds): a drift that never stops
 DRIFT_BLIND_S = 8.0  # a hold ends when no frame found the site for this long (autopilot seconds)
-REACQUIRE_AGREE_M = 1.0  # a coarse answer counts when the next frame's agrees this well
 
 
 def site_view(frame: Any) -> SiteView | None:
@@ -92,7 +91,6 @@ class Following(RecoveryBase):
     _track_params = TrackParams()
     # the frame the site was chosen in: the widest view of it, looked in when the last frame fails
     _anchor: tuple[SiteView, tuple[float, float, float]] | None = None
-    _pending_site: tuple[float, float] | None = None  # a coarse answer awaiting a second frame
 
     _resets_seen = 0  # the estimate's resets (``tm.position_resets``) the tracker's state has taken
     _site_seen: collections.deque[tuple[float, float, float]] | None = None  # (t_boot_s, north, east)
@@ -103,16 +101,15 @@ class Following(RecoveryBase):
         view = site_view(frame)
         self._track = (view, target) if view is not None else None
         self._anchor = self._track
-        self._pending_site = None
         taken = _frame_time(frame)
         self._resets_seen = sum(1 for t, _ in self.tm.position_resets.resets if t <= taken)
         self._site_seen = collections.deque(maxlen=64)
         self._drift_budget_s = DRIFT_WAIT_S
 
     def _catch_up(self) -> tuple[float, float]:
-        """The estimate's resets not taken yet, added up (north, east): the followed site, the frames
-        it is looked for in and a pending answer move by them into the estimate's frame now. The
-        caller moves its target alike (a reset moves the vehicle's frame of reference, not the site)."""
+        """The estimate's resets not taken yet, added up (north, east): the followed site and the frames
+        it is looked for in move by them into the estimate's frame now. The caller moves its target
+        alike (a reset moves the vehicle's frame of reference, not the site)."""
         resets = self.tm.position_resets.resets
         new, self._resets_seen = resets[self._resets_seen :], len(resets)
         if not new:
@@ -120,8 +117,6 @@ class Following(RecoveryBase):
         dn, de = sum(r[1][0] for r in new), sum(r[1][1] for r in new)
         self._track = _moved(self._track, dn, de)
         self._anchor = _moved(self._anchor, dn, de)
-        if self._pending_site is not None:
-            self._pending_site = (self._pending_site[0] + dn, self._pending_site[1] + de)
         if self._site_seen is not None:  # a reset is not a drift
             moved = ((t, n + dn, e + de) for t, n, e in self._site_seen)
             self._site_seen = collections.deque(moved, maxlen=64)
@@ -158,35 +153,12 @@ class Following(RecoveryBase):
         if not result.found and anchor is not None and anchor[0] is not ref:
             again = track_site(anchor[0], anchor[1], view, self._track_params)
             result = again if again.found else result
-        if result.found and result.coarse:
-            result = self._confirmed(result, site)
-        elif result.found:
-            self._pending_site = None
-        if result.found and not result.coarse:  # a coarse answer: the site not seen well in this frame
+        if result.found:
             if adopt:
                 self._track = (view, result.site_ned_m)
             if self._site_seen is not None and math.isfinite(taken):
                 self._site_seen.append((taken, result.site_ned_m[0], result.site_ned_m[1]))
         return result
-
-    def _confirmed(self, result: TrackResult, site: tuple[float, float, float]) -> TrackResult:
-        """A coarse answer (the wide search's alone: the site itself not matched in this frame) counts
-        once the next frame puts the site in the same place: a GPS that jumped moves every frame after
-        it alike, a place mistaken for the site is seldom mistaken twice the same way. Until then
-        the site stays at ``site``, not found."""
-        found = (result.site_ned_m[0], result.site_ned_m[1])
-        pending, self._pending_site = self._pending_site, found
-        if pending is not None and math.dist(pending, found) <= REACQUIRE_AGREE_M:
-            self._pending_site = None
-            return result
-        moved = math.hypot(*result.shift_m)
-        return dataclasses.replace(
-            result,
-            found=False,
-            site_ned_m=site,
-            shift_m=(0.0, 0.0),
-            reason=f"found roughly {moved:.1f} m from where the estimate had it: a second frame must agree",
-        )
 
     async def _follow(self, frame: Any, target: tuple[float, float, float]) -> tuple[float, float, float]:
         """The descent's target after looking for the site in ``frame``: moved onto it when found,
@@ -325,7 +297,6 @@ class Following(RecoveryBase):
             "cell_m": r(result.cell_m),
             "reason": result.reason,
             "reacquired": result.reacquired,
-            "coarse": result.coarse,
         }
 
     async def _feed_landing_target(self, stats: dict[str, Any]) -> None:
