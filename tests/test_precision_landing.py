@@ -84,13 +84,13 @@ def test_a_site_drifting_in_the_estimate_is_measured_and_jitter_is_not_a_drift()
     assert math.isnan(site_drift_m_s([]))
 
 
-def _fly_scenario1(tmp_path: Path, *flags: str) -> tuple[dict[str, Any], Path, str]:
-    """One companion-bench episode of scenario1 on the emulated ArduCopter at 8x with ``flags``: its
-    results entry, the run's folder and what to show when an assertion fails."""
+def _fly_scenario1(tmp_path: Path, *flags: str, speed: float = 8.0) -> tuple[dict[str, Any], Path, str]:
+    """One companion-bench episode of scenario1 on the emulated ArduCopter at ``speed`` with
+    ``flags``: its results entry, the run's folder and what to show when an assertion fails."""
     out = tmp_path / "bench"
     res = bench(
         "curated", "--scenario", "scenario1", "--runs", "1", "--workers", "1", "--autopilot", "ardupilot",
-        *flags, "--speed", "8", "--quiet", "--out", str(out),
+        *flags, "--speed", f"{speed:g}", "--quiet", "--out", str(out),
     )  # fmt: skip
     assert res.returncode == 0, res.stderr[-3000:]
     (e,) = json.loads((out / "results.json").read_text())["episodes"]
@@ -153,7 +153,9 @@ def test_a_gps_drifting_18_m_holds_the_descent_over_the_site_until_it_stops(tmp_
     estimate drifts 18 m over 30 s, no step to see. The site drifts in the estimate frame after
     frame; the companion holds over it, following it, until it stops, then descends and lands on it
     (5-6 m off on real ArduCopter without the hold)."""
-    e, out, why = _fly_scenario1(tmp_path, "--gps-fault", "15,10", "--gps-fault-ramp", "30")
+    # at 4x, as the real-firmware runs: the companion's looks are paced in wall time, and at 8x on a
+    # loaded machine the drift between two of them outran the usual search
+    e, out, why = _fly_scenario1(tmp_path, "--gps-fault", "15,10", "--gps-fault-ramp", "30", speed=4.0)
     assert e["gps_fault"] == {"offset_ne_m": [15.0, 10.0], "ramp_s": 30.0}
     assert e["outcome"] == "landed", why
     assert e["surface"] == "rooftop_clear", why

@@ -35,6 +35,7 @@ LAND_FEED_PERIOD_S = 0.2  # at most five targets a second (ArduPilot forgets one
 STEP_FOLLOW_PERIOD_S = 0.5  # during a descent step, a look for the site twice a second
 STEP_FOLLOW_MIN_M = 0.3  # and the step's target moved when it is this far from where the site is seen
 RESET_CHECK_PERIOD_S = 0.1  # and for the estimate's resets ten times a second
+ADOPT_SHIFT_M = 1.0  # a look that finds the site moved this far becomes the reference all the same
 DRIFT_WINDOW_S = 12.0  # the site's drift in the estimate: a line fitted to its last seconds of frames
 DRIFT_MIN_SPAN_S = 2.5  # ... at least three frames this far apart (autopilot seconds)
 DRIFT_MIN_M_S = 0.15  # drifting faster than this: the final approach waits, following the site
@@ -135,7 +136,9 @@ class Following(RecoveryBase):
         for against the last frame it was found in, else against the one it was chosen in (from
         higher up, it saw more: what a jump of the estimate took out of the last one's view). Found,
         ``frame`` becomes the one to look against next when ``adopt``: each such link adds its match's
-        error to the chain, so the looks during a descent step, twice a second, do not."""
+        error to the chain, so the looks during a descent step, twice a second, do not, unless the
+        site moved ``ADOPT_SHIFT_M`` or more (the estimate is moving: a drift would soon outrun the
+        usual search from the older frame)."""
         if self._track is None:
             return None
         view = site_view(frame)
@@ -154,7 +157,7 @@ class Following(RecoveryBase):
             again = track_site(anchor[0], anchor[1], view, self._track_params)
             result = again if again.found else result
         if result.found:
-            if adopt:
+            if adopt or math.hypot(*result.shift_m) >= ADOPT_SHIFT_M:
                 self._track = (view, result.site_ned_m)
             if self._site_seen is not None and math.isfinite(taken):
                 self._site_seen.append((taken, result.site_ned_m[0], result.site_ned_m[1]))
