@@ -282,7 +282,7 @@ def track_site(
     wide = _reacquire(reference, site, current, p)
     if wide is None:
         return first
-    centre, coarse_cell, _score = wide
+    centre, coarse_cell = wide
     # the usual search around the wide one's answer: the site itself must match there, or nothing
     # (a city repeats its roofs: the whole view can match another block as well, twice running)
     fine = _track(reference, site, current, p, centre, search_m=p.search_m + 2.0 * coarse_cell)
@@ -374,7 +374,7 @@ def _track(
 
 def _reacquire(
     reference: SiteView, site: np.ndarray, current: SiteView, p: TrackParams
-) -> tuple[np.ndarray, float, float] | None:
+) -> tuple[np.ndarray, float] | None:
     """The wide search. What the newer frame sees around its optical axis (on the site's surface) is
     looked for in the reference frame, up to ``p.reacquire_m`` from where the estimates put it, on a
     coarse grid: the offset between the two estimates, whatever moved them (a GPS that jumps moves
@@ -382,8 +382,8 @@ def _reacquire(
     frame because the reference was taken from higher up: it sees all the newer one does, and a patch
     as wide as the newer view stands out where a small one around the site would not.
 
-    Returns the site's position in the newer frame's estimate, the grid's cell and the score, or None
-    when no place stands out."""
+    Returns the site's position in the newer frame's estimate and the grid's cell, or None when no
+    place stands out."""
     # what lies at the view's centre, on its own surface (a street beside the roof is 20 m lower:
     # resampled at the roof's height it would not line up between two views)
     plane_d = current.centre_down_m if math.isfinite(current.centre_down_m) else float(site[2])
@@ -432,7 +432,7 @@ def _reacquire(
     half = reach_cells - patch_cells  # the score map's centre: the estimates agree
     # the newer view's centre lies this far from where the reference's estimate has it
     offset = np.array([(row + dr - half) * cell_m, (col + dc - half) * cell_m, 0.0])
-    return site - offset, cell_m, float(best)
+    return site - offset, cell_m
 
 
 def centre_down(lidar_frd: np.ndarray | None, view: SiteView, cone_deg: float = 6.0) -> float:

@@ -21,6 +21,7 @@ import contextlib
 import dataclasses
 import math
 import time
+from collections.abc import AsyncIterator
 from typing import Any
 
 import cv2
@@ -183,8 +184,7 @@ class Following(RecoveryBase):
         """A descent step: to ``target``'s north and east at ``down_m``, the site followed meanwhile
         (module docstring). Returns the target as it ended, down at the step's start."""
         moved = [target]
-        follower = asyncio.create_task(self._follow_during_step(moved), name="site-follow")
-        try:
+        async with self._following(moved, adopt=False):
             await self.ctl.goto(
                 target[0],
                 target[1],
@@ -193,11 +193,20 @@ class Following(RecoveryBase):
                 speed_m_s=self.p.arrival_speed_m_s,
                 timeout_s=timeout_s,
             )
+        return moved[-1]
+
+    @contextlib.asynccontextmanager
+    async def _following(
+        self, moved: list[tuple[float, float, float]], *, adopt: bool
+    ) -> AsyncIterator[None]:
+        """:meth:`_follow_during_step` for as long as the block runs."""
+        follower = asyncio.create_task(self._follow_during_step(moved, adopt), name="site-follow")
+        try:
+            yield
         finally:
             follower.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await follower
-        return moved[-1]
 
     async def _follow_during_step(
         self, moved: list[tuple[float, float, float]], adopt: bool = False
@@ -252,11 +261,10 @@ class Following(RecoveryBase):
         )  # fmt: skip
         start = self.tm.state.t_boot_s
         moved = [target]
+        why = "it stopped"
         # holding while the estimate drifts away from the last frame it was found in: each look
         # becomes the next one's reference, or the drift would outrun the usual search
-        follower = asyncio.create_task(self._follow_during_step(moved, adopt=True), name="site-follow")
-        why = "it stopped"
-        try:
+        async with self._following(moved, adopt=True):
             while True:
                 await asyncio.sleep(STEP_FOLLOW_PERIOD_S)
                 self.ctl.check_interruption()
@@ -270,10 +278,6 @@ class Following(RecoveryBase):
                 if now - start >= self._drift_budget_s:
                     why = "the round's time for holding is spent"
                     break
-        finally:
-            follower.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await follower
         waited = self.tm.state.t_boot_s - start
         self._drift_budget_s -= waited
         still = self._site_drift_m_s(since_s=start)
