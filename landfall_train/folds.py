@@ -157,7 +157,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     held_fold = next(f for f in folds if f["fold"] == HELD_OUT)
     report = {
         "member": args.member, "seed": args.seed, "steps": args.steps, "lr": args.lr,
-        "photo_weight": args.photo_weight, "hold_out": args.hold_out, "folds": folds,
+        "photo_weight": args.photo_weight, "photo_cells": args.photo_cells,
+        "photo_roof": args.photo_roof, "hold_out": args.hold_out,
+        "folds": folds,
         "source_folds": {f"{a:g}": pooled(source_folds, f"{a:g}") for a in args.alphas},
         "held_out": {f"{a:g}": pooled([held_fold], f"{a:g}") for a in args.alphas},
         "seconds": round(time.monotonic() - t0, 1),

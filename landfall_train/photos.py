@@ -62,7 +62,7 @@ import numpy as np
 from landfall_train import patches
 from landfall_train.augment import augment, targets
 from landfall_train.closeups import closeups
-from landfall_train.labels import CLASSES
+from landfall_train.labels import CLASSES, HAZARD_CLASSES
 from landfall_train.train import (
     CLEAR_POS_WEIGHT,
     INPUT_PX,
@@ -86,6 +86,10 @@ ALPHA = 0.75
 CLOSEUPS = 400
 CLOSEUP_SHARE = 0.25
 STREAM = 4242  # the photograph views' random stream
+MIDDLE_INSET = 0.25  # a clear photograph's middle (each side's quarter left out) holds no hazard
+PHOTO_CELLS = 0.0  # weight of the clear photographs' hazard-free middle cells (--photo-cells)
+PHOTO_ROOF = 0.0  # weight of the roof cells in the middle of clear roofs and of photographs of no roof
+ROOF = CLASSES.index("roof")
 
 
 @dataclass(frozen=True)
@@ -130,6 +134,15 @@ def read_rgb(path: Path) -> np.ndarray:
 
 def photo_view(rgb: np.ndarray, rng: np.random.Generator, px: int = INPUT_PX) -> np.ndarray:
     """One randomised ``px`` x ``px`` view of a photograph (module docstring), uint8 RGB."""
+    return photo_view_middle(rgb, rng, px)[0]
+
+
+def photo_view_middle(
+    rgb: np.ndarray, rng: np.random.Generator, px: int = INPUT_PX
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`photo_view` and where in it the photograph's middle lies: a ``px`` x ``px`` bool mask of
+    the view's pixels inside the photograph's middle (:data:`MIDDLE_INSET` of each side left out), moved
+    with the view (crop, quarter turn, mirror image). The same random draws as :func:`photo_view`."""
     h, w = rgb.shape[:2]
     s = math.sqrt(rng.uniform(0.45, 1.0))
     ch, cw = max(8, int(h * s)), max(8, int(w * s))
@@ -138,9 +151,15 @@ def photo_view(rgb: np.ndarray, rng: np.random.Generator, px: int = INPUT_PX) ->
     img: np.ndarray = np.asarray(
         cv2.resize(rgb[y : y + ch, x : x + cw], (px, px), interpolation=interp), np.float32
     )
-    img = np.rot90(img, int(rng.integers(4)))
+    rows = y + (np.arange(px) + 0.5) * ch / px  # each view pixel's place in the photograph
+    cols = x + (np.arange(px) + 0.5) * cw / px
+    middle = ((rows > MIDDLE_INSET * h) & (rows < (1 - MIDDLE_INSET) * h))[:, None] & (
+        (cols > MIDDLE_INSET * w) & (cols < (1 - MIDDLE_INSET) * w)
+    )[None, :]
+    turns = int(rng.integers(4))
+    img, middle = np.rot90(img, turns), np.rot90(middle, turns)
     if rng.random() < 0.5:
-        img = img[:, ::-1]
+        img, middle = img[:, ::-1], middle[:, ::-1]
     grey = img.mean(axis=2, keepdims=True)
     img = grey + (img - grey) * rng.uniform(0.6, 1.4)
     img = img * rng.uniform(0.7, 1.3) * rng.uniform(0.9, 1.1, size=3) + rng.uniform(-25.0, 25.0)
@@ -148,7 +167,7 @@ def photo_view(rgb: np.ndarray, rng: np.random.Generator, px: int = INPUT_PX) ->
         img = cv2.GaussianBlur(np.ascontiguousarray(img), (0, 0), rng.uniform(0.3, 1.2))
     if rng.random() < 0.3:
         img = img + rng.normal(0.0, rng.uniform(2.0, 8.0), img.shape)
-    return np.asarray(np.clip(img, 0, 255), np.uint8)
+    return np.asarray(np.clip(img, 0, 255), np.uint8), np.ascontiguousarray(middle)
 
 
 def from_onnx(spec: str) -> Any:
@@ -207,10 +226,23 @@ def member_sidecar(spec: str) -> dict[str, Any]:
 
 def _views(
     photos: Sequence[Photo], images: dict[Path, np.ndarray], rng: np.random.Generator, n: int
-) -> tuple[np.ndarray, np.ndarray]:
-    pick = rng.integers(0, len(photos), n)
-    imgs = np.stack([photo_view(images[photos[i].path], rng) for i in pick.tolist()])
-    return imgs, np.array([1.0 if photos[i].land else 0.0 for i in pick.tolist()], np.float32)
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``n`` photograph views, their clear-site targets and their cell targets: per view and stride-8
+    cell lying wholly in the photograph's middle, 0 (no hazard) where the photograph is a clear site,
+    and the roof cell's target, 1 on a clear roof, 0 where the photograph shows no roof (``label``
+    ``not_roof``); -1 where the label says nothing of the cell."""
+    pick = rng.integers(0, len(photos), n).tolist()
+    views = [photo_view_middle(images[photos[i].path], rng) for i in pick]
+    clear = np.array([1.0 if photos[i].land else 0.0 for i in pick], np.float32)
+    side = INPUT_PX // 8
+    middle = np.stack([m for _v, m in views]).reshape(n, side, 8, side, 8).all(axis=(2, 4))
+    free = middle & (clear > 0)[:, None, None]
+    roof_value = np.array(
+        [1.0 if photos[i].land and photos[i].label == "clear_roof" else 0.0 if photos[i].label == "not_roof"
+         else -1.0 for i in pick], np.float32,
+    )  # fmt: skip
+    roof = np.where(middle, roof_value[:, None, None], -1.0).astype(np.float32)
+    return np.stack([v for v, _m in views]), clear, free, roof
 
 
 def fine_tune(
@@ -243,7 +275,7 @@ def fine_tune(
     net.eval()  # the folded norms stay fixed maps (module docstring)
     for step in range(args.steps):
         rng = np.random.default_rng([args.seed, STREAM, step])
-        p_img, p_clear = _views(used, images, rng, args.photo_batch)
+        p_img, p_clear, p_free, p_roof = _views(used, images, rng, args.photo_batch)
         r_img, cells, valid, clear = [], [], [], []
         picks = np.concatenate([
             rng.integers(0, first_closeup, args.render_batch - closeups_here),
@@ -273,6 +305,22 @@ def fine_tune(
             clear_logit[n:].view(-1), torch.from_numpy(p_clear), pos_weight=photo_pos_weight
         )
         loss = cell_loss + render_clear + args.photo_weight * photo_clear
+        if args.photo_cells > 0 and p_free.any():
+            # a clear photograph's middle holds no object, person, vehicle, water or marking
+            free = torch.from_numpy(p_free)
+            hazard_logits = logits[n:, list(HAZARD_CLASSES)]
+            bce = torch.nn.functional.binary_cross_entropy_with_logits(
+                hazard_logits, torch.zeros_like(hazard_logits), reduction="none"
+            )
+            loss = loss + args.photo_cells * (bce * free[:, None]).sum() / (free.sum() * len(HAZARD_CLASSES))
+        if args.photo_roof > 0 and (p_roof >= 0).any():
+            # a clear roof's middle is roof surface; a photograph of no roof has none there
+            target = torch.from_numpy(p_roof)
+            known = (target >= 0).float()
+            bce = torch.nn.functional.binary_cross_entropy_with_logits(
+                logits[n:, ROOF], target.clamp(min=0.0), reduction="none"
+            )
+            loss = loss + args.photo_roof * (bce * known).sum() / known.sum()
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
@@ -328,6 +376,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--render-batch", type=int, default=16)
     p.add_argument("--photo-weight", type=float, default=1.0, help="weight of the photographs' loss")
     p.add_argument(
+        "--photo-cells", type=float, default=PHOTO_CELLS,
+        help="weight of the hazard cells held at 0 in the middle of the clear photographs' views",
+    )  # fmt: skip
+    p.add_argument(
+        "--photo-roof", type=float, default=PHOTO_ROOF,
+        help="weight of the roof cells held at 1 in a clear roof's middle, at 0 in a photograph of no roof",
+    )  # fmt: skip
+    p.add_argument(
         "--closeups", type=int, default=CLOSEUPS,
         help="procedural roof close-ups beside the renders (landfall_train.closeups)",
     )  # fmt: skip
@@ -373,7 +429,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         "learnt_sources": sorted({p.source for p in learn}),
         "held_out_sources": sorted({p.source for p in held}),
         "steps": args.steps, "lr": args.lr, "photo_batch": args.photo_batch,
-        "render_batch": args.render_batch, "photo_weight": args.photo_weight, "alpha": args.alpha,
+        "render_batch": args.render_batch, "photo_weight": args.photo_weight,
+        "photo_cells": args.photo_cells, "photo_roof": args.photo_roof, "alpha": args.alpha,
         "closeups": args.closeups, "closeup_share": args.closeup_share,
         "render_digest": digest,
         "seconds": round(seconds, 1), "torch": _torch_version(), "commit": _commit(),

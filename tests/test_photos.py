@@ -20,10 +20,12 @@ torch = pytest.importorskip("torch", reason="the training extra: pip install -e 
 from landfall_train.folds import scores  # noqa: E402
 from landfall_train.photos import (  # noqa: E402
     Photo,
+    _views,
     from_onnx,
     interpolate,
     load_photos,
     photo_view,
+    photo_view_middle,
     split,
     trainable,
 )
@@ -140,6 +142,42 @@ def test_photo_views_are_seeded_square_and_keep_the_picture() -> None:
     assert a.dtype == np.uint8
     assert np.array_equal(a, photo_view(rgb, np.random.default_rng(1)))
     assert a[:, :, 0].mean() > a[:, :, 2].mean() + 60
+
+
+def test_a_views_middle_mask_follows_the_crop_turn_and_mirror() -> None:
+    # the photograph's middle painted white on black: the mask must cover what is white in the view
+    h, w = 300, 400
+    rgb = np.zeros((h, w, 3), np.uint8)
+    rgb[h // 4 : 3 * h // 4, w // 4 : 3 * w // 4] = 255
+    for seed in range(20):
+        view, middle = photo_view_middle(rgb, np.random.default_rng(seed))
+        assert np.array_equal(view, photo_view(rgb, np.random.default_rng(seed)))  # the same draws
+        assert middle.shape == (128, 128)
+        assert ((view.mean(axis=2) > 128) != middle).mean() < 0.03  # a pixel's border, no more
+
+
+def test_cell_targets_only_where_the_label_speaks_of_the_middle(tmp_path: Path) -> None:
+    rgb = np.full((64, 64, 3), 128, np.uint8)
+    photos = [
+        Photo(tmp_path / "clear.jpg", "clear_roof", True, "a", "CC0"),
+        Photo(tmp_path / "cluttered.jpg", "cluttered_roof", False, "a", "CC0"),
+        Photo(tmp_path / "road.jpg", "not_roof", False, "a", "CC0"),
+    ]
+    images = {p.path: rgb for p in photos}
+    seen = set()
+    for seed in range(30):
+        picks = np.random.default_rng(seed).integers(0, 3, 4).tolist()  # what _views will draw first
+        _img, clear, free, roof = _views(photos, images, np.random.default_rng(seed), 4)
+        for k, i in enumerate(picks):
+            seen.add(i)
+            assert clear[k] == (1.0 if i == 0 else 0.0)
+            assert free[k].any() == (i == 0)  # no hazard: only in a clear photograph's middle
+            known = roof[k][roof[k] >= 0]
+            assert set(known.tolist()) <= ({1.0} if i == 0 else {0.0} if i == 2 else set())
+            assert (roof[k] >= 0).any() == (i != 1)  # a cluttered roof says nothing of a cell
+            if i == 0:
+                assert np.array_equal(free[k], roof[k] == 1.0)
+    assert seen == {0, 1, 2}
 
 
 def test_fold_scores_count_each_answerable_confirm_and_each_clear_cluttered_pair_once() -> None:
