@@ -146,23 +146,32 @@ class VehicleController:
         distance = math.sqrt(x * x + y * y + z * z)
         if not (math.isfinite(distance) and distance > 0 and z > 0):
             raise ControlError(f"refusing a landing target not below the vehicle ({x}, {y}, {z})")
+        # angle_x: image right (body right); angle_y: image down (body aft), as ArduPilot reads them
+        angles = (math.atan2(y, z), math.atan2(-x, z), distance)
+        self._send_landing_target(mavlink2.MAV_FRAME_BODY_FRD, angles, target_frd_m, time_usec)
+
+    def send_landing_target_local(self, site_ned_m: tuple[float, float, float], time_usec: int) -> None:
+        """LANDING_TARGET in ``MAV_FRAME_LOCAL_NED``: where the landing site is in the autopilot's local
+        frame (what PX4's precision land reads; it stamps the target on arrival unless TIMESYNC runs)."""
+        if not all(math.isfinite(v) for v in site_ned_m):
+            raise ControlError(f"refusing a landing target that is not a place {site_ned_m}")
+        # the angles and the distance are not read in this frame
+        self._send_landing_target(mavlink2.MAV_FRAME_LOCAL_NED, (0.0, 0.0, 0.0), site_ned_m, time_usec)
+
+    def _send_landing_target(
+        self,
+        frame: int,
+        angles: tuple[float, float, float],
+        xyz: tuple[float, float, float],
+        time_usec: int,
+    ) -> None:
+        """LANDING_TARGET with ``position_valid`` 1: ``xyz`` in ``frame``, ``angles`` (angle_x, angle_y,
+        distance) beside them."""
         sys_id, comp_id = self.vehicle
         msg = self._mav.landing_target_encode(
-            time_usec,
-            0,  # target_num
-            mavlink2.MAV_FRAME_BODY_FRD,
-            math.atan2(y, z),  # angle_x: image right (body right) ...
-            math.atan2(-x, z),  # ... angle_y: image down (body aft), as ArduPilot reads them
-            distance,
-            0.0,
-            0.0,
-            x,
-            y,
-            z,
-            [1.0, 0.0, 0.0, 0.0],
-            mavlink2.LANDING_TARGET_TYPE_VISION_OTHER,
-            1,  # position_valid: x, y, z hold
-        )
+            time_usec, 0, frame, *angles, 0.0, 0.0, *xyz, [1.0, 0.0, 0.0, 0.0],
+            mavlink2.LANDING_TARGET_TYPE_VISION_OTHER, 1,
+        )  # fmt: skip
         self._send_to(msg, sys_id, comp_id)
 
     async def command(self, command: int, *params: float, timeout_s: float = 1.5, tries: int = 3) -> int:
@@ -458,12 +467,13 @@ class VehicleController:
             if err < tolerance_m and self.tm.speed_m_s < speed_m_s:
                 return
 
-    async def land(self, timeout_s: float) -> None:
-        """Hand over to the autopilot's land mode and wait for the touchdown (landed or disarmed)."""
-        await self.set_mode(Mode.LAND)
+    async def land(self, timeout_s: float, mode: Mode = Mode.LAND) -> None:
+        """Hand over to the autopilot's land mode (or ``mode``: PX4's AUTO.PRECLAND) and wait for the
+        touchdown (landed or disarmed)."""
+        await self.set_mode(mode)
         self._target = None
         await self.release()
-        self._engaged_mode = self.flavour.modes[Mode.LAND]
+        self._engaged_mode = self.flavour.modes[mode]
         deadline = time.monotonic() + timeout_s
         while not self.tm.state.on_ground:
             self.check_interruption()

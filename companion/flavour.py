@@ -13,6 +13,7 @@ class Mode(enum.Enum):
     GUIDED = "guided"  # PX4 OFFBOARD, ArduPilot GUIDED: the companion flies
     HOLD = "hold"  # PX4 AUTO.LOITER, ArduPilot LOITER
     LAND = "land"  # PX4 AUTO.LAND, ArduPilot LAND
+    PRECLAND = "precland"  # PX4 AUTO.PRECLAND; ArduPilot lands on a target in LAND
 
 
 @dataclass(frozen=True, slots=True)
@@ -42,8 +43,13 @@ class Flavour:
 
 PX4 = Flavour(
     name="px4",
-    modes={Mode.GUIDED: 6 << 16, Mode.HOLD: (4 << 16) | (3 << 24), Mode.LAND: (4 << 16) | (6 << 24)},
-    set_mode={Mode.GUIDED: (1, 6, 0), Mode.HOLD: (1, 4, 3), Mode.LAND: (1, 4, 6)},
+    modes={
+        Mode.GUIDED: 6 << 16,
+        Mode.HOLD: (4 << 16) | (3 << 24),
+        Mode.LAND: (4 << 16) | (6 << 24),
+        Mode.PRECLAND: (4 << 16) | (9 << 24),
+    },
+    set_mode={Mode.GUIDED: (1, 6, 0), Mode.HOLD: (1, 4, 3), Mode.LAND: (1, 4, 6), Mode.PRECLAND: (1, 4, 9)},
     needs_stream=True,
     comes_down={
         (4 << 16) | (5 << 24): "AUTO.RTL",
@@ -78,8 +84,8 @@ PX4 = Flavour(
 )
 ARDUPILOT = Flavour(
     name="ardupilot",
-    modes={Mode.GUIDED: 4, Mode.HOLD: 5, Mode.LAND: 9},
-    set_mode={Mode.GUIDED: (1, 4, 0), Mode.HOLD: (1, 5, 0), Mode.LAND: (1, 9, 0)},
+    modes={Mode.GUIDED: 4, Mode.HOLD: 5, Mode.LAND: 9, Mode.PRECLAND: 9},
+    set_mode={Mode.GUIDED: (1, 4, 0), Mode.HOLD: (1, 5, 0), Mode.LAND: (1, 9, 0), Mode.PRECLAND: (1, 9, 0)},
     needs_stream=False,
     comes_down={6: "RTL", 9: "LAND", 21: "SMART_RTL", 27: "AUTO_RTL"},
     names={

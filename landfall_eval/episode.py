@@ -603,6 +603,7 @@ def precision_landing_summary(events: list[dict[str, Any]]) -> dict[str, Any] | 
     return {
         "used": bool(last.get("used")),
         "why": str(last.get("why", "")),
+        "mode": last.get("mode"),
         "targets_sent": int(last.get("targets_sent", 0)),
         "tracks_found": sum(bool(e.get("found")) for e in tracks),
         "tracks_lost": sum(not e.get("found") for e in tracks),

@@ -123,6 +123,9 @@ PARAMS: dict[str, float] = {
     "COM_DISARM_PRFLT": 60.0,  # the air start arms, then asks for the takeoff a moment later
     "MPC_TKO_SPEED": 3.0,  # and climbs at the envelope's climb rate (MPC_Z_VEL_MAX_UP)
     "SDLOG_MODE": -1,  # no flight logs in the temporary directory
+    # precision land on the companion's LANDING_TARGET (companion/precision.py): a lost target lands
+    # where it is rather than climbing to PLD_SRCH_ALT above the origin to search for it
+    "PLD_MAX_SRCH": 0,
 }
 # The flight envelope the emulated PX4 flies (and companion-bench's kinematic bound assumes), in place of
 # PX4's defaults (12 m/s across): the same F450 whoever flies it.

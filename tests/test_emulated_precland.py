@@ -1,5 +1,6 @@
-"""The emulated ArduCopter's precision landing on a companion's LANDING_TARGET (issue 35), stepped
-without processes; and the message as the emulation's MAVLink server reads it. The companion's side,
+"""The emulated autopilots' precision landing on a companion's LANDING_TARGET (issue 35), stepped
+without processes: ArduCopter's in LAND, PX4's AUTO.PRECLAND (simbridge.autopilot.precland, its phases
+one by one); and the message as the emulation's MAVLink server reads it for each. The companion's side,
 flown end to end: tests/test_precision_landing.py."""
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 
 from simbridge.autopilot.core import Autopilot
 from simbridge.autopilot.flavours import flavour_named
+from simbridge.autopilot.precland import HORIZONTAL_SETTLE_S, PrecLand, PrecLandTune
 from simbridge.autopilot.server import AutopilotServer
 from simbridge.geo import GeoOrigin, rotate_body_to_ned
 from simbridge.telemetry import Telemetry
@@ -72,11 +74,108 @@ def test_ardupilot_land_ignores_the_target_with_precision_landing_off() -> None:
 
 
 def test_px4_auto_land_ignores_the_target() -> None:
-    """PX4's precision landing (AUTO.PRECLAND) is not emulated: AUTO.LAND lands where it is."""
+    """PX4 lands on a target in AUTO.PRECLAND only: AUTO.LAND lands where it is."""
     ap, v, _ = _rig("px4")
     _land_with_target(ap, v, (1.5, -1.0), 30.0)
     assert v.state.on_ground
     assert math.dist(v.state.pos_ned_m[:2], (0.0, 0.0)) < 0.2
+
+
+def test_px4_precland_flies_over_the_local_target_then_lands_on_it() -> None:
+    ap, v, _ = _rig("px4")
+    ap.landing_target_local((1.5, -1.0, 0.0))  # sent before the switch, as the companion does
+    assert ap.set_mode(ap.flavour.mode("AUTO.PRECLAND")).result == 0
+    for step in range(30 * STEPS_S):
+        if step % (STEPS_S // 5) == 0 and not v.state.on_ground:
+            ap.landing_target_local((1.5, -1.0, 0.0))
+        v.step(ap.tick(v.state), ap.armed)
+        if step == 2 * STEPS_S:
+            assert v.state.pos_ned_m[2] == pytest.approx(-6.0, abs=0.3)  # across first, at its height
+    assert v.state.on_ground
+    assert math.dist(v.state.pos_ned_m[:2], (1.5, -1.0)) < 0.2
+
+
+TUNE = PrecLandTune(
+    timeout_s=5.0, hacc_rad_m=0.2, final_approach_alt_m=0.1, search_alt_m=10.0, search_timeout_s=10.0,
+    max_searches=0,
+)  # fmt: skip
+HIGH = (0.0, 0.0, -30.0)  # the vehicle, 30 m above the local origin
+SITE = (3.0, -4.0, -10.0)  # the target: a roof 10 m up
+
+
+def _run(pl: PrecLand, t0: float, t1: float, pos: tuple[float, float, float], every_s: float | None):
+    """Step ``pl`` at 50 Hz from ``t0`` to ``t1`` with the vehicle at ``pos``, hearing the target every
+    ``every_s`` (None: never); the last command."""
+    cmd = None
+    t, next_heard = t0, t0
+    while t < t1:
+        if every_s is not None and t >= next_heard:
+            pl.heard(t, SITE)
+            next_heard += every_s
+        cmd = pl.step(t, pos)
+        t += 0.02
+    return cmd
+
+
+def test_a_target_heard_before_the_mode_starts_the_approach_at_the_height_it_began() -> None:
+    pl = PrecLand(TUNE, 100.0, HIGH, last=(99.9, SITE))  # sent just before the switch, as the companion does
+    cmd = pl.step(100.0, HIGH)
+    assert pl.phase == "approach"
+    assert cmd.land is False
+    assert cmd.ne == SITE[:2]
+    assert cmd.d == HIGH[2]
+
+
+def test_over_the_target_for_two_seconds_then_down_onto_it() -> None:
+    pl = PrecLand(TUNE, 0.0, HIGH, last=(0.0, SITE))
+    above = (SITE[0] + 0.1, SITE[1] - 0.1, HIGH[2])
+    _run(pl, 0.0, HORIZONTAL_SETTLE_S - 0.2, above, 0.2)
+    assert pl.phase == "approach"  # not yet two seconds within PLD_HACC_RAD
+    cmd = _run(pl, HORIZONTAL_SETTLE_S - 0.2, HORIZONTAL_SETTLE_S + 0.5, above, 0.2)
+    assert pl.phase == "descend"
+    assert cmd is not None
+    assert cmd.land
+    assert cmd.ne == SITE[:2]
+    # 0.3 m off is not over it: the approach goes on
+    off = PrecLand(TUNE, 0.0, HIGH, last=(0.0, SITE))
+    _run(off, 0.0, 5.0, (SITE[0] + 0.3, SITE[1], HIGH[2]), 0.2)
+    assert off.phase == "approach"
+
+
+def test_a_target_lost_in_the_descent_lands_where_it_is_with_no_search_allowed() -> None:
+    pl = PrecLand(TUNE, 0.0, HIGH, last=(0.0, SITE))
+    low = (SITE[0], SITE[1], SITE[2] - 2.0)  # 2 m over the roof
+    _run(pl, 0.0, 3.0, low, 0.2)
+    assert pl.phase == "descend"
+    cmd = _run(pl, 3.0, 3.0 + TUNE.timeout_s + 0.5, low, None)  # the camera loses it: PLD_BTOUT later
+    assert pl.phase == "fallback"
+    assert cmd is not None
+    assert cmd.land
+    assert cmd.ne == low[:2]
+    # with one search allowed (PX4's default is 3), the same loss climbs to PLD_SRCH_ALT instead
+    searching = PrecLand(PrecLandTune(5.0, 0.2, 0.1, 10.0, 10.0, 1), 0.0, HIGH, last=(0.0, SITE))
+    _run(searching, 0.0, 3.0, low, 0.2)
+    cmd = _run(searching, 3.0, 3.0 + TUNE.timeout_s + 1.6, low, None)
+    assert searching.phase == "search"
+    assert cmd is not None
+    assert not cmd.land
+    assert cmd.d == -10.0
+
+
+def test_no_target_at_the_start_searches_or_with_no_search_time_lands_in_place() -> None:
+    pl = PrecLand(TUNE, 0.0, HIGH)
+    cmd = _run(pl, 0.0, 1.5, HIGH, None)
+    assert pl.phase == "search"
+    assert cmd is not None
+    assert cmd.d == -TUNE.search_alt_m
+    _run(pl, 1.5, 12.0, HIGH, None)
+    assert pl.phase == "fallback"  # PLD_SRCH_TOUT ran out
+    no_search = PrecLand(PrecLandTune(5.0, 0.2, 0.1, 10.0, 0.0, 0), 0.0, HIGH)
+    cmd = _run(no_search, 0.0, 1.5, HIGH, None)
+    assert no_search.phase == "fallback"
+    assert cmd is not None
+    assert cmd.land
+    assert cmd.ne == HIGH[:2]
 
 
 class _Sent:
@@ -121,3 +220,16 @@ def test_server_reads_angles_as_arducopter_does() -> None:
     los = (-math.tan(-0.2), math.tan(0.1), 1.0)
     norm = math.sqrt(sum(c * c for c in los))
     assert unit == pytest.approx(tuple(c / norm for c in los))
+
+
+def test_px4_server_reads_local_ned_positions_and_refuses_other_frames() -> None:
+    ap, _v, texts = _rig("px4")
+    server = _server(ap)
+    server.handle(_landing_target(mavlink2.MAV_FRAME_BODY_FRD, 1, (3.0, 4.0, 12.0)), None)
+    assert "landing target: coordinate frame 12 unsupported" in texts  # PX4's own words
+    assert ap._pld_heard is None
+    server.handle(_landing_target(mavlink2.MAV_FRAME_BODY_FRD, 0, (0.0, 0.0, 0.0)), None)  # angles only
+    assert ap._pld_heard is None  # PX4's IR-LOCK path, not run here
+    server.handle(_landing_target(mavlink2.MAV_FRAME_LOCAL_NED, 1, (1.0, -2.0, -8.0)), None)
+    assert ap._pld_heard is not None
+    assert ap._pld_heard[1] == (1.0, -2.0, -8.0)

@@ -363,8 +363,9 @@ def test_a_lost_companion_link_hands_real_px4_to_its_own_failsafe_then_the_compa
     s, COM_OBL_RC_ACT 0: position, which with no RC holds) takes the vehicle out of OFFBOARD into
     POSCTL; the companion sees the silence and keeps its target; once the link is back PX4 takes
     OFFBOARD again as the setpoints arrive, and the companion confirms the same site again and lands on
-    it through AUTO.LAND, PX4's land detector and disarm; the world grades the touchdown: the checks
-    the emulation's PX4 passes in tests/test_companion_e2e.py."""
+    it through PX4's precision land (AUTO.PRECLAND on its LANDING_TARGET; AUTO.LAND if none went out in
+    time), PX4's land detector and disarm; the world grades the touchdown: the checks the emulation's
+    PX4 passes in tests/test_companion_e2e.py."""
     from tests.test_companion_e2e import _clean_relay, _events, _via
 
     relays: list[Any] = []
@@ -399,10 +400,16 @@ def test_a_lost_companion_link_hands_real_px4_to_its_own_failsafe_then_the_compa
     modes = [m for _, m in timed]
     taken = modes.index("OFFBOARD")
     assert modes[taken : taken + 3] == ["OFFBOARD", "POSCTL", "OFFBOARD"], modes  # PX4's own hold
-    assert "AUTO.LAND" in modes[taken + 3 :], modes
-    # the touchdown is the firmware's AUTO.LAND (PX4 changes mode again as it disarms)
-    assert [m for t, m in timed if t <= td["t_s"]][-1] == "AUTO.LAND", timed
-    kinds = [e["kind"] for e in _events(record)]
+    # the touchdown is the firmware's: its precision land on the companion's LANDING_TARGET, where one
+    # went out in time, else AUTO.LAND (PX4 changes mode again as it disarms)
+    events = _events(record)
+    (landing,) = [e for e in events if e["kind"] == "precision_landing"]
+    assert landing["why"].startswith("AUTO.PRECLAND, PLD_MAX_SRCH 0") or not landing["used"], landing
+    assert landing["mode"] == ("AUTO.PRECLAND" if landing["used"] else "AUTO.LAND"), landing
+    assert landing["mode"] in modes[taken + 3 :], modes
+    assert [m for t, m in timed if t <= td["t_s"]][-1] == landing["mode"], timed
+    assert "PLD_MAX_SRCH 0, PLD_BTOUT 5 s" in log  # read from the firmware when it was first heard
+    kinds = [e["kind"] for e in events]
     restored = kinds.index("link_restored")
     assert "confirm" in kinds[restored:]
 

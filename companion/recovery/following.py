@@ -27,12 +27,14 @@ from typing import Any
 import cv2
 import numpy as np
 
+from companion.flavour import Mode
 from companion.guidance.frames import PinholeCamera, quat_to_matrix
 from companion.perception.site_track import SiteView, TrackParams, TrackResult, centre_down, track_site
 from companion.precision import PrecisionLanding
 from companion.recovery.core import FrameUnavailable, RecoveryBase
 
 LAND_FEED_PERIOD_S = 0.2  # at most five targets a second (ArduPilot forgets one after 1 s)
+PRECLAND_FIRST_S = 1.5  # PX4's AUTO.PRECLAND is asked for once a target went out, within this long
 STEP_FOLLOW_PERIOD_S = 0.5  # during a descent step, a look for the site twice a second
 STEP_FOLLOW_MIN_M = 0.3  # and the step's target moved when it is this far from where the site is seen
 RESET_CHECK_PERIOD_S = 0.1  # and for the estimate's resets ten times a second
@@ -97,6 +99,7 @@ class Following(RecoveryBase):
     _resets_seen = 0  # the estimate's resets (``tm.position_resets``) the tracker's state has taken
     _site_seen: collections.deque[tuple[float, float, float]] | None = None  # (t_boot_s, north, east)
     _drift_budget_s = DRIFT_WAIT_S  # what is left of the round's time for holding over a drifting site
+    _target_local_ned = False  # landing targets in the autopilot's local frame (PX4), not body FRD
 
     def _follow_from(self, frame: Any, target: tuple[float, float, float]) -> None:
         """The frame the site was chosen in, and where inverse perspective mapping put it."""
@@ -208,9 +211,7 @@ class Following(RecoveryBase):
             with contextlib.suppress(asyncio.CancelledError):
                 await follower
 
-    async def _follow_during_step(
-        self, moved: list[tuple[float, float, float]], adopt: bool = False
-    ) -> None:
+    async def _follow_during_step(self, moved: list[tuple[float, float, float]], adopt: bool = False) -> None:
         """Twice a second: a frame, the site in it, and the step's target onto it when it moved
         (appended to ``moved``); the estimate's resets at once. Frames missing or unusable are
         skipped: the next one is tried. ``adopt``: see :meth:`_track_once`."""
@@ -306,6 +307,17 @@ class Following(RecoveryBase):
             "reacquired": result.reacquired,
         }
 
+    async def _first_target(self, stats: dict[str, Any]) -> bool:
+        """Wait (holding the descent's last target) until the feed has sent a landing target, at most
+        ``PRECLAND_FIRST_S``; True if one went out."""
+        deadline = time.monotonic() + PRECLAND_FIRST_S
+        while stats["sent"] == 0:
+            self.ctl.check_interruption()
+            if time.monotonic() > deadline:
+                return False
+            await asyncio.sleep(0.05)
+        return True
+
     async def _feed_landing_target(self, stats: dict[str, Any]) -> None:
         """While the autopilot lands: a frame, the site in it, LANDING_TARGET toward it; until the
         task is cancelled. A frame without the site sends nothing (the autopilot keeps its last
@@ -336,7 +348,7 @@ class Following(RecoveryBase):
             return f"no frame: {exc}", math.nan
         self._catch_up()
         try:
-            result = await asyncio.to_thread(self._track_once, frame)
+            result = await asyncio.to_thread(self._track_once, frame, not self._target_local_ned)
         except (ValueError, cv2.error) as exc:  # a malformed frame: said, and the next one tried
             return f"frame not usable: {exc}", math.nan
         if result is None:
@@ -349,7 +361,12 @@ class Following(RecoveryBase):
         frd = quat_to_matrix(s.quat_wxyz).T @ (site - np.asarray(s.pos_ned_m))
         if frd[2] <= 0.05:
             return "the site is level with the vehicle", result.score
-        self.ctl.send_landing_target((float(frd[0]), float(frd[1]), float(frd[2])), int(s.t_boot_s * 1e6))
+        if self._target_local_ned:  # PX4: where the site is in its local frame
+            self.ctl.send_landing_target_local(
+                (float(site[0]), float(site[1]), float(site[2])), int(s.t_boot_s * 1e6)
+            )
+        else:
+            self.ctl.send_landing_target((float(frd[0]), float(frd[1]), float(frd[2])), int(s.t_boot_s * 1e6))
         stats["sent"] += 1
         stats["last_site_ned_m"] = [round(float(v), 3) for v in site]
         return "", result.score
@@ -364,9 +381,22 @@ class Following(RecoveryBase):
         if ready and self._track is None:
             why, ready = "no camera view of the site to follow: the absolute target", False
         stats: dict[str, Any] = {"sent": 0, "lost": [], "last_site_ned_m": None}
+        own_mode = ready and setup is not None and setup.own_mode
+        self._target_local_ned = ready and setup is not None and setup.local_ned
         feed = asyncio.create_task(self._feed_landing_target(stats), name="landing-target") if ready else None
+        mode = Mode.LAND
         try:
-            await self.ctl.land(self.p.land_timeout_s)
+            if own_mode:
+                # PX4's AUTO.PRECLAND searches (or lands where it is) a second after it starts without a
+                # target: it is asked for only once a target went out, else the land mode it is
+                if await self._first_target(stats):
+                    mode = Mode.PRECLAND
+                else:
+                    why = f"no landing target within {PRECLAND_FIRST_S:g} s: the absolute target"
+                    ready = False  # AUTO.LAND reads no target: the feed stops (below)
+            if not ready and feed is not None:
+                feed.cancel()
+            await self.ctl.land(self.p.land_timeout_s, mode)
         finally:
             if feed is not None:
                 feed.cancel()
@@ -378,6 +408,7 @@ class Following(RecoveryBase):
                     "round": self.round,
                     "used": ready,
                     "why": why,
+                    "mode": self.ctl.flavour.mode_name(self.ctl.flavour.modes[mode]),
                     "targets_sent": stats["sent"],
                     "lost": stats["lost"],
                     "last_site_ned_m": stats["last_site_ned_m"],

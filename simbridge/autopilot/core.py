@@ -28,6 +28,7 @@ from simbridge.autopilot.flavours import (
     Nav,
     Tunables,
 )
+from simbridge.autopilot.precland import PrecLand
 from simbridge.control import Setpoint
 from simbridge.estimate import EstimateError
 from simbridge.geo import Vec3, rotate_body_to_ned
@@ -126,6 +127,9 @@ class Autopilot:
         self._plnd_seen: tuple[float, Vec3, float] | None = None
         self._plnd_target_ne: tuple[float, float] | None = None
         self._plnd_wait_d: float | None = None  # the height held while the target is too far across
+        # PX4's AUTO.PRECLAND: the newest LANDING_TARGET in the local frame (when, where), and the mode's run
+        self._pld_heard: tuple[float, Vec3] | None = None
+        self._precland: PrecLand | None = None
         self._apply_limits()
 
     # ------------------------------------------------------------------ spawn
@@ -319,6 +323,9 @@ class Autopilot:
     def text_warning(self, text: str) -> None:
         self._emit_text(SEV_WARNING, text)
 
+    def text_critical(self, text: str) -> None:
+        self._emit_text(SEV_CRITICAL, text)
+
     # ------------------------------------------------------------------ per-step
     def tick(self, s: VehicleState) -> Setpoint | None:
         """Decide what to fly for the next step. ``None``: motors idle if armed, else stopped."""
@@ -344,6 +351,8 @@ class Autopilot:
         if nav is Nav.TAKEOFF:
             return self._fly_takeoff(s)
         if nav is Nav.LAND:
+            if self._precland is not None:
+                return self._fly_precland(s, self._precland)
             return self._fly_land(s, self._hold, self._precision_target(s))
         if nav is Nav.RTL:
             return self._fly_rtl(s)
@@ -450,6 +459,26 @@ class Autopilot:
                 self._plnd_target_ne = (est.pos_ned_m[0] + dn - bn, est.pos_ned_m[1] + de - be)
             self._plnd_seen = None  # each line of sight places the target once
         return self._plnd_target_ne
+
+    def landing_target_local(self, target_ned: Vec3) -> None:
+        """A LANDING_TARGET in the local frame (PX4: the landing target pose, whatever the mode)."""
+        if not all(math.isfinite(v) for v in target_ned):
+            return
+        self._pld_heard = (self.vehicle.state.t_s, target_ned)
+        if self._precland is not None:
+            self._precland.heard(*self._pld_heard)
+
+    def _fly_precland(self, s: VehicleState, run: PrecLand) -> Setpoint:
+        """AUTO.PRECLAND (:mod:`simbridge.autopilot.precland`): its answer, from the estimate's frame
+        into the world's (an estimator's bias moves where the vehicle flies, as with every target)."""
+        cmd = run.step(s.t_s, self.estimated_state.pos_ned_m)
+        bn, be, bd = self.estimate.bias_ned_m if self.estimate is not None else (0.0, 0.0, 0.0)
+        ne = (cmd.ne[0] - bn, cmd.ne[1] - be)
+        yaw = self._hold.yaw_rad if self._hold is not None else None
+        if cmd.land:
+            return self._fly_land(s, Setpoint(pos_ne_m=ne, yaw_rad=yaw))
+        d = cmd.d - bd if cmd.d is not None else s.pos_ned_m[2]
+        return Setpoint.hold((ne[0], ne[1], d), yaw)
 
     def _fly_land(
         self, s: VehicleState, over: Setpoint | None, target_ne: tuple[float, float] | None = None
@@ -700,6 +729,11 @@ class Autopilot:
         if changed:
             self._plnd_target_ne = None  # a target is followed within one landing only
             self._plnd_wait_d = None
+            tune = self.flavour.precland(self.params) if spec.precision else None
+            heard = self._pld_heard
+            self._precland = (
+                PrecLand(tune, s.t_s, self.estimated_state.pos_ned_m, heard) if tune is not None else None
+            )
         if spec.nav is Nav.RTL:
             self._rtl_phase = "climb"
         if spec.nav is Nav.EXTERNAL and not self.flavour.offboard_needs_stream:

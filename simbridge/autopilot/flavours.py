@@ -9,6 +9,7 @@ import math
 from dataclasses import dataclass
 from typing import ClassVar
 
+from simbridge.autopilot.precland import PrecLandTune
 from simbridge.battery import Battery
 from simbridge.control import ControlLimits
 
@@ -69,6 +70,7 @@ class ModeSpec:
     nav: Nav
     custom_mode: int
     armable: bool = True
+    precision: bool = False  # a landing on a companion's target in a mode of its own (PX4's AUTO.PRECLAND)
 
 
 @dataclass(frozen=True, slots=True)
@@ -154,7 +156,11 @@ class Flavour:
 
     def precision_landing(self, p: dict[str, float]) -> PrecisionLandingTune | None:
         """How land mode follows a companion's LANDING_TARGET; None: it does not (PX4's precision
-        landing, AUTO.PRECLAND, is not emulated)."""
+        landing is a mode of its own: :meth:`precland`)."""
+        return None
+
+    def precland(self, p: dict[str, float]) -> PrecLandTune | None:
+        """PX4's AUTO.PRECLAND (:mod:`simbridge.autopilot.precland`); None: no such mode."""
         return None
 
     def external_mode_name(self) -> str:
@@ -187,6 +193,7 @@ class Px4Flavour(Flavour):
         ModeSpec("AUTO.LOITER", Nav.HOLD, _px4_custom(4, 3)),
         ModeSpec("AUTO.RTL", Nav.RTL, _px4_custom(4, 5), armable=False),
         ModeSpec("AUTO.LAND", Nav.LAND, _px4_custom(4, 6), armable=False),
+        ModeSpec("AUTO.PRECLAND", Nav.LAND, _px4_custom(4, 9), armable=False, precision=True),
         ModeSpec("OFFBOARD", Nav.EXTERNAL, _px4_custom(6)),
     )
     params = (
@@ -215,6 +222,15 @@ class Px4Flavour(Flavour):
         # (MAV_CMD_INJECT_FAILURE needs SYS_FAILURE_EN 1, as on real PX4)
         Param("EKF2_NOAID_TOUT", 5000000, MAV_PARAM_TYPE_INT32),
         Param("SYS_FAILURE_EN", 0, MAV_PARAM_TYPE_INT32),
+        # precision land (navigator's precland, AUTO.PRECLAND; simbridge.autopilot.precland): PX4's
+        # defaults but PLD_MAX_SRCH, 0 on simbridge's vehicle as on its real PX4 (simbridge.px4_sitl.PARAMS;
+        # PX4 ships 3): a lost target lands where the vehicle is
+        Param("PLD_BTOUT", 5.0, MAV_PARAM_TYPE_REAL32),
+        Param("PLD_HACC_RAD", 0.2, MAV_PARAM_TYPE_REAL32),
+        Param("PLD_FAPPR_ALT", 0.1, MAV_PARAM_TYPE_REAL32),
+        Param("PLD_SRCH_ALT", 10.0, MAV_PARAM_TYPE_REAL32),
+        Param("PLD_SRCH_TOUT", 10.0, MAV_PARAM_TYPE_REAL32),
+        Param("PLD_MAX_SRCH", 0, MAV_PARAM_TYPE_INT32),
     )
     air_start_mode = "AUTO.LOITER"
     ground_start_mode = "AUTO.LOITER"
@@ -233,6 +249,12 @@ class Px4Flavour(Flavour):
         7: "STABILIZED",
         8: "RATTITUDE",
     }
+
+    def precland(self, p: dict[str, float]) -> PrecLandTune | None:
+        return PrecLandTune(
+            p["PLD_BTOUT"], p["PLD_HACC_RAD"], p["PLD_FAPPR_ALT"], p["PLD_SRCH_ALT"], p["PLD_SRCH_TOUT"],
+            round(p["PLD_MAX_SRCH"]),
+        )  # fmt: skip
 
     def decode_set_mode(self, base_mode: float, main: float, sub: float) -> ModeSpec | int:
         if not (int(base_mode) & 1):

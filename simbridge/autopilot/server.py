@@ -296,9 +296,19 @@ class AutopilotServer:
 
     # ------------------------------------------------------------------ precision landing
     def _on_landing_target(self, msg: Any) -> None:
-        """LANDING_TARGET (addressed to no one): x, y, z in body FRD with position_valid, else the
-        angles (ArduPilot's reading: angle_x right, angle_y aft); other frames are refused as
-        ArduCopter does ("Plnd: Frame not supported")."""
+        """LANDING_TARGET (addressed to no one). ArduPilot: x, y, z in body FRD with position_valid, else
+        the angles (angle_x right, angle_y aft); other frames are refused as ArduCopter does ("Plnd: Frame
+        not supported"). PX4: x, y, z in its local frame with position_valid (the landing target pose);
+        another frame is refused as PX4 does; the angles alone would go to its IR-LOCK estimator, which
+        simbridge's PX4 does not run."""
+        if self.ap.flavour.name == "px4":
+            if int(msg.position_valid) != 1:
+                return
+            if int(msg.frame) != mavlink2.MAV_FRAME_LOCAL_NED:
+                self.ap.text_critical(f"landing target: coordinate frame {int(msg.frame)} unsupported")
+                return
+            self.ap.landing_target_local((float(msg.x), float(msg.y), float(msg.z)))
+            return
         if int(msg.position_valid) == 1:
             if int(msg.frame) != mavlink2.MAV_FRAME_BODY_FRD:
                 self.ap.text_warning("Plnd: Frame not supported")
