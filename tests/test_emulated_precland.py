@@ -23,13 +23,14 @@ from simbridge.vehicle import Vehicle
 STEPS_S = round(1 / Vehicle.DT_S)
 
 
-def _rig(flavour: str = "ardupilot") -> tuple[Autopilot, Vehicle, list[str]]:
+def _rig(
+    flavour: str = "ardupilot", home: tuple[float, float, float] = (0.0, 0.0, 0.0)
+) -> tuple[Autopilot, Vehicle, list[str]]:
+    """An autopilot flying 6 m over ``home`` (the world's NED; its local frame's origin is there)."""
     texts: list[str] = []
     v = Vehicle(GeoOrigin(), FlatTerrain())
-    ap = Autopilot(
-        flavour_named(flavour), v, (0.0, 0.0, 0.0), lambda _e, _f: None, lambda _s, t: texts.append(t)
-    )
-    v.reset((0.0, 0.0, -6.0), 0.0)
+    ap = Autopilot(flavour_named(flavour), v, home, lambda _e, _f: None, lambda _s, t: texts.append(t))
+    v.reset((home[0], home[1], -6.0), 0.0)
     ap.spawn_in_air(v.state)
     return ap, v, texts
 
@@ -81,18 +82,22 @@ def test_px4_auto_land_ignores_the_target() -> None:
     assert math.dist(v.state.pos_ned_m[:2], (0.0, 0.0)) < 0.2
 
 
-def test_px4_precland_flies_over_the_local_target_then_lands_on_it() -> None:
-    ap, v, _ = _rig("px4")
-    ap.landing_target_local((1.5, -1.0, 0.0))  # sent before the switch, as the companion does
+@pytest.mark.parametrize("home", [(0.0, 0.0, 0.0), (120.0, -80.0, 0.0)])
+def test_px4_precland_flies_over_the_local_target_then_lands_on_it(home: tuple[float, float, float]) -> None:
+    """The target is in the local frame, whose origin is home (a launch away from the world's origin,
+    as every city launch is): the touchdown is at home + target in the world."""
+    ap, v, _ = _rig("px4", home)
+    local = (1.5, -1.0, -ap.local_origin_ned_m[2])  # on the ground
+    ap.landing_target_local(local)  # sent before the switch, as the companion does
     assert ap.set_mode(ap.flavour.mode("AUTO.PRECLAND")).result == 0
     for step in range(30 * STEPS_S):
         if step % (STEPS_S // 5) == 0 and not v.state.on_ground:
-            ap.landing_target_local((1.5, -1.0, 0.0))
+            ap.landing_target_local(local)
         v.step(ap.tick(v.state), ap.armed)
         if step == 2 * STEPS_S:
             assert v.state.pos_ned_m[2] == pytest.approx(-6.0, abs=0.3)  # across first, at its height
     assert v.state.on_ground
-    assert math.dist(v.state.pos_ned_m[:2], (1.5, -1.0)) < 0.2
+    assert math.dist(v.state.pos_ned_m[:2], (home[0] + 1.5, home[1] - 1.0)) < 0.2
 
 
 TUNE = PrecLandTune(
@@ -232,4 +237,5 @@ def test_px4_server_reads_local_ned_positions_and_refuses_other_frames() -> None
     assert ap._pld_heard is None  # PX4's IR-LOCK path, not run here
     server.handle(_landing_target(mavlink2.MAV_FRAME_LOCAL_NED, 1, (1.0, -2.0, -8.0)), None)
     assert ap._pld_heard is not None
-    assert ap._pld_heard[1] == (1.0, -2.0, -8.0)
+    o = ap.local_origin_ned_m
+    assert ap._pld_heard[1] == (1.0 + o[0], -2.0 + o[1], -8.0 + o[2])  # world axes, as its pose

@@ -461,10 +461,15 @@ class Autopilot:
         return self._plnd_target_ne
 
     def landing_target_local(self, target_ned: Vec3) -> None:
-        """A LANDING_TARGET in the local frame (PX4: the landing target pose, whatever the mode)."""
+        """A LANDING_TARGET in the local frame, relative to the EKF origin (PX4: the landing target pose,
+        whatever the mode); kept in world axes of the estimated frame, as the estimated pose is."""
         if not all(math.isfinite(v) for v in target_ned):
             return
-        self._pld_heard = (self.vehicle.state.t_s, target_ned)
+        on, oe, od = self.local_origin_ned_m
+        self._pld_heard = (
+            self.vehicle.state.t_s,
+            (target_ned[0] + on, target_ned[1] + oe, target_ned[2] + od),
+        )
         if self._precland is not None:
             self._precland.heard(*self._pld_heard)
 
