@@ -450,9 +450,12 @@ def test_curated_run_writes_results_and_report_then_resumes(
         assert 10 < e["companion"]["peak_anon_mb"] <= e["companion"]["peak_rss_mb"]
         assert e["companion"]["cpu_s"] > 0
         assert (out / "episodes" / e["id"] / "episode.jsonl").exists()
-        # PX4's precision landing is not used yet: the absolute target, said in the record
-        assert e["precision_landing"]["used"] is False
-        assert "not used yet" in e["precision_landing"]["why"]
+        # PX4's precision land where a landing target went out in time, else AUTO.LAND on the absolute
+        # target: either way said in the record
+        pl = e["precision_landing"]
+        assert pl["mode"] == ("AUTO.PRECLAND" if pl["used"] else "AUTO.LAND"), pl
+        said = "AUTO.PRECLAND, PLD_MAX_SRCH 0" if pl["used"] else "no landing target"
+        assert pl["why"].startswith(said), pl
     s = results["summary"]
     assert s["episodes"] == 2
     assert s["safe_rate"] == 1.0

@@ -23,13 +23,20 @@ pytestmark = pytest.mark.slow
 async def _wait_for(
     gen_factory: Callable[[], object], cond: Callable[[object], bool], timeout_s: float
 ) -> object:
+    seen: list[object] = []  # the last value the stream gave, for the message when it times out
+
     async def scan() -> object:
         async for value in gen_factory():  # type: ignore[attr-defined]
+            seen[:] = [value]
             if cond(value):
                 return value
         raise AssertionError("telemetry stream ended")
 
-    return await asyncio.wait_for(scan(), timeout_s)
+    try:
+        return await asyncio.wait_for(scan(), timeout_s)
+    except TimeoutError:
+        last = f"last value {seen[0]}" if seen else "no value at all"
+        raise AssertionError(f"{gen_factory.__name__}: not there within {timeout_s:g} s ({last})") from None
 
 
 @pytest.mark.parametrize("autopilot", ["px4", pytest.param("px4-sitl", marks=pytest.mark.sitl)])
