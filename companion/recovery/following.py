@@ -99,7 +99,6 @@ class Following(RecoveryBase):
     _resets_seen = 0  # the estimate's resets (``tm.position_resets``) the tracker's state has taken
     _site_seen: collections.deque[tuple[float, float, float]] | None = None  # (t_boot_s, north, east)
     _drift_budget_s = DRIFT_WAIT_S  # what is left of the round's time for holding over a drifting site
-    _target_local_ned = False  # landing targets in the autopilot's local frame (PX4), not body FRD
 
     def _follow_from(self, frame: Any, target: tuple[float, float, float]) -> None:
         """The frame the site was chosen in, and where inverse perspective mapping put it."""
@@ -318,7 +317,7 @@ class Following(RecoveryBase):
             await asyncio.sleep(0.05)
         return True
 
-    async def _feed_landing_target(self, stats: dict[str, Any]) -> None:
+    async def _feed_landing_target(self, stats: dict[str, Any], local_ned: bool) -> None:
         """While the autopilot lands: a frame, the site in it, LANDING_TARGET toward it; until the
         task is cancelled. A frame without the site sends nothing (the autopilot keeps its last
         estimate of the target for a second, then lands where it is), and each change of the reason
@@ -326,7 +325,7 @@ class Following(RecoveryBase):
         last_reason = ""
         while True:
             started = time.monotonic()
-            reason, score = await self._one_landing_target(stats)
+            reason, score = await self._one_landing_target(stats, local_ned)
             if reason and reason != last_reason:
                 stats["lost"].append(
                     {
@@ -339,16 +338,17 @@ class Following(RecoveryBase):
             last_reason = reason
             await asyncio.sleep(max(0.0, LAND_FEED_PERIOD_S - (time.monotonic() - started)))
 
-    async def _one_landing_target(self, stats: dict[str, Any]) -> tuple[str, float]:
+    async def _one_landing_target(self, stats: dict[str, Any], local_ned: bool) -> tuple[str, float]:
         """One frame of the final approach: LANDING_TARGET sent (``("", score)``), or why not and the
-        match's score (NaN when no match was tried)."""
+        match's score (NaN when no match was tried). ``local_ned``: the target in the autopilot's local
+        frame (PX4), its looks not chained into references; else body FRD (ArduPilot)."""
         try:
             frame = await self._frames()
         except FrameUnavailable as exc:
             return f"no frame: {exc}", math.nan
         self._catch_up()
         try:
-            result = await asyncio.to_thread(self._track_once, frame, not self._target_local_ned)
+            result = await asyncio.to_thread(self._track_once, frame, not local_ned)
         except (ValueError, cv2.error) as exc:  # a malformed frame: said, and the next one tried
             return f"frame not usable: {exc}", math.nan
         if result is None:
@@ -361,7 +361,7 @@ class Following(RecoveryBase):
         frd = quat_to_matrix(s.quat_wxyz).T @ (site - np.asarray(s.pos_ned_m))
         if frd[2] <= 0.05:
             return "the site is level with the vehicle", result.score
-        if self._target_local_ned:  # PX4: where the site is in its local frame
+        if local_ned:  # PX4: where the site is in its local frame
             self.ctl.send_landing_target_local(
                 (float(site[0]), float(site[1]), float(site[2])), int(s.t_boot_s * 1e6)
             )
@@ -381,21 +381,22 @@ class Following(RecoveryBase):
         if ready and self._track is None:
             why, ready = "no camera view of the site to follow: the absolute target", False
         stats: dict[str, Any] = {"sent": 0, "lost": [], "last_site_ned_m": None}
-        own_mode = ready and setup is not None and setup.own_mode
-        self._target_local_ned = ready and setup is not None and setup.local_ned
-        feed = asyncio.create_task(self._feed_landing_target(stats), name="landing-target") if ready else None
+        feed = None
+        if ready and setup is not None:
+            feed = asyncio.create_task(
+                self._feed_landing_target(stats, setup.local_ned), name="landing-target"
+            )
         mode = Mode.LAND
         try:
-            if own_mode:
+            if feed is not None and setup is not None and setup.own_mode:
                 # PX4's AUTO.PRECLAND searches (or lands where it is) a second after it starts without a
                 # target: it is asked for only once a target went out, else the land mode it is
                 if await self._first_target(stats):
                     mode = Mode.PRECLAND
                 else:
                     why = f"no landing target within {PRECLAND_FIRST_S:g} s: the absolute target"
-                    ready = False  # AUTO.LAND reads no target: the feed stops (below)
-            if not ready and feed is not None:
-                feed.cancel()
+                    ready = False
+                    feed.cancel()  # AUTO.LAND reads no target
             await self.ctl.land(self.p.land_timeout_s, mode)
         finally:
             if feed is not None:

@@ -275,6 +275,11 @@ class Autopilot:
         o = self.local_origin_ned_m
         return (p[0] - o[0], p[1] - o[1], p[2] - o[2])
 
+    def from_local_ned(self, p: Vec3) -> Vec3:
+        """The autopilot's local frame -> world NED axes (the inverse of :meth:`to_local`)."""
+        o = self.local_origin_ned_m
+        return (p[0] + o[0], p[1] + o[1], p[2] + o[2])
+
     def from_local(self, sp: Setpoint) -> Setpoint:
         """A setpoint in the local frame -> the same in world axes (still the estimated frame)."""
         on, oe, od = self.local_origin_ned_m
@@ -465,11 +470,7 @@ class Autopilot:
         whatever the mode); kept in world axes of the estimated frame, as the estimated pose is."""
         if not all(math.isfinite(v) for v in target_ned):
             return
-        on, oe, od = self.local_origin_ned_m
-        self._pld_heard = (
-            self.vehicle.state.t_s,
-            (target_ned[0] + on, target_ned[1] + oe, target_ned[2] + od),
-        )
+        self._pld_heard = (self.vehicle.state.t_s, self.from_local_ned(target_ned))
         if self._precland is not None:
             self._precland.heard(*self._pld_heard)
 
@@ -735,9 +736,10 @@ class Autopilot:
             self._plnd_target_ne = None  # a target is followed within one landing only
             self._plnd_wait_d = None
             tune = self.flavour.precland(self.params) if spec.precision else None
-            heard = self._pld_heard
             self._precland = (
-                PrecLand(tune, s.t_s, self.estimated_state.pos_ned_m, heard) if tune is not None else None
+                PrecLand(tune, s.t_s, self.estimated_state.pos_ned_m, self._pld_heard)
+                if tune is not None
+                else None
             )
         if spec.nav is Nav.RTL:
             self._rtl_phase = "climb"
