@@ -93,6 +93,7 @@ class VehicleController:
         self._acks: dict[int, asyncio.Future[int]] = {}
         self._params: dict[str, asyncio.Future[float]] = {}
         self._target: tuple[float, float, float, float] | None = None  # n, e, d, yaw
+        self._asked_mode: int | None = None  # a mode change in flight (its custom_mode)
         self._streamer: asyncio.Task[None] | None = None
         self._engaged_mode: int | None = None
         self._mode_set_at = 0.0
@@ -244,6 +245,15 @@ class VehicleController:
 
     async def set_mode(self, mode: Mode) -> None:
         params = self.flavour.set_mode[mode]
+        # while the command is out, a heartbeat already in the asked mode (it can come before the
+        # acknowledgement) is the autopilot obeying, not someone else taking over
+        self._asked_mode = self.flavour.modes[mode]
+        try:
+            await self._set_mode(params, mode)
+        finally:
+            self._asked_mode = None
+
+    async def _set_mode(self, params: tuple[float, float, float], mode: Mode) -> None:
         for _ in range(5):
             result = await self._mode_command(params, self.flavour.modes[mode])
             if result == MAV_RESULT_ACCEPTED:
@@ -304,6 +314,8 @@ class VehicleController:
             self._own_mode_heard = True
             self._foreign_heartbeat = None
             return
+        if self.tm.state.custom_mode == self._asked_mode:
+            return  # the mode being asked for, heard before its acknowledgement
         # Until a heartbeat has shown our mode, one in someone else's may be an old one the link
         # delivered late (a reordered datagram overtaken by our mode change's COMMAND_ACK): then a
         # takeover is two heartbeats in a row. Once ours has been heard, one is enough.
