@@ -106,6 +106,30 @@ def test_a_site_drifting_in_the_estimate_is_measured_and_jitter_is_not_a_drift()
     assert math.isnan(site_drift_m_s([]))
 
 
+def test_a_steady_drift_is_carried_forward_and_a_jump_or_a_standstill_is_not() -> None:
+    """Where the site will be in the estimate: the drift's line carried forward (at most
+    ``DRIFT_BLIND_S`` past its newest frame); nothing for a site that stays put or one whose places
+    a line does not fit (a jump of the estimate the reset watch did not catch)."""
+    from companion.recovery.following import DRIFT_BLIND_S, drift_prediction, site_drift_line
+
+    drifting = [(100.0 + 2.0 * k, 5.0 + 1.0 * k, -28.0 + 0.6 * k) for k in range(6)]  # 0.5, 0.3 m/s
+    line = site_drift_line(drifting)
+    assert line is not None
+    assert line.rms_m == pytest.approx(0.0, abs=1e-9)
+    assert line.newest_s == 110.0
+    assert drift_prediction(line, 112.0) == pytest.approx((11.0, -24.4))
+    far = drift_prediction(line, 200.0)  # blind for long: carried no farther than DRIFT_BLIND_S
+    assert far == pytest.approx(drift_prediction(line, 110.0 + DRIFT_BLIND_S))
+    still = [(100.0 + 2.0 * k, 5.0, -28.0) for k in range(6)]
+    assert drift_prediction(site_drift_line(still), 112.0) is None
+    jump = [(100.0 + 2.0 * k, 5.0 + (15.0 if k >= 3 else 0.0), -28.0) for k in range(6)]
+    jumped = site_drift_line(jump)
+    assert jumped is not None and jumped.speed_m_s > 1.0 and jumped.rms_m > 3.0
+    assert drift_prediction(jumped, 112.0) is None
+    assert drift_prediction(None, 112.0) is None
+    assert drift_prediction(line, float("-inf")) is None  # a frame without the autopilot's time
+
+
 def _fly_scenario1(tmp_path: Path, *flags: str, speed: float = 8.0) -> tuple[dict[str, Any], Path, str]:
     """One companion-bench episode of scenario1 on the emulated ArduCopter at ``speed`` with
     ``flags``: its results entry, the run's folder and what to show when an assertion fails."""
@@ -188,6 +212,12 @@ def test_a_gps_drifting_18_m_holds_the_descent_over_the_site_until_it_stops(tmp_
     assert holds[0]["drift_m_s"] >= 0.15
     assert holds[-1]["why"] == "it stopped", holds
     assert not [x for x in events if x["kind"] == "estimate_reset"]  # a drift, not a jump
+    # after the hold, the site looked for against the frame it was chosen in (one link, not the
+    # chain the drift built), found where the drift left it
+    reanchors = [x for x in events if x["kind"] == "site_track" and x["phase"] == "reanchor"]
+    assert reanchors, why
+    assert reanchors[0]["found"], reanchors[0]
+    assert math.hypot(*reanchors[0]["shift_m"]) > 15.0, reanchors[0]
     assert e["landing_distance_m"] < 0.8, (e["landing_target_ned_m"], why)
 
 

@@ -147,6 +147,25 @@ def test_a_jump_seen_from_too_close_is_not_guessed(scenario1: LiveWorld) -> None
     assert result.site_ned_m == tuple(truth)
 
 
+def test_a_drift_carried_forward_centres_the_usual_search_where_the_site_went(scenario1: LiveWorld) -> None:
+    """The estimate drifted 6 m since the reference frame (a GPS drifting steadily): the usual search
+    about the old place does not reach the site; centred where the drift carried it (0.5 m off: the
+    drift's line is not exact), it finds the site where the newer estimate has it."""
+    truth = np.array([2.0, -25.0, -22.0])
+    ref = _view(scenario1, (truth[0], truth[1], truth[2] - 17.0), euler_to_quat(0.0, 0.0, YAW))
+    drift = np.array([5.0, 3.3, 0.0])
+    cur = _view(scenario1, (truth[0] + 0.3, truth[1], truth[2] - 17.0), euler_to_quat(0.01, 0.0, 1.0), tuple(drift))
+    usual = TrackParams(reacquire_m=0.0)
+    assert not track_site(ref, truth, cur, usual).found
+    guess = (truth + drift)[:2] + np.array([0.4, -0.3])
+    result = track_site(ref, truth, cur, usual, predicted_ne_m=guess)
+    assert result.found, result
+    assert math.dist(result.site_ned_m[:2], (truth + drift)[:2]) < 0.25
+    assert result.shift_m == pytest.approx(drift[:2], abs=0.25)
+    with pytest.raises(ValueError, match="predicted_ne_m"):
+        track_site(ref, truth, cur, usual, predicted_ne_m=(math.nan, 0.0))
+
+
 def test_centre_down_is_the_lidars_surface_about_the_cameras_axis() -> None:
     """Returns within a few degrees of the camera's axis give the surface there (a street 20 m below
     a roof at the view's edge does not count); none there, none at all or a malformed sweep: NaN."""

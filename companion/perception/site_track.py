@@ -258,6 +258,7 @@ def track_site(
     site_ned_m: Sequence[float],
     current: SiteView,
     params: TrackParams | None = None,
+    predicted_ne_m: Sequence[float] | None = None,
 ) -> TrackResult:
     """Find the site that ``reference`` showed at ``site_ned_m`` in ``current``: where the estimate
     predicts it, else around where a wide search puts it.
@@ -268,6 +269,9 @@ def track_site(
             surface's height, where both views are resampled.
         current: the newer frame.
         params: thresholds (:class:`TrackParams` defaults).
+        predicted_ne_m: where the site is expected in ``current``'s estimate (north, east metres),
+            when the estimate is known to move between the two frames (a GPS drifting steadily);
+            ``site_ned_m`` itself when None. The usual search is centred there.
 
     Returns:
         A :class:`TrackResult`; ``site_ned_m`` there keeps ``site_ned_m``'s down coordinate.
@@ -276,7 +280,12 @@ def track_site(
     site = np.asarray(site_ned_m, dtype=np.float64)
     if site.shape != (3,) or not np.isfinite(site).all():
         raise ValueError(f"site_ned_m must be three finite numbers, got {site_ned_m!r}")
-    first = _track(reference, site, current, p, site)
+    centre = site
+    if predicted_ne_m is not None:
+        centre = np.array([float(predicted_ne_m[0]), float(predicted_ne_m[1]), site[2]])
+        if not np.isfinite(centre).all():
+            raise ValueError(f"predicted_ne_m must be two finite numbers, got {predicted_ne_m!r}")
+    first = _track(reference, site, current, p, centre)
     if first.found or p.reacquire_m <= 0 or first.reason == NOT_IN_REFERENCE:
         return first
     wide = _reacquire(reference, site, current, p)

@@ -44,6 +44,7 @@ DRIFT_MIN_SPAN_S = 2.5  # ... at least three frames this far apart (autopilot se
 DRIFT_MIN_M_S = 0.15  # drifting faster than this: the final approach waits, following the site
 DRIFT_WAIT_S = 60.0  # a round holds for at most this long (autopilot seconds): a drift that never stops
 DRIFT_BLIND_S = 8.0  # a hold ends when no frame found the site for this long (autopilot seconds)
+DRIFT_FIT_M = 0.5  # a drift is carried forward only while the line fits the site's places this well (RMS)
 
 
 def site_view(frame: Any) -> SiteView | None:
@@ -55,21 +56,65 @@ def site_view(frame: Any) -> SiteView | None:
     return dataclasses.replace(view, centre_down_m=centre_down(getattr(frame, "lidar_frd", None), view))
 
 
-def site_drift_m_s(seen: list[tuple[float, float, float]], since_s: float = -math.inf) -> float:
-    """How fast a site moves in the autopilot's estimate (m/s), from where frames found it
-    (``(t_boot_s, north, east)``, oldest first): a line fitted to those of the last ``DRIFT_WINDOW_S``
-    (and after ``since_s``); NaN with fewer than three spanning ``DRIFT_MIN_SPAN_S``. A GPS that drifts
-    moves the estimate, and the vehicle holding its target in it, while the site stays put."""
+@dataclasses.dataclass(frozen=True, slots=True)
+class DriftLine:
+    """A site's place in the autopilot's estimate as a line in time: at ``t_s`` (autopilot seconds)
+    it was at ``north``, ``east`` and moves ``vn``, ``ve`` m/s; ``rms_m``: how far the places it was
+    fitted to lie from it; ``newest_s``: the newest of them."""
+
+    t_s: float
+    north: float
+    east: float
+    vn: float
+    ve: float
+    rms_m: float
+    newest_s: float
+
+    @property
+    def speed_m_s(self) -> float:
+        return math.hypot(self.vn, self.ve)
+
+    def at(self, t_s: float) -> tuple[float, float]:
+        """Where the line puts the site at ``t_s``."""
+        dt = t_s - self.t_s
+        return self.north + self.vn * dt, self.east + self.ve * dt
+
+
+def site_drift_line(seen: list[tuple[float, float, float]], since_s: float = -math.inf) -> DriftLine | None:
+    """The line fitted to where frames found a site (``(t_boot_s, north, east)``, oldest first) over
+    the last ``DRIFT_WINDOW_S`` (and after ``since_s``); None with fewer than three spanning
+    ``DRIFT_MIN_SPAN_S``. A GPS that drifts moves the estimate, and the vehicle holding its target in
+    it, while the site stays put."""
     if not seen:
-        return math.nan
+        return None
     newest = seen[-1][0]
     pts = np.array([p for p in seen if p[0] >= max(newest - DRIFT_WINDOW_S, since_s)])
     if len(pts) < 3 or pts[-1, 0] - pts[0, 0] < DRIFT_MIN_SPAN_S:
-        return math.nan
-    t = pts[:, 0] - pts[:, 0].mean()
-    vn = float(np.dot(t, pts[:, 1] - pts[:, 1].mean()) / np.dot(t, t))
-    ve = float(np.dot(t, pts[:, 2] - pts[:, 2].mean()) / np.dot(t, t))
-    return math.hypot(vn, ve)
+        return None
+    mean = pts.mean(axis=0)
+    t = pts[:, 0] - mean[0]
+    vn = float(np.dot(t, pts[:, 1] - mean[1]) / np.dot(t, t))
+    ve = float(np.dot(t, pts[:, 2] - mean[2]) / np.dot(t, t))
+    resid = pts[:, 1:] - mean[1:] - np.outer(t, (vn, ve))
+    rms = float(np.sqrt((resid**2).sum(axis=1).mean()))
+    return DriftLine(float(mean[0]), float(mean[1]), float(mean[2]), vn, ve, rms, float(newest))
+
+
+def site_drift_m_s(seen: list[tuple[float, float, float]], since_s: float = -math.inf) -> float:
+    """How fast a site moves in the autopilot's estimate (m/s): :func:`site_drift_line`'s speed, NaN
+    without one."""
+    line = site_drift_line(seen, since_s)
+    return line.speed_m_s if line is not None else math.nan
+
+
+def drift_prediction(line: DriftLine | None, t_s: float) -> tuple[float, float] | None:
+    """Where a steadily drifting site is at ``t_s`` in the estimate: ``line`` carried forward, at most
+    ``DRIFT_BLIND_S`` past the newest place it was fitted to. None where there is nothing to carry:
+    no line, slower than ``DRIFT_MIN_M_S`` (the site is where it was last found), or a line that fits
+    badly (a jump of the estimate is not a drift)."""
+    if line is None or not math.isfinite(t_s) or line.speed_m_s < DRIFT_MIN_M_S or line.rms_m > DRIFT_FIT_M:
+        return None
+    return line.at(min(t_s, line.newest_s + DRIFT_BLIND_S))
 
 
 def _frame_time(frame: Any) -> float:
@@ -99,6 +144,7 @@ class Following(RecoveryBase):
     _resets_seen = 0  # the estimate's resets (``tm.position_resets``) the tracker's state has taken
     _site_seen: collections.deque[tuple[float, float, float]] | None = None  # (t_boot_s, north, east)
     _drift_budget_s = DRIFT_WAIT_S  # what is left of the round's time for holding over a drifting site
+    _reanchor = False  # the next look is against the frame the site was chosen in (after a drift hold)
 
     def _follow_from(self, frame: Any, target: tuple[float, float, float]) -> None:
         """The frame the site was chosen in, and where inverse perspective mapping put it."""
@@ -109,6 +155,7 @@ class Following(RecoveryBase):
         self._resets_seen = sum(1 for t, _ in self.tm.position_resets.resets if t <= taken)
         self._site_seen = collections.deque(maxlen=64)
         self._drift_budget_s = DRIFT_WAIT_S
+        self._reanchor = False
 
     def _catch_up(self) -> tuple[float, float]:
         """The estimate's resets not taken yet, added up (north, east): the followed site and the frames
@@ -134,14 +181,21 @@ class Following(RecoveryBase):
         )  # fmt: skip
         return (dn, de)
 
-    def _track_once(self, frame: Any, adopt: bool = True) -> TrackResult | None:
+    def _track_once(self, frame: Any, adopt: bool = True, reanchor: bool = False) -> TrackResult | None:
         """The site in ``frame`` (a worker-thread job); None when there is nothing to follow. Looked
         for against the last frame it was found in, else against the one it was chosen in (from
         higher up, it saw more: what a jump of the estimate took out of the last one's view). Found,
         ``frame`` becomes the one to look against next when ``adopt``: each such link adds its match's
         error to the chain, so the looks during a descent step, twice a second, do not, unless the
-        site moved ``ADOPT_SHIFT_M`` or more (the estimate is moving: a drift would soon outrun the
-        usual search from the older frame)."""
+        site lies ``ADOPT_SHIFT_M`` or more from where it was expected (the estimate moved: the next
+        search from the older frame might not reach it). Where the site drifts steadily in the
+        estimate (:func:`drift_prediction`), the search is centred where the drift carried it: a
+        drift needs no chain of references then, and no look rate to keep up with it.
+
+        ``reanchor``: looked for against the frame it was chosen in first, about where the last
+        frame puts it, and found there, that frame becomes the one to look against: one link from
+        the choice instead of the chain a drift built (each of its links added its match's error;
+        scenario2's plain membrane roof on real ArduCopter, 18 m of drift over 30 s: 0.4-0.75 m)."""
         if self._track is None:
             return None
         view = site_view(frame)
@@ -154,13 +208,25 @@ class Following(RecoveryBase):
             (n, e, d), dn, de = view.pos_ned_m, sum(r[0] for r in later), sum(r[1] for r in later)
             view = dataclasses.replace(view, pos_ned_m=(n + dn, e + de, d))
         ref, site = self._track
-        result = track_site(ref, site, view, self._track_params)
+        # a steady drift of the estimate carried forward: the search is centred where it puts the site
+        predicted = drift_prediction(site_drift_line(list(self._site_seen or ())), taken)
         anchor = self._anchor
-        if not result.found and anchor is not None and anchor[0] is not ref:
-            again = track_site(anchor[0], anchor[1], view, self._track_params)
-            result = again if again.found else result
+        if reanchor and anchor is not None and anchor[0] is not ref:
+            expected = predicted if predicted is not None else site[:2]
+            result = track_site(anchor[0], anchor[1], view, self._track_params, expected)
+            if result.found:
+                adopt = True
+            else:
+                result = track_site(ref, site, view, self._track_params, predicted)
+        else:
+            result = track_site(ref, site, view, self._track_params, predicted)
+            if not result.found and anchor is not None and anchor[0] is not ref:
+                again = track_site(anchor[0], anchor[1], view, self._track_params, predicted)
+                result = again if again.found else result
         if result.found:
-            if adopt or math.hypot(*result.shift_m) >= ADOPT_SHIFT_M:
+            expected = predicted if predicted is not None else site[:2]
+            surprise = math.dist(result.site_ned_m[:2], expected)
+            if adopt or surprise >= ADOPT_SHIFT_M:
                 self._track = (view, result.site_ned_m)
             if self._site_seen is not None and math.isfinite(taken):
                 self._site_seen.append((taken, result.site_ned_m[0], result.site_ned_m[1]))
@@ -168,13 +234,17 @@ class Following(RecoveryBase):
 
     async def _follow(self, frame: Any, target: tuple[float, float, float]) -> tuple[float, float, float]:
         """The descent's target after looking for the site in ``frame``: moved onto it when found,
-        kept when not; recorded either way."""
+        kept when not; recorded either way. After a hold over a drifting site the frame the site was
+        chosen in is looked against first (:meth:`_track_once`'s ``reanchor``)."""
         dn, de = self._catch_up()
         target = (target[0] + dn, target[1] + de, target[2])
-        result = await asyncio.to_thread(self._track_once, frame)
+        reanchor, self._reanchor = self._reanchor, False
+        result = await asyncio.to_thread(self._track_once, frame, True, reanchor)
         if result is None:
             return target
-        self.record.record_event("site_track", self._track_fields(result, "descent"))
+        self.record.record_event(
+            "site_track", self._track_fields(result, "reanchor" if reanchor else "descent", frame)
+        )
         if not result.found:
             self.log.info("site not found in the frame (%s): keeping the target", result.reason)
             return target
@@ -236,7 +306,7 @@ class Following(RecoveryBase):
                 continue
             moved.append((result.site_ned_m[0], result.site_ned_m[1], d))
             self.ctl.retarget(result.site_ned_m[0], result.site_ned_m[1])
-            self.record.record_event("site_track", self._track_fields(result, "step"))
+            self.record.record_event("site_track", self._track_fields(result, "step", frame))
             if result.reacquired:
                 self.log.info(
                     "site found %.1f m from where the estimate had it: the target follows it",
@@ -262,9 +332,10 @@ class Following(RecoveryBase):
         start = self.tm.state.t_boot_s
         moved = [target]
         why = "it stopped"
-        # holding while the estimate drifts away from the last frame it was found in: each look
-        # becomes the next one's reference, or the drift would outrun the usual search
-        async with self._following(moved, adopt=True):
+        # the looks search where the drift carries the site (:meth:`_track_once`), against the last
+        # frame the site was found in before the hold: a chain of references, one per look, would
+        # add each match's error to where the vehicle lands
+        async with self._following(moved, adopt=False):
             while True:
                 await asyncio.sleep(STEP_FOLLOW_PERIOD_S)
                 self.ctl.check_interruption()
@@ -280,6 +351,7 @@ class Following(RecoveryBase):
                     break
         waited = self.tm.state.t_boot_s - start
         self._drift_budget_s -= waited
+        self._reanchor = True
         still = self._site_drift_m_s(since_s=start)
         self.record.record_event(
             "drift_hold",
@@ -289,13 +361,14 @@ class Following(RecoveryBase):
         self._say(5, f"held {waited:.0f} s over the site ({why}): going on")
         return moved[-1]
 
-    def _track_fields(self, result: TrackResult, phase: str) -> dict[str, Any]:
+    def _track_fields(self, result: TrackResult, phase: str, frame: Any) -> dict[str, Any]:
         def r(v: float) -> float | None:
             return round(v, 3) if math.isfinite(v) else None
 
         return {
             "round": self.round,
             "phase": phase,
+            "t_boot_s": r(_frame_time(frame)),
             "found": result.found,
             "site_ned_m": [round(v, 3) for v in result.site_ned_m],
             "shift_m": [round(v, 3) for v in result.shift_m],
