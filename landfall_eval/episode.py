@@ -605,6 +605,7 @@ def precision_landing_summary(events: list[dict[str, Any]]) -> dict[str, Any] | 
         "why": str(last.get("why", "")),
         "mode": last.get("mode"),
         "targets_sent": int(last.get("targets_sent", 0)),
+        "looks_found": int(last.get("looks_found", 0)),
         "tracks_found": sum(bool(e.get("found")) for e in tracks),
         "tracks_lost": sum(not e.get("found") for e in tracks),
     }

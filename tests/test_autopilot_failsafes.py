@@ -235,13 +235,18 @@ def _gcs_frames(
     *,
     bytewise: bool,
     commands: Sequence[tuple[int, Sequence[float]]] = (),
+    heartbeat: bool = False,
 ) -> list[bytes]:
     """PARAM_SET frames, then COMMAND_LONG ones (command, its first params), from a ground station
-    (255/190) for the vehicle (1/1)."""
+    (255/190) for the vehicle (1/1); first the ground station's HEARTBEAT with ``heartbeat`` (the
+    autopilot then counts it as its ground link)."""
     from pymavlink.dialects.v20 import common as mavlink2
 
     mav = mavlink2.MAVLink(None, srcSystem=255, srcComponent=190)
     frames = []
+    if heartbeat:
+        gcs, invalid = mavlink2.MAV_TYPE_GCS, mavlink2.MAV_AUTOPILOT_INVALID
+        frames.append(mav.heartbeat_encode(gcs, invalid, 0, 0, mavlink2.MAV_STATE_ACTIVE).pack(mav))
     for name, (value, kind) in params.items():
         wire = _wire(value, kind, bytewise=bytewise)
         frames.append(mav.param_set_encode(1, 1, name.encode(), wire, kind).pack(mav))
@@ -261,6 +266,7 @@ def _real_firmware_failsafe(
     commands: Sequence[tuple[int, Sequence[float]]] = (),
     env: dict[str, str] | None = None,
     until_touchdown: bool = True,
+    heartbeat: bool = False,
 ) -> tuple[Rig, str, list[dict[str, Any]], float]:
     """An alarm on real firmware; at the first descent step a failsafe is set up from a ground station
     sharing the companion's link (real firmware has no other MAVLink port here); then the recovery
@@ -281,7 +287,7 @@ def _real_firmware_failsafe(
         assert out.returncode == 0, out.stdout + out.stderr
         rig.wait_log("m, site clear", timeout_s=300)  # "descending 70 m, site clear: ...": the first step
         for _ in range(3):  # a datagram may be lost; setting a parameter twice does no harm
-            for frame in _gcs_frames(params, bytewise=bytewise, commands=commands):
+            for frame in _gcs_frames(params, bytewise=bytewise, commands=commands, heartbeat=heartbeat):
                 relays[0].inject(frame)
             time.sleep(0.2)
         touchdown = math.nan
@@ -306,11 +312,13 @@ def _real_firmware_failsafe_lands(
     *,
     bytewise: bool,
     land_mode: str,
+    heartbeat: bool = False,
 ) -> list[dict[str, Any]]:
     """:func:`_real_firmware_failsafe` where the firmware's own failsafe lands the vehicle in
-    ``land_mode``: the companion stood down and never took the vehicle back while it flew."""
+    ``land_mode`` (a return's landing included): the companion stood down and never took the
+    vehicle back while it flew."""
     rig, log, events, touchdown = _real_firmware_failsafe(
-        start_rig, tmp_path, sim_args, params, bytewise=bytewise
+        start_rig, tmp_path, sim_args, params, bytewise=bytewise, heartbeat=heartbeat
     )
     assert f"autopilot failsafe: {land_mode}; the autopilot keeps control" in log, log[-3000:]
     assert f"(the autopilot's failsafe landed it ({land_mode}))" in log
@@ -345,6 +353,51 @@ def test_real_arducopters_battery_failsafe_lands_and_the_companion_stands_down(
 
 
 @pytest.mark.sitl
+def test_real_arducopters_low_battery_warning_leaves_room_and_the_recovery_lands_on_its_site(
+    arducopter: Path, start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """Real ArduCopter: mid-descent its low-battery level is set above the charge left with no action
+    (BATT_LOW_MAH, BATT_FS_LOW_ACT 0, its default): a warning only. The companion records ArduCopter's
+    words, takes nothing from it, and lands on the site it chose."""
+    rig, log, events, _ = _real_firmware_failsafe(
+        start_rig,
+        tmp_path,
+        ["--autopilot", "ardupilot-sitl", "--sitl", str(arducopter), "--scenario", "scenario2"],
+        {"BATT_FS_LOW_ACT": (0, INT32), "BATT_LOW_MAH": (100000.0, REAL32)},
+        bytewise=False,
+    )
+    texts = [e["text"] for e in events if e["kind"] == "autopilot_text"]
+    assert any("Battery 1 is low" in t for t in texts), texts
+    assert "recovery ended: landed after" in log, log[-3000:]
+    assert not [e for e in events if e["kind"] in ("takeover", "released", "autopilot_failsafe")], events
+    assert events[-1]["reason"] == "landed"
+    (touchdown,) = rig.sim.events("touchdown")
+    assert touchdown["surface"] == "rooftop_clear", touchdown
+
+
+@pytest.mark.sitl
+def test_real_arducopters_ground_link_loss_returns_it_home_and_the_companion_stands_down(
+    arducopter: Path, start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """Real ArduCopter: mid-descent a ground station sharing the companion's link sets the ground-link
+    failsafe to return (FS_GCS_ENABLE 1), beats its heart a few times and falls silent. After
+    FS_GCS_TIMEOUT (5 s) ArduCopter's GCS failsafe takes the vehicle out of GUIDED into RTL (GUIDED is
+    not among the modes FS_OPTIONS lets go on by default); the companion stops commanding, never takes
+    the vehicle back while it returns and lands at home, and the record says why it ended."""
+    events = _real_firmware_failsafe_lands(
+        start_rig,
+        tmp_path,
+        ["--autopilot", "ardupilot-sitl", "--sitl", str(arducopter), "--scenario", "scenario2"],
+        {"FS_GCS_ENABLE": (1, INT32)},
+        bytewise=False,
+        land_mode="RTL",
+        heartbeat=True,
+    )
+    texts = [e["text"] for e in events if e["kind"] == "autopilot_text"]
+    assert "GCS Failsafe" in texts, texts  # ArduCopter's own account of it
+
+
+@pytest.mark.sitl
 def test_real_px4s_battery_failsafe_lands_and_the_companion_stands_down(
     px4: Path, start_rig: Callable[..., Rig], tmp_path: Path
 ) -> None:
@@ -362,6 +415,45 @@ def test_real_px4s_battery_failsafe_lands_and_the_companion_stands_down(
         land_mode="AUTO.LAND",
     )
     assert any(e["kind"] == "autopilot_failsafe" for e in events)
+
+
+@pytest.mark.sitl
+def test_real_px4s_ground_link_loss_returns_it_and_the_companion_stands_down(
+    px4: Path, start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """Real PX4 1.15: mid-descent a ground station sharing the companion's link sets the data-link-loss
+    action to return (NAV_DLL_ACT 2; simbridge boots PX4 with 0), beats its heart a few times and
+    falls silent. After COM_DL_LOSS_T (10 s) PX4's failsafe takes the vehicle out of OFFBOARD into
+    AUTO.RTL; the companion stops commanding and never takes it back while it returns and lands."""
+    events = _real_firmware_failsafe_lands(
+        start_rig,
+        tmp_path,
+        ["--autopilot", "px4-sitl", "--px4", str(px4), "--scenario", "scenario1"],
+        {"NAV_DLL_ACT": (2, INT32)},
+        bytewise=True,
+        land_mode="AUTO.RTL",
+        heartbeat=True,
+    )
+    texts = [e["text"] for e in events if e["kind"] == "autopilot_text"]
+    assert any(t.startswith("Failsafe activated") for t in texts), texts
+
+
+@pytest.mark.sitl
+def test_real_px4s_geofence_breach_lands_and_the_companion_stands_down(
+    px4: Path, start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """Real PX4 1.15: mid-descent its geofence gets a ceiling below the vehicle (GF_MAX_VER_DIST 10 m
+    above home) with the land action (GF_ACTION 5). PX4's geofence failsafe takes the vehicle out of
+    OFFBOARD into AUTO.LAND; the companion stops commanding, never takes it back, and the record says
+    why the recovery ended."""
+    _real_firmware_failsafe_lands(
+        start_rig,
+        tmp_path,
+        ["--autopilot", "px4-sitl", "--px4", str(px4), "--scenario", "scenario1"],
+        {"GF_ACTION": (5, INT32), "GF_MAX_VER_DIST": (10.0, REAL32)},
+        bytewise=True,
+        land_mode="AUTO.LAND",
+    )
 
 
 @pytest.mark.sitl

@@ -33,7 +33,10 @@ from companion.perception.site_track import SiteView, TrackParams, TrackResult, 
 from companion.precision import PrecisionLanding
 from companion.recovery.core import FrameUnavailable, RecoveryBase
 
-LAND_FEED_PERIOD_S = 0.2  # at most five targets a second (ArduPilot forgets one after 1 s)
+LAND_FEED_PERIOD_S = 0.2  # a look for the site at most five times a second (wall time: the processor's pace)
+LAND_SEND_PERIOD_S = 0.1  # LANDING_TARGET ten times a second of the autopilot's clock: ArduPilot's
+# precision landing starts only after 2 s of targets none more than 0.5 s apart ("PrecLand: Init Failed")
+LAND_TARGET_MAX_AGE_S = 1.5  # from a look at most this old (autopilot seconds), placed from the pose now
 PRECLAND_FIRST_S = 1.5  # PX4's AUTO.PRECLAND is asked for once a target went out, within this long
 STEP_FOLLOW_PERIOD_S = 0.5  # during a descent step, a look for the site twice a second
 STEP_FOLLOW_MIN_M = 0.3  # and the step's target moved when it is this far from where the site is seen
@@ -391,30 +394,37 @@ class Following(RecoveryBase):
         return True
 
     async def _feed_landing_target(self, stats: dict[str, Any], local_ned: bool) -> None:
-        """While the autopilot lands: a frame, the site in it, LANDING_TARGET toward it; until the
-        task is cancelled. A frame without the site sends nothing (the autopilot keeps its last
-        estimate of the target for a second, then lands where it is), and each change of the reason
-        goes into ``stats["lost"]`` with its time."""
+        """While the autopilot lands: frames, the site in each, and LANDING_TARGET toward where it was
+        last found (:meth:`_send_landing_targets`); until the task is cancelled. A frame without the
+        site changes nothing (the targets stop once the last find is ``LAND_TARGET_MAX_AGE_S`` old:
+        the autopilot keeps its estimate of the target a while, then lands where it is), and each
+        change of the reason goes into ``stats["lost"]`` with its time."""
+        sender = asyncio.create_task(self._send_landing_targets(stats, local_ned), name="landing-target-send")
         last_reason = ""
-        while True:
-            started = time.monotonic()
-            reason, score = await self._one_landing_target(stats, local_ned)
-            if reason and reason != last_reason:
-                stats["lost"].append(
-                    {
-                        "t_boot_s": round(self.tm.state.t_boot_s, 2),
-                        "why": reason,
-                        "score": round(score, 3) if math.isfinite(score) else None,
-                    }
-                )
-                self.log.info("precision landing: no target sent (%s)", reason)
-            last_reason = reason
-            await asyncio.sleep(max(0.0, LAND_FEED_PERIOD_S - (time.monotonic() - started)))
+        try:
+            while True:
+                started = time.monotonic()
+                reason, score = await self._one_landing_look(stats, local_ned)
+                if reason and reason != last_reason:
+                    stats["lost"].append(
+                        {
+                            "t_boot_s": round(self.tm.state.t_boot_s, 2),
+                            "why": reason,
+                            "score": round(score, 3) if math.isfinite(score) else None,
+                        }
+                    )
+                    self.log.info("precision landing: the site not found (%s)", reason)
+                last_reason = reason
+                await asyncio.sleep(max(0.0, LAND_FEED_PERIOD_S - (time.monotonic() - started)))
+        finally:
+            sender.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await sender
 
-    async def _one_landing_target(self, stats: dict[str, Any], local_ned: bool) -> tuple[str, float]:
-        """One frame of the final approach: LANDING_TARGET sent (``("", score)``), or why not and the
-        match's score (NaN when no match was tried). ``local_ned``: the target in the autopilot's local
-        frame (PX4), its looks not chained into references; else body FRD (ArduPilot)."""
+    async def _one_landing_look(self, stats: dict[str, Any], local_ned: bool) -> tuple[str, float]:
+        """One frame of the final approach: the site found in it (``stats["seen"]``: the frame's time
+        and the site in the estimate; ``("", score)``), or why not and the match's score (NaN when no
+        match was tried). ``local_ned`` (PX4): the looks are not chained into references."""
         try:
             frame = await self._frames()
         except FrameUnavailable as exc:
@@ -428,21 +438,37 @@ class Following(RecoveryBase):
             return "no camera image", math.nan
         if not result.found:
             return result.reason, result.score
-        site = np.asarray(result.site_ned_m)
-        s = self.tm.state
-        # from where the vehicle is now (it moved since the frame), in its body axes now
-        frd = quat_to_matrix(s.quat_wxyz).T @ (site - np.asarray(s.pos_ned_m))
-        if frd[2] <= 0.05:
-            return "the site is level with the vehicle", result.score
-        if local_ned:  # PX4: where the site is in its local frame
-            self.ctl.send_landing_target_local(
-                (float(site[0]), float(site[1]), float(site[2])), int(s.t_boot_s * 1e6)
-            )
-        else:
-            self.ctl.send_landing_target((float(frd[0]), float(frd[1]), float(frd[2])), int(s.t_boot_s * 1e6))
-        stats["sent"] += 1
-        stats["last_site_ned_m"] = [round(float(v), 3) for v in site]
+        taken = _frame_time(frame)
+        stats["seen"] = (taken if math.isfinite(taken) else self.tm.state.t_boot_s, np.asarray(result.site_ned_m))
+        stats["looks_found"] += 1
         return "", result.score
+
+    async def _send_landing_targets(self, stats: dict[str, Any], local_ned: bool) -> None:
+        """LANDING_TARGET every ``LAND_SEND_PERIOD_S`` of the autopilot's clock toward the site where
+        the newest look found it (at most ``LAND_TARGET_MAX_AGE_S`` old): in the autopilot's local
+        frame (PX4), else in the vehicle's body axes from where it is now (ArduPilot). The looks come
+        at the processor's pace; the targets at the autopilot's, whatever the simulation's speed."""
+        last = -math.inf
+        while True:
+            await asyncio.sleep(0.02)
+            s = self.tm.state
+            now = s.t_boot_s
+            seen = stats.get("seen")
+            if seen is None or now - last < LAND_SEND_PERIOD_S or now - seen[0] > LAND_TARGET_MAX_AGE_S:
+                continue
+            site = seen[1]
+            if local_ned:  # PX4: where the site is in its local frame
+                self.ctl.send_landing_target_local(
+                    (float(site[0]), float(site[1]), float(site[2])), int(now * 1e6)
+                )
+            else:  # from where the vehicle is now (it moved since the frame), in its body axes now
+                frd = quat_to_matrix(s.quat_wxyz).T @ (site - np.asarray(s.pos_ned_m))
+                if frd[2] <= 0.05:  # level with the vehicle: no line of sight to give
+                    continue
+                self.ctl.send_landing_target((float(frd[0]), float(frd[1]), float(frd[2])), int(now * 1e6))
+            last = now
+            stats["sent"] += 1
+            stats["last_site_ned_m"] = [round(float(v), 3) for v in site]
 
     async def _land_on_site(self, setup: PrecisionLanding | None) -> None:
         """The autopilot's land mode; with its precision landing fed from the camera when it is set up
@@ -453,7 +479,7 @@ class Following(RecoveryBase):
             why, ready = setup.why, setup.ready
         if ready and self._track is None:
             why, ready = "no camera view of the site to follow: the absolute target", False
-        stats: dict[str, Any] = {"sent": 0, "lost": [], "last_site_ned_m": None}
+        stats: dict[str, Any] = {"sent": 0, "looks_found": 0, "lost": [], "last_site_ned_m": None, "seen": None}
         feed = None
         if ready and setup is not None:
             feed = asyncio.create_task(
@@ -484,6 +510,7 @@ class Following(RecoveryBase):
                     "why": why,
                     "mode": self.ctl.flavour.mode_name(self.ctl.flavour.modes[mode]),
                     "targets_sent": stats["sent"],
+                    "looks_found": stats["looks_found"],
                     "lost": stats["lost"],
                     "last_site_ned_m": stats["last_site_ned_m"],
                 },
