@@ -376,6 +376,27 @@ def test_real_arducopters_low_battery_warning_leaves_room_and_the_recovery_lands
 
 
 @pytest.mark.sitl
+def test_real_px4s_low_battery_warning_leaves_room_and_the_recovery_lands_on_its_site(
+    px4: Path, start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """Real PX4 1.15: mid-descent its low-battery threshold is raised above the charge its battery
+    simulator reports with no action (BAT_LOW_THR, COM_LOW_BAT_ACT 0, its default): a warning only.
+    The companion keeps the vehicle and lands on the site it chose."""
+    rig, log, events, _ = _real_firmware_failsafe(
+        start_rig,
+        tmp_path,
+        ["--autopilot", "px4-sitl", "--px4", str(px4), "--scenario", "scenario1"],
+        {"COM_LOW_BAT_ACT": (0, INT32), "BAT_LOW_THR": (0.99, REAL32)},
+        bytewise=True,
+    )
+    assert "recovery ended: landed after" in log, log[-3000:]
+    assert not [e for e in events if e["kind"] in ("takeover", "released")], events
+    assert events[-1]["reason"] == "landed"
+    (touchdown,) = rig.sim.events("touchdown")
+    assert touchdown["surface"] == "rooftop_clear", touchdown
+
+
+@pytest.mark.sitl
 def test_real_arducopters_ground_link_loss_returns_it_home_and_the_companion_stands_down(
     arducopter: Path, start_rig: Callable[..., Rig], tmp_path: Path
 ) -> None:

@@ -697,3 +697,26 @@ def test_landnet_rank_with_geometry_a_roof_with_a_person_on_it_comes_second(
     for reverse in (False, True):
         best, ranking, _t = _geometry_rank(judge, [crop(frame, b) for b in boxes], cands, reverse)
         assert best == 0, ranking.rationale
+
+
+def test_a_roof_the_net_is_sure_is_not_clear_is_not_a_soft_doubt() -> None:
+    """Refused under the clear-site threshold with nothing counted: a soft doubt ("hazard", a roof the
+    search may settle for) unless the net is sure (clear-site confidence under 0.2: "not_clear", which
+    the least-bad ranking counts as obstructed: city 0 on real ArduCopter landed on such a site, a
+    parapet 1.9 m away, once the round budget was spent)."""
+    from companion.reasoning.net_judge import FIRM_NOT_CLEAR_P, _not_clear
+    from companion.site_ledger import Hazard, hazard_of
+
+    def reading(clear_p: float) -> SceneReading:
+        shares = (("roof", 0.93), ("edge", 0.26), ("ground", 0.65))
+        return SceneReading("landnet-s", (64, 64), (16, 16), clear_p, shares, (), (), 0.3)
+
+    soft, text = _not_clear(reading(0.45), 0.6, 0, 0.0, 0.1)
+    assert soft == "hazard"
+    assert "clear-site confidence 0.45 under 0.60" in text
+    firm, text = _not_clear(reading(FIRM_NOT_CLEAR_P - 0.09), 0.6, 0, 0.0, 0.1)
+    assert firm == "not_clear"
+    assert "edges or walls" in text
+    assert hazard_of([soft], accepted=False, street_level=False, strip=False) is Hazard.DOUBTED
+    assert hazard_of([firm], accepted=False, street_level=False, strip=False) is Hazard.OBSTRUCTED
+    assert _not_clear(reading(0.05), 0.6, 2, 0.0, 0.1)[0] == "raised"  # counted things come first

@@ -30,6 +30,7 @@ def _site(n: float, hazard: Hazard, *, closeup: bool = True, edge: float = math.
         ((), False, True, False, Hazard.OFF_ROOF),  # a sidewalk, a plaza, a car park
         (("street_level",), False, True, False, Hazard.OFF_ROOF),  # refused among buildings: last resort
         (("hazard",), False, False, False, Hazard.DOUBTED),  # a roof with soft doubts only
+        (("not_clear",), False, False, False, Hazard.OBSTRUCTED),  # the image sure it is no clear roof
         ((), False, False, False, Hazard.DOUBTED),
     ],
 )

@@ -139,7 +139,8 @@ HAZARD_KINDS = (
     "street_level",  # street level among buildings: sidewalks, plazas (people), kept as a last resort
     "raised",  # people, vehicles, rooftop objects
     "raised_lines",  # pipes, rails
-    "hazard",  # the total hazard score over its limit
+    "hazard",  # the total hazard score over its limit, or the net's clear-site confidence under its threshold
+    "not_clear",  # the net sure it is no clear roof (its clear-site confidence under 0.2): something is there
 )
 
 
