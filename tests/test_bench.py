@@ -286,7 +286,9 @@ def test_curated_with_a_gps_fault_passes_it_to_simbridge_and_names_its_episodes_
     config = config_from_args(sim_parser().parse_args(["--gps-fault", "15,10", "--gps-fault-ramp", "20"]))
     assert config.gps_fault is not None
     assert (config.gps_fault.offset_ne_m, config.gps_fault.below_m, config.gps_fault.ramp_s) == (
-        (15.0, 10.0), 40.0, 20.0,
+        (15.0, 10.0),
+        40.0,
+        20.0,
     )
     with pytest.raises(ValueError, match="only with --gps-fault"):
         config_from_args(sim_parser().parse_args(["--gps-fault-below", "30"]))
@@ -690,9 +692,11 @@ def test_real_arducopters_gps_drifting_over_the_membrane_roof_is_waited_out_on_t
     (record,) = (out / "episodes" / e["id"] / "record").glob("*/events.jsonl")
     events = [json.loads(x) for x in record.read_text().splitlines()]
     holds = [x for x in events if x["kind"] == "drift_hold"]
-    assert holds and holds[0]["drift_m_s"] >= 0.15, holds
+    assert holds, why
+    assert holds[0]["drift_m_s"] >= 0.15, holds
     reanchors = [x for x in events if x["kind"] == "site_track" and x["phase"] == "reanchor"]
-    assert reanchors and reanchors[-1]["found"], (reanchors, why)
+    assert reanchors, why
+    assert reanchors[-1]["found"], (reanchors, why)
     assert e["landing_distance_m"] < 0.5, (e["landing_target_ned_m"], why)
 
 

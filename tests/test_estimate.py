@@ -54,7 +54,7 @@ def test_a_gps_fault_starts_at_the_first_crossing_downward_and_jumps_or_drifts()
     offsets = _descend(v, jump, -20.0)
     assert offsets[0] == (0.0, 0.0)
     assert offsets[-1] == (15.0, 10.0)
-    (_t0, h0), = starts
+    ((_t0, h0),) = starts
     assert h0 == pytest.approx(40.0, abs=0.2)
     assert len(set(offsets)) == 2  # nothing between: a jump
     drift = GpsFault(GpsFaultConfig((-20.0, 0.0), below_m=40.0, ramp_s=10.0))

@@ -124,7 +124,9 @@ def test_a_steady_drift_is_carried_forward_and_a_jump_or_a_standstill_is_not() -
     assert drift_prediction(site_drift_line(still), 112.0) is None
     jump = [(100.0 + 2.0 * k, 5.0 + (15.0 if k >= 3 else 0.0), -28.0) for k in range(6)]
     jumped = site_drift_line(jump)
-    assert jumped is not None and jumped.speed_m_s > 1.0 and jumped.rms_m > 3.0
+    assert jumped is not None
+    assert jumped.speed_m_s > 1.0
+    assert jumped.rms_m > 3.0
     assert drift_prediction(jumped, 112.0) is None
     assert drift_prediction(None, 112.0) is None
     assert drift_prediction(line, float("-inf")) is None  # a frame without the autopilot's time

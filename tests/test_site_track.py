@@ -154,7 +154,9 @@ def test_a_drift_carried_forward_centres_the_usual_search_where_the_site_went(sc
     truth = np.array([2.0, -25.0, -22.0])
     ref = _view(scenario1, (truth[0], truth[1], truth[2] - 17.0), euler_to_quat(0.0, 0.0, YAW))
     drift = np.array([5.0, 3.3, 0.0])
-    cur = _view(scenario1, (truth[0] + 0.3, truth[1], truth[2] - 17.0), euler_to_quat(0.01, 0.0, 1.0), tuple(drift))
+    cur = _view(
+        scenario1, (truth[0] + 0.3, truth[1], truth[2] - 17.0), euler_to_quat(0.01, 0.0, 1.0), tuple(drift)
+    )
     usual = TrackParams(reacquire_m=0.0)
     assert not track_site(ref, truth, cur, usual).found
     guess = (truth + drift)[:2] + np.array([0.4, -0.3])

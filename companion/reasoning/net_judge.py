@@ -210,7 +210,15 @@ def _not_clear(
     # the search would otherwise settle for (city 0 on real ArduCopter: a parapet 1.9 m away, clear-site
     # confidence 0.11, "edges or walls 26 %")
     firm = r.clear_p < FIRM_NOT_CLEAR_P
-    kind = "raised" if groups else "vegetation" if vegetation > max_vegetation else "not_clear" if firm else "hazard"
+    kind = (
+        "raised"
+        if groups
+        else "vegetation"
+        if vegetation > max_vegetation
+        else "not_clear"
+        if firm
+        else "hazard"
+    )
     return kind, text
 
 

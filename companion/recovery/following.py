@@ -213,9 +213,9 @@ class Following(RecoveryBase):
         ref, site = self._track
         # a steady drift of the estimate carried forward: the search is centred where it puts the site
         predicted = drift_prediction(site_drift_line(list(self._site_seen or ())), taken)
+        expected = predicted if predicted is not None else (site[0], site[1])
         anchor = self._anchor
         if reanchor and anchor is not None and anchor[0] is not ref:
-            expected = predicted if predicted is not None else site[:2]
             result = track_site(anchor[0], anchor[1], view, self._track_params, expected)
             if result.found:
                 adopt = True
@@ -227,7 +227,6 @@ class Following(RecoveryBase):
                 again = track_site(anchor[0], anchor[1], view, self._track_params, predicted)
                 result = again if again.found else result
         if result.found:
-            expected = predicted if predicted is not None else site[:2]
             surprise = math.dist(result.site_ned_m[:2], expected)
             if adopt or surprise >= ADOPT_SHIFT_M:
                 self._track = (view, result.site_ned_m)
@@ -429,7 +428,10 @@ class Following(RecoveryBase):
             frame = await self._frames()
         except FrameUnavailable as exc:
             return f"no frame: {exc}", math.nan
-        self._catch_up()
+        dn, de = self._catch_up()
+        if (dn or de) and stats["seen"] is not None:  # the estimate jumped: the newest find with it
+            t, (n, e, d) = stats["seen"]
+            stats["seen"] = (t, np.array([n + dn, e + de, d]))
         try:
             result = await asyncio.to_thread(self._track_once, frame, not local_ned)
         except (ValueError, cv2.error) as exc:  # a malformed frame: said, and the next one tried
@@ -439,7 +441,10 @@ class Following(RecoveryBase):
         if not result.found:
             return result.reason, result.score
         taken = _frame_time(frame)
-        stats["seen"] = (taken if math.isfinite(taken) else self.tm.state.t_boot_s, np.asarray(result.site_ned_m))
+        stats["seen"] = (
+            taken if math.isfinite(taken) else self.tm.state.t_boot_s,
+            np.asarray(result.site_ned_m),
+        )
         stats["looks_found"] += 1
         return "", result.score
 
@@ -479,7 +484,13 @@ class Following(RecoveryBase):
             why, ready = setup.why, setup.ready
         if ready and self._track is None:
             why, ready = "no camera view of the site to follow: the absolute target", False
-        stats: dict[str, Any] = {"sent": 0, "looks_found": 0, "lost": [], "last_site_ned_m": None, "seen": None}
+        stats: dict[str, Any] = {
+            "sent": 0,
+            "looks_found": 0,
+            "lost": [],
+            "last_site_ned_m": None,
+            "seen": None,
+        }
         feed = None
         if ready and setup is not None:
             feed = asyncio.create_task(
