@@ -144,6 +144,17 @@ class MavClient:
             self.conn.recv_match(blocking=True, timeout=period_s)
             time.sleep(0)
 
+    def heartbeat_streaming(self, n: float, e: float, d: float, timeout_s: float = 5.0) -> Any:
+        """The autopilot's next HEARTBEAT, the same position setpoint sent every 20 ms meanwhile (as
+        a client in OFFBOARD keeps doing: without it, PX4 leaves OFFBOARD after COM_OF_LOSS_T)."""
+        end = time.monotonic() + timeout_s
+        while time.monotonic() < end:
+            self.send_position(n, e, d)
+            m = self.conn.recv_match(type="HEARTBEAT", blocking=True, timeout=0.02)
+            if m is not None and m.get_srcComponent() == 1:
+                return m
+        raise AssertionError(f"no HEARTBEAT within {timeout_s} s")
+
     def drain(self, wall_s: float) -> None:
         """Read (and drop, keeping STATUSTEXTs) whatever arrives for ``wall_s``."""
         end = time.monotonic() + wall_s
