@@ -635,9 +635,14 @@ def test_curated_episode_flies_real_arducopter(arducopter: Path, tmp_path: Path)
     # they were paced in wall time)
     assert pl["looks_found"] >= 1, (pl, why)
     assert pl["targets_sent"] >= 20, (pl, why)
-    (record,) = (out / "episodes" / e["id"] / "record").glob("*/events.jsonl")
-    texts = [json.loads(x).get("text", "") for x in record.read_text().splitlines()]
+    texts = [x.get("text", "") for x in _episode_events(out, e)]
     assert not [t for t in texts if "PrecLand: Init Failed" in t], texts
+
+
+def _episode_events(out: Path, e: dict[str, Any]) -> list[dict[str, Any]]:
+    """The flight record's events of episode ``e`` of the campaign in ``out``."""
+    (record,) = (out / "episodes" / e["id"] / "record").glob("*/events.jsonl")
+    return [json.loads(x) for x in record.read_text().splitlines()]
 
 
 def test_real_arducopters_gps_glitch_mid_descent_is_followed_onto_the_chosen_site(
@@ -658,8 +663,7 @@ def test_real_arducopters_gps_glitch_mid_descent_is_followed_onto_the_chosen_sit
     assert res.returncode == 0, res.stderr[-3000:] + why
     assert e["outcome"] == "landed", why
     assert e["surface"] == "rooftop_clear", why
-    (record,) = (out / "episodes" / e["id"] / "record").glob("*/events.jsonl")
-    events = [json.loads(x) for x in record.read_text().splitlines()]
+    events = _episode_events(out, e)
     (reset,) = [x for x in events if x["kind"] == "estimate_reset"]
     assert reset["shift_m"] == pytest.approx([15.0, 10.0], abs=1.0)
     texts = " ".join(x["text"] for x in events if x["kind"] == "autopilot_text")
@@ -689,8 +693,7 @@ def test_real_arducopters_gps_drifting_over_the_membrane_roof_is_waited_out_on_t
     assert res.returncode == 0, res.stderr[-3000:] + why
     assert e["outcome"] == "landed", why
     assert e["surface"] == "rooftop_clear", why
-    (record,) = (out / "episodes" / e["id"] / "record").glob("*/events.jsonl")
-    events = [json.loads(x) for x in record.read_text().splitlines()]
+    events = _episode_events(out, e)
     holds = [x for x in events if x["kind"] == "drift_hold"]
     assert holds, why
     assert holds[0]["drift_m_s"] >= 0.15, holds

@@ -15,7 +15,7 @@ import pytest
 
 from companion.precision import check_precision_landing
 from companion.telemetry import MAV_AUTOPILOT_ARDUPILOTMEGA, MAV_AUTOPILOT_PX4
-from tests.test_bench import _log_tail, bench
+from tests.test_bench import _episode_events, _log_tail, bench
 
 
 class _Params:
@@ -160,8 +160,7 @@ def test_precision_landing_on_emulated_arducopter_with_estimator_errors(tmp_path
     assert pl["tracks_found"] >= 1, why
     assert e["landing_distance_m"] < 0.8, (e["landing_target_ned_m"], why)
     # each frame of the landing that sent no target says why, in the record
-    (record,) = (out / "episodes" / e["id"] / "record").glob("*/events.jsonl")
-    events = [json.loads(x) for x in record.read_text().splitlines()]
+    events = _episode_events(out, e)
     (landing,) = [x for x in events if x["kind"] == "precision_landing"]
     assert landing["targets_sent"] == pl["targets_sent"]
     assert landing["targets_sent"] >= 1 or landing["lost"], landing
@@ -185,8 +184,7 @@ def test_a_gps_that_jumps_18_m_mid_descent_still_lands_on_the_chosen_site(tmp_pa
     (fault,) = [x for x in sim_log if x["event"] == "gps_fault"]
     touchdown = next(x for x in sim_log if x["event"] == "touchdown")
     assert fault["t_s"] < touchdown["t_s"]  # it happened during the descent
-    (record,) = (out / "episodes" / e["id"] / "record").glob("*/events.jsonl")
-    events = [json.loads(x) for x in record.read_text().splitlines()]
+    events = _episode_events(out, e)
     resets = [x for x in events if x["kind"] == "estimate_reset"]
     assert len(resets) == 1, resets
     assert resets[0]["shift_m"] == pytest.approx([15.0, 10.0], abs=0.5)
@@ -207,8 +205,7 @@ def test_a_gps_drifting_18_m_holds_the_descent_over_the_site_until_it_stops(tmp_
     assert e["gps_fault"] == {"offset_ne_m": [15.0, 10.0], "ramp_s": 30.0}
     assert e["outcome"] == "landed", why
     assert e["surface"] == "rooftop_clear", why
-    (record,) = (out / "episodes" / e["id"] / "record").glob("*/events.jsonl")
-    events = [json.loads(x) for x in record.read_text().splitlines()]
+    events = _episode_events(out, e)
     holds = [x for x in events if x["kind"] == "drift_hold"]
     assert holds, why
     assert holds[0]["drift_m_s"] >= 0.15
