@@ -40,6 +40,10 @@ Procedural close-ups of gravel, ballast and membrane roofs with and without obje
 renders: the labelled photographs hold no
 such roof seen from 10-20 m up.
 Thresholds stay as ``--recalibrate`` sets them on held-out renders (``make model``).
+Tried and left at 0 by default (docs/reasoning.md: the source folds did not move): hazard-free cell
+targets in clear photographs' middles (``--photo-cells``, ``--photo-roof``), photographed clear roofs'
+surfaces on the renders' roofs (``--real-roofs``) and renders' roofs shaded as pitched planes
+(``--pitched``); at 0 none of them draws a random number, so the shipped weights are reproduced.
 """
 
 from __future__ import annotations
@@ -89,6 +93,10 @@ STREAM = 4242  # the photograph views' random stream
 MIDDLE_INSET = 0.25  # a clear photograph's middle (each side's quarter left out) holds no hazard
 PHOTO_CELLS = 0.0  # weight of the clear photographs' hazard-free middle cells (--photo-cells)
 PHOTO_ROOF = 0.0  # weight of the roof cells in the middle of clear roofs and of photographs of no roof
+REAL_ROOFS = 0.0  # share of the render views whose roof surface is a clear photographed roof's (--real-roofs)
+REAL_ROOF_MIN = 0.15  # a render with less roof than this share keeps its own
+PITCHED = 0.0  # share of the render views whose roof is shaded as a pitched roof's planes (--pitched)
+SURFACE_INSET = 0.15  # a clear roof's photograph without this share of each side is its surface
 ROOF = CLASSES.index("roof")
 
 
@@ -245,6 +253,80 @@ def _views(
     return np.stack([v for v, _m in views]), clear, free, roof
 
 
+def roof_surfaces(photos: Sequence[Photo], images: dict[Path, np.ndarray]) -> list[np.ndarray]:
+    """Every photograph of a clear roof in ``photos`` without its margins (:data:`SURFACE_INSET` of each
+    side, where a neighbour's foliage or a gutter may show): real roof surfaces, float32 RGB 0-1, for
+    :func:`with_real_roof`."""
+    out = []
+    for p in photos:
+        if p.label != "clear_roof" or not p.land:
+            continue
+        rgb = images[p.path]
+        h, w = rgb.shape[:2]
+        y0, x0 = int(SURFACE_INSET * h), int(SURFACE_INSET * w)
+        out.append(np.ascontiguousarray(rgb[y0 : h - y0, x0 : w - x0], np.float32) / np.float32(255.0))
+    return out
+
+
+def with_real_roof(
+    rgb: np.ndarray, labels: np.ndarray, surfaces: Sequence[np.ndarray], rng: np.random.Generator
+) -> np.ndarray:
+    """A render (uint8 RGB) whose roof pixels show a photographed clear roof's surface instead of the
+    renderer's, lit as the render's roof was (its brightness relative to the roof's mean, smoothed, so
+    shadows and the light's fall-off stay), turned, mirrored and scaled to cover the render (up to 1.5
+    times more); everything else, and the labels, unchanged. The renders teach where objects, edges and
+    roads are; the photographs what a real roof's tiles, sheets and stains look like between them."""
+    roof = labels == ROOF
+    h, w = labels.shape
+    if not surfaces or roof.mean() < REAL_ROOF_MIN:
+        return rgb
+    tex = np.rot90(surfaces[int(rng.integers(len(surfaces)))], int(rng.integers(4)))
+    if rng.random() < 0.5:
+        tex = tex[:, ::-1]
+    scale = max(h / tex.shape[0], w / tex.shape[1]) * rng.uniform(1.0, 1.5)
+    th, tw = max(h, math.ceil(tex.shape[0] * scale)), max(w, math.ceil(tex.shape[1] * scale))
+    interp = cv2.INTER_AREA if scale < 1 else cv2.INTER_LINEAR
+    tex = np.asarray(cv2.resize(np.ascontiguousarray(tex), (tw, th), interpolation=interp), np.float32)
+    oy, ox = int(rng.integers(th - h + 1)), int(rng.integers(tw - w + 1))
+    x = rgb.astype(np.float32) / np.float32(255.0)
+    lum = x.mean(axis=2)
+    light = np.asarray(cv2.GaussianBlur(lum, (0, 0), 4.0), np.float32) / max(float(lum[roof].mean()), 1e-3)
+    surface = tex[oy : oy + h, ox : ox + w] * np.clip(light, 0.3, 1.5)[..., None]
+    out = np.where(roof[..., None], surface, x)
+    return np.asarray(np.clip(out * 255.0 + 0.5, 0, 255), np.uint8)
+
+
+def pitched(rgb: np.ndarray, labels: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """A render (uint8 RGB) whose roof is shaded as a pitched roof's: a ridge at a random place and angle,
+    the two long planes either side lit differently, and for a hipped roof (half of them) the two end
+    planes beyond the ridge's ends lit differently again; sometimes a ridge cap along it. Labels
+    unchanged: on real photographs a clear gable or hipped roof is still a clear roof (its slope is
+    geometry's business), and renders' roofs are flat."""
+    roof = labels == ROOF
+    if roof.mean() < REAL_ROOF_MIN:
+        return rgb
+    h, w = labels.shape
+    ys, xs = np.nonzero(roof)
+    k = int(rng.integers(len(ys)))
+    cy, cx = float(ys[k]), float(xs[k])
+    theta = float(rng.uniform(0.0, math.pi))
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    along = (xx - cx) * math.cos(theta) + (yy - cy) * math.sin(theta)
+    across = -(xx - cx) * math.sin(theta) + (yy - cy) * math.cos(theta)
+    d = float(rng.uniform(0.1, 0.4))
+    gain = np.where(across > 0, 1.0 + d, 1.0 - d).astype(np.float32)
+    if rng.random() < 0.5:  # hipped: end planes beyond the ridge's ends, at 45 degrees
+        half = float(rng.uniform(0.0, 0.3)) * max(h, w)
+        end = (np.abs(along) - half) > np.abs(across)
+        d_end = float(rng.uniform(-0.3, 0.3))
+        gain = np.where(end, np.where(along > 0, 1.0 + d_end, 1.0 - d_end), gain).astype(np.float32)
+    if rng.random() < 0.5:  # a ridge cap: a line one or two pixels wide, lighter or darker
+        cap = np.abs(across) < float(rng.uniform(0.5, 1.5))
+        gain = np.where(cap, float(rng.uniform(0.6, 1.4)), gain).astype(np.float32)
+    x = rgb.astype(np.float32) * np.where(roof, gain, 1.0)[..., None]
+    return np.asarray(np.clip(x + 0.5, 0, 255), np.uint8)
+
+
 def fine_tune(
     net: Any,
     photos: Sequence[Photo],
@@ -262,6 +344,7 @@ def fine_tune(
     torch.set_num_threads(args.threads)
     used = [p for p in photos if p.land is not None]
     images = {p.path: read_rgb(p.path) for p in used}
+    surfaces = roof_surfaces(used, images) if args.real_roofs > 0 else []
     pos = sum(1 for p in used if p.land)
     photo_pos_weight = torch.tensor((len(used) - pos) / max(pos, 1))
     pos_weight = torch.tensor([POS_WEIGHT.get(c, 1.0) for c in CLASSES]).view(1, -1, 1, 1)
@@ -282,7 +365,11 @@ def fine_tune(
             rng.integers(first_closeup, len(x), closeups_here),
         ])  # fmt: skip
         for i in picks.tolist():
-            img, lab = augment(x[i], y[i], rng, INPUT_PX)
+            real = surfaces and i < first_closeup and rng.random() < args.real_roofs  # no draw at 0
+            src = with_real_roof(x[i], y[i], surfaces, rng) if real else x[i]
+            if args.pitched > 0 and i < first_closeup and rng.random() < args.pitched:  # no draw at 0
+                src = pitched(src, y[i], rng)
+            img, lab = augment(src, y[i], rng, INPUT_PX)
             c, v, s = targets(lab)
             r_img.append(img)
             cells.append(c)
@@ -384,6 +471,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="weight of the roof cells held at 1 in a clear roof's middle, at 0 in a photograph of no roof",
     )  # fmt: skip
     p.add_argument(
+        "--real-roofs", type=float, default=REAL_ROOFS,
+        help="share of the render views whose roof shows a photographed clear roof's surface",
+    )  # fmt: skip
+    p.add_argument(
+        "--pitched", type=float, default=PITCHED,
+        help="share of the render views whose roof is shaded as a gable or hipped roof's planes",
+    )  # fmt: skip
+    p.add_argument(
         "--closeups", type=int, default=CLOSEUPS,
         help="procedural roof close-ups beside the renders (landfall_train.closeups)",
     )  # fmt: skip
@@ -431,6 +526,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "steps": args.steps, "lr": args.lr, "photo_batch": args.photo_batch,
         "render_batch": args.render_batch, "photo_weight": args.photo_weight,
         "photo_cells": args.photo_cells, "photo_roof": args.photo_roof, "alpha": args.alpha,
+        "real_roofs": args.real_roofs, "pitched": args.pitched,
         "closeups": args.closeups, "closeup_share": args.closeup_share,
         "render_digest": digest,
         "seconds": round(seconds, 1), "torch": _torch_version(), "commit": _commit(),

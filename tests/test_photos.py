@@ -26,8 +26,11 @@ from landfall_train.photos import (  # noqa: E402
     load_photos,
     photo_view,
     photo_view_middle,
+    pitched,
+    roof_surfaces,
     split,
     trainable,
+    with_real_roof,
 )
 
 
@@ -178,6 +181,56 @@ def test_cell_targets_only_where_the_label_speaks_of_the_middle(tmp_path: Path) 
             if i == 0:
                 assert np.array_equal(free[k], roof[k] == 1.0)
     assert seen == {0, 1, 2}
+
+
+def test_a_real_roof_replaces_the_renders_roof_only_and_keeps_its_light(tmp_path: Path) -> None:
+    # a render: grey roof on the left half, lit on top and in shadow below; green ground on the right
+    rgb = np.zeros((96, 96, 3), np.uint8)
+    rgb[:, 48:] = (40, 160, 40)
+    rgb[:48, :48], rgb[48:, :48] = 200, 80
+    labels = np.full((96, 96), 10, np.uint8)
+    labels[:, :48] = 0  # roof
+    # photographs: a clear red roof (with a dark margin left out) and a cluttered blue one (never used)
+    red, blue = np.zeros((60, 80, 3), np.uint8), np.full((60, 80, 3), (0, 0, 255), np.uint8)
+    red[9:51, 12:68] = (220, 30, 30)
+    photos = [Photo(tmp_path / "clear.jpg", "clear_roof", True, "a", "CC0"),
+              Photo(tmp_path / "cluttered.jpg", "cluttered_roof", False, "a", "CC0")]  # fmt: skip
+    surfaces = roof_surfaces(photos, {photos[0].path: red, photos[1].path: blue})
+    assert len(surfaces) == 1
+    assert surfaces[0].shape == (42, 56, 3)  # the margins left out
+    for seed in range(10):
+        out = with_real_roof(rgb, labels, surfaces, np.random.default_rng(seed))
+        assert out.shape == rgb.shape
+        assert out.dtype == np.uint8
+        assert np.array_equal(out[:, 48:], rgb[:, 48:])  # the ground untouched
+        roof = out[:, :48].astype(float)
+        assert (roof[..., 0] > roof[..., 2] + 40).mean() > 0.95  # the photographed roof's red
+        assert roof[4:40, 4:44, 0].mean() > roof[56:92, 4:44, 0].mean() + 40  # lit above, shadow below
+        again = with_real_roof(rgb, labels, surfaces, np.random.default_rng(seed))
+        assert np.array_equal(out, again)
+    little = labels.copy()
+    little[:, 8:] = 10  # under REAL_ROOF_MIN of roof: the render keeps its own
+    assert with_real_roof(rgb, little, surfaces, np.random.default_rng(0)) is rgb
+    assert with_real_roof(rgb, labels, [], np.random.default_rng(0)) is rgb
+
+
+def test_a_pitched_roof_is_planes_of_two_or_more_tones_on_the_roof_only() -> None:
+    rgb = np.full((96, 96, 3), 120, np.uint8)
+    rgb[:, 64:] = (40, 160, 40)
+    labels = np.full((96, 96), 10, np.uint8)
+    labels[:, :64] = 0  # roof
+    tones = set()
+    for seed in range(20):
+        out = pitched(rgb, labels, np.random.default_rng(seed))
+        assert np.array_equal(out, pitched(rgb, labels, np.random.default_rng(seed)))
+        assert np.array_equal(out[:, 64:], rgb[:, 64:])  # the ground untouched
+        roof = out[:, :64, 0].astype(int)
+        assert roof.max() - roof.min() >= 0.2 * 120  # a lit plane and a shaded one
+        tones.add(len(np.unique(roof)))
+    assert max(tones) > 2  # hipped end planes or a ridge cap, in some of them
+    little = labels.copy()
+    little[:, 8:] = 10
+    assert pitched(rgb, little, np.random.default_rng(0)) is rgb
 
 
 def test_fold_scores_count_each_answerable_confirm_and_each_clear_cluttered_pair_once() -> None:
