@@ -274,6 +274,29 @@ def test_out_of_lidar_range_descends_into_it_instead_of_climbing(
     assert td["safe"] is True, td
 
 
+def test_past_the_budget_a_descent_to_see_is_followed_by_a_look_from_there(
+    start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """A round budget of one (``recovery.max_rounds``), 125 m above a bare field, out of the 100 m
+    LiDAR's reach: the first round ends descending to 70 m to see; the next, past the budget, looks
+    from there before it flies any search leg, finds the field flat and lands on it. (City 5, launch
+    47: past the budget each such descent was followed by a leg climbing back out of the LiDAR's
+    reach, until the alarm's window closed with nothing seen and it landed where it was.)"""
+    scenario = tmp_path / "open_field.toml"
+    scenario.write_text(open_field_toml(250.0, 125.0))
+    rig = start_rig(
+        ["--scenario", str(scenario), "--autopilot", "px4", "--speed", "8"],
+        env={"LANDFALL_RECOVERY_MAX_ROUNDS": "1"},
+    )
+    _raise_alarm(rig, "GPS spoofing", "high")
+    td = _wait_touchdown(rig, timeout_s=200)
+    log = rig.log_text()
+    assert "LiDAR sees nothing, ground 125 m below: descending 55 m" in log
+    assert "budget spent, nothing measured: looking again from here (1, battery" in log
+    assert "search leg" not in log
+    assert td["safe"] is True, td
+
+
 TOWER = """
 [[buildings]]
 id = "tower"

@@ -160,6 +160,8 @@ class RecoveryBase:
         self._descending: tuple[tuple[float, float, float], Candidate] | None = None
         self.ledger = SiteLedger(self.p.rejected_radius_m)
         self.extra = 0  # rounds flown past the budget (nothing acceptable seen)
+        # the last round ended on an exploring climb or descent: a view from here not yet looked at
+        self._new_vantage = False
         self.search = SearchPlanner(
             alarm.criticality, self.p.search, search_agl_m=self.p.search_agl_m, lidar_range_m=100.0
         )

@@ -319,6 +319,7 @@ class Recovery(Searching, SiteChoice, Following, Looking):
 
     async def _round(self) -> bool:
         look, self._first_look = self._first_look, None
+        self._new_vantage = False  # this round looks from here
         self._track = None  # a new round, a new site
         frame = await (look if look is not None else self._acquire())
         self._set(State.SURFACE_ID)

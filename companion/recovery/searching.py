@@ -97,8 +97,9 @@ class Searching(RecoveryBase):
 
     async def _extra_round(self) -> bool:
         """A round past the budget: a closer look at the best roof seen only from afar (nothing seen
-        against it: flown to and confirmed as any round would), or, with none, a step outward to a view
-        not yet judged and a round there. True when it landed."""
+        against it: flown to and confirmed as any round would), or, with none, a round from here when
+        the last round ended by climbing or descending to see (:meth:`_explore`), else a step outward
+        to a view not yet judged and a round there. True when it landed."""
         self.extra += 1
         self.round += 1
         self._descending = None
@@ -120,7 +121,7 @@ class Searching(RecoveryBase):
                 "round": self.round,
                 "extra": self.extra,
                 "best": None if site is None else site.to_json(),
-                "action": "closer look" if look else "explore",
+                "action": "closer look" if look else "look again" if self._new_vantage else "explore",
             },
         )
         if look:
@@ -135,6 +136,11 @@ class Searching(RecoveryBase):
             if site is None
             else f"the best seen is {site.hazard.name.lower().replace('_', ' ')}"
         )
+        if self._new_vantage:
+            # the last round ended by climbing or descending to see (out of the LiDAR's reach, or too
+            # low for a wide view): look from there before flying on, or the step was for nothing
+            self._say(4, f"budget spent, {seen}: looking again from here ({count})")
+            return await self._round()
         self._say(4, f"budget spent, {seen}: searching on ({count})")
         await self._search_leg()
         return await self._round()
@@ -210,3 +216,4 @@ class Searching(RecoveryBase):
             return
         with contextlib.suppress(TargetTimeout):
             await self.ctl.goto(*target, tolerance_m=1.0, speed_m_s=0.5, timeout_s=self.p.move_timeout_s)
+        self._new_vantage = True  # the next round, within the budget or past it, looks from here
