@@ -125,6 +125,23 @@ def test_lidar_returns_match_the_geometry() -> None:
     assert np.all(np.linalg.norm(pts[:, :3], axis=1) <= model.range_m + 1e-3)
 
 
+def test_beyond_the_modelled_area_the_lidar_sees_the_open_ground_the_camera_and_rangefinder_see() -> None:
+    """Off the grid the world is open ground at height 0 for the camera and the rangefinder; the LiDAR
+    returned nothing there (a companion that searched past a city's edge descended to 70 m and still
+    saw nothing). It sees the same ground, within its range only."""
+    g = _box_world(30.0, 20.0)
+    p = Pyramid(g.height)
+    model = LidarModel(noise_sigma_m=0.0, dropout=0.0)
+    pos = (400.0, 0.0, -70.0)  # 250 m beyond the grid's edge
+    pts = sweep(g, p, model, pos, LEVEL, np.random.default_rng(0))
+    assert rangefinder_m(g, p, pos, LEVEL) == pytest.approx(70.0, abs=1e-3)
+    assert len(pts) > 1000
+    assert np.allclose(pts[:, 2], 70.0, atol=0.01)  # level ground 70 m below, in body FRD
+    assert np.all(np.linalg.norm(pts[:, :3], axis=1) <= model.range_m + 1e-3)
+    assert np.all(pts[:, 3] > 0.0)
+    assert len(sweep(g, p, model, (400.0, 0.0, -120.0), LEVEL, np.random.default_rng(0))) == 0  # out of range
+
+
 def test_lidar_noise_and_dropouts_are_seeded() -> None:
     g = _box_world()
     p = Pyramid(g.height)
