@@ -289,3 +289,23 @@ def test_observe_finds_the_ground_beyond_the_lidar_by_the_rangefinder() -> None:
     p.observe(Frame(pos, roof_only, 110.0))
     assert p.ground_up_m == pytest.approx(0.0, abs=0.5)
     assert p.roof_cells()
+
+
+def test_a_street_level_site_is_among_buildings_with_a_roof_in_view_or_measured_within_200_m() -> None:
+    """Past a town's last roofs the fields are open country (judged on what is seen), not a plaza among
+    buildings (a last resort): roofs measured anywhere in the recovery no longer make everything
+    built-up (city 5 launch 47 refused five open fields 260-500 m from the city's last roofs)."""
+    from types import SimpleNamespace
+
+    from companion.recovery.core import BUILT_UP_RADIUS_M, RecoveryBase
+
+    p = planner()
+    pos = (0.0, 0.0, -75.0)
+    p.observe(Frame(pos, sweep(pos, [(35.0, 60.0, -10.0, 20.0, 20.0)]), 75.0))  # one roof, N 35-60 m
+    recovery = SimpleNamespace(_roofs_in_view=False, search=p)
+    assert RecoveryBase._built_up(recovery, (0.0, 0.0))  # type: ignore[arg-type]
+    assert RecoveryBase._built_up(recovery, (-100.0, 0.0))  # type: ignore[arg-type]  # 135 m from it
+    far = (35.0 - BUILT_UP_RADIUS_M - 20.0, 0.0)
+    assert not RecoveryBase._built_up(recovery, far)  # type: ignore[arg-type]
+    recovery._roofs_in_view = True  # a roof in this round's view: built-up wherever the site
+    assert RecoveryBase._built_up(recovery, far)  # type: ignore[arg-type]

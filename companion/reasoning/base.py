@@ -93,7 +93,7 @@ class ConfirmRequest:
     site_ne_m: tuple[float, float] | None = None  # where the site is, for the lone-"no" rule
     site_up_m: float | None = None  # the site's height above its surroundings (Surface ID), if measured
     site_strip: bool = False  # Surface ID measured the site on an elevated strip (a deck, not a roof)
-    built_up: bool = False  # roofs were measured during the recovery: a town, where streets carry people
+    built_up: bool = False  # roofs in view or measured near the site: a town, where streets carry people
     deadline: float | None = None
     transcript: list[dict[str, Any]] | None = field(default=None, compare=False)
 

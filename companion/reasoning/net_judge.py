@@ -17,8 +17,8 @@ Otherwise the site is accepted when the net's clear-site probability reaches the
 (calibrated on simbridge renders). That probability means a clear *roof*, which a surface Surface ID
 measured at street level is not: there the window's road *and* roof-like cells count as paving (a plain
 asphalt road looks like a tar roof from above; the height tells them apart), over
-``max_street_asphalt`` a road or a car park. In open country (street level, no roof measured during the
-recovery: ``built_up`` false) only level ground with nothing on it passes, whatever the clear-site
+``max_street_asphalt`` a road or a car park. In open country (street level, no roof in view or measured near
+the site: ``built_up`` false) only level ground with nothing on it passes, whatever the clear-site
 probability: no object, person, vehicle, water or marking in the window, paving and trees within their
 limits (a bare field, a yard, a lawn). Among buildings street level is a last resort. A rejection names what
 was seen where (objects, people, vehicles, vegetation, road surface, ...). With a critical alarm and a

@@ -27,10 +27,10 @@ count: a dark, even tar roof looks like a road, but no road runs on a roof. An e
 no roof: it is judged as street level is, where a single painted line (``lane_lines >= 1``) vetoes the
 site whatever its texture. A "no" for water or lane markings, or any "no" for a site measured at street
 level or on a strip (streets, plazas, car parks, decks), is *binding*: the cascade lets no remote
-tier's "yes" overrule it. Among buildings (``ConfirmRequest.built_up``: the recovery measured a roof)
-a site at street level is refused even when it looks clear: sidewalks and plazas look empty between
-one pedestrian and the next, and the clear roofs are where no one walks. Such a site stays in the
-recovery's ledger as a last resort (docs/recovery.md); in open country (no roof measured) a field is
+tier's "yes" overrule it. Among buildings (``ConfirmRequest.built_up``: a roof in view or measured
+near the site) a site at street level is refused even when it looks clear: sidewalks and plazas look
+empty between one pedestrian and the next, and the clear roofs are where no one walks. Such a site
+stays in the recovery's ledger as a last resort (docs/recovery.md); in open country (none) a field is
 judged on what is seen. ``Decision.hazards`` names the kinds of what vetoed the site (water,
 markings, street_asphalt, raised, lidar_obstacle, ...): the recovery's ledger of measured sites ranks
 them by it (docs/recovery.md). ``critical=True``

@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import enum
 import logging
+import math
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -35,6 +36,8 @@ SENSOR_RETRY_S = 1.0  # between two asks for a frame after one failed
 SITE_RETRIES = 2  # more frames asked for when a LiDAR sweep misses the site before judging it unmeasured
 SEVERITY_CRITICAL = 2  # MAV_SEVERITY_CRITICAL: a defect of the companion's own
 MAX_REJECTED_RADIUS_M = 15.0  # water or traffic rules out at most this far around a rejected site
+# a site at street level with roofs measured this close is among buildings (people and traffic come back)
+BUILT_UP_RADIUS_M = 200.0
 
 
 class FrameUnavailable(Exception):
@@ -171,7 +174,7 @@ class RecoveryBase:
         onboard = getattr(reasoner, "onboard", None)
         self._onboard = onboard if isinstance(onboard, OnboardReasoner) else OnboardReasoner()
         self._fault = FaultHook.from_env()
-        self._roofs_seen = False  # a roof measured during this recovery: a built-up area
+        self._roofs_in_view = False  # this round's Surface ID measured a roof: a built-up area here
         # the site being followed: the last frame it was found in, and where it was then (following.py)
         self._track: tuple[SiteView, tuple[float, float, float]] | None = None
         self._first_look: asyncio.Task[Any] | None = None  # the first frame, asked for while engaging
@@ -251,6 +254,15 @@ class RecoveryBase:
         strip: bool,
     ) -> tuple[str, ...]:
         raise NotImplementedError
+
+    def _built_up(self, site_ne_m: tuple[float, float]) -> bool:
+        """Policy: whether a site at street level is among buildings, where streets and plazas carry people
+        and traffic that come back (docs/recovery.md): a roof in this round's view, or roofs the LiDAR
+        measured during the recovery (the search's map) within ``BUILT_UP_RADIUS_M`` of the site. The
+        open fields past a town's last roofs are open country, judged on what is seen."""
+        if self._roofs_in_view:
+            return True
+        return bool(self.search.roof_groups(lambda c: math.dist(c, site_ne_m) < BUILT_UP_RADIUS_M))
 
     def _note_candidates(self, candidates: list[Candidate], frame: Any, camera: PinholeCamera) -> None:
         raise NotImplementedError

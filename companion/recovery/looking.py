@@ -177,7 +177,7 @@ class Looking(RecoveryBase):
                     site_ne_m=(target[0], target[1]),
                     site_up_m=choice.height_above_m if math.isfinite(choice.height_above_m) else None,
                     site_strip=choice.strip,
-                    built_up=self._roofs_seen,
+                    built_up=self._built_up((target[0], target[1])),
                 )
             )
         up_m = choice.height_above_m if math.isfinite(choice.height_above_m) else None

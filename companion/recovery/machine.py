@@ -326,9 +326,8 @@ class Recovery(Searching, SiteChoice, Following, Looking):
         camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
         candidates = await asyncio.to_thread(self._surface_id, frame, camera)
         await asyncio.to_thread(self._observe, frame)  # the search's map of what was seen
-        # roofs the LiDAR saw beyond Surface ID's candidates make it a built-up area too
-        self._roofs_seen = self._roofs_seen or bool(self.search.roof_groups())
-        self._roofs_seen = self._roofs_seen or any(c.elevated for c in candidates)
+        # a roof in view makes it a built-up area; so do roofs the LiDAR saw near a site (_built_up)
+        self._roofs_in_view = any(c.elevated for c in candidates)
         candidates = [c for c in candidates if not self._near_rejected(c)]
         if frame.image_rgb is not None:  # JPEG encoding off the event loop: the setpoint stream runs there
             await asyncio.to_thread(self.record.save_image, f"round{self.round:02d}-acquire", frame.image_rgb)
