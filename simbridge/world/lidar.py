@@ -75,7 +75,7 @@ def sweep(
     # beyond the modelled area: open ground (soil) at height 0, as the camera and the rangefinder see it
     beyond = (kinds == HIT_MISS) & (dirs[:, 2] < -1e-6)
     t_open = np.where(beyond, origin[0, 2] / np.where(beyond, -dirs[:, 2], 1.0), np.inf)
-    beyond &= t_open <= model.range_m
+    beyond &= (t_open > 0.0) & (t_open <= model.range_m)  # a vehicle below height 0 sees none of it
     ts = np.where(beyond, t_open, ts)
     kinds = np.where(beyond, HIT_TOP, kinds)
     keep = (kinds != HIT_MISS) & (rng.random(ts.shape[0]) >= model.dropout)
