@@ -280,61 +280,46 @@ def _real_firmware_failsafe(
     The rig's firmware itself has aborted mid-flight once (ArduCopter SITL, its GPS switched off: a
     floating point exception in the firmware, simbridge exits with its output): that flight is flown
     once more, with a warning saying so; any other failure, or a second abort, fails the test."""
-    kwargs: dict[str, Any] = dict(
-        bytewise=bytewise, commands=commands, env=env, until_touchdown=until_touchdown, heartbeat=heartbeat
-    )
+
+    def fly(where: Path) -> tuple[Rig, str, list[dict[str, Any]], float]:
+        relays: list[Any] = []
+        record = where / "record"
+        try:
+            rig = start_rig(
+                [*sim_args, "--speed", "8"],
+                ["--record", str(record)],
+                env=env,
+                mavlink_via=_via(relays, _clean_relay),
+            )
+            _wait_event(rig.sim, "ready", 240)
+            rig.wait_log("sensor stream connected", timeout_s=60)
+            out = rig.alarm_accepted("--reason", "GPS spoofing detected", "--criticality", "high")
+            assert out.returncode == 0, out.stdout + out.stderr
+            rig.wait_log("m, site clear", timeout_s=300)  # "descending 70 m, site clear: ...": the first step
+            for _ in range(3):  # a datagram may be lost; setting a parameter twice does no harm
+                for frame in _gcs_frames(params, bytewise=bytewise, commands=commands, heartbeat=heartbeat):
+                    relays[0].inject(frame)
+                time.sleep(0.2)
+            touchdown = math.nan
+            if until_touchdown:
+                touchdown = float(_wait_event(rig.sim, "touchdown", 400)["t_s"])
+            log = rig.wait_log("recovery ended", timeout_s=120)
+            if until_touchdown:
+                _wait_event(rig.sim, "disarmed", 60)
+        finally:
+            for r in relays:
+                r.close()
+        events = _events(record)
+        assert events[-1]["kind"] == "outcome"
+        return rig, log, events, touchdown
+
     try:
-        return _fly_failsafe(start_rig, tmp_path / "first", sim_args, params, **kwargs)
+        return fly(tmp_path / "first")
     except AssertionError as exc:
         if FIRMWARE_ABORT not in str(exc):
             raise
         warnings.warn(f"the firmware aborted by itself ({FIRMWARE_ABORT}): flying again", stacklevel=2)
-    return _fly_failsafe(start_rig, tmp_path / "again", sim_args, params, **kwargs)
-
-
-def _fly_failsafe(
-    start_rig: Callable[..., Rig],
-    tmp_path: Path,
-    sim_args: list[str],
-    params: dict[str, tuple[float, int]],
-    *,
-    bytewise: bool,
-    commands: Sequence[tuple[int, Sequence[float]]],
-    env: dict[str, str] | None,
-    until_touchdown: bool,
-    heartbeat: bool,
-) -> tuple[Rig, str, list[dict[str, Any]], float]:
-    """One flight of :func:`_real_firmware_failsafe`."""
-    relays: list[Any] = []
-    record = tmp_path / "record"
-    try:
-        rig = start_rig(
-            [*sim_args, "--speed", "8"],
-            ["--record", str(record)],
-            env=env,
-            mavlink_via=_via(relays, _clean_relay),
-        )
-        _wait_event(rig.sim, "ready", 240)
-        rig.wait_log("sensor stream connected", timeout_s=60)
-        out = rig.alarm_accepted("--reason", "GPS spoofing detected", "--criticality", "high")
-        assert out.returncode == 0, out.stdout + out.stderr
-        rig.wait_log("m, site clear", timeout_s=300)  # "descending 70 m, site clear: ...": the first step
-        for _ in range(3):  # a datagram may be lost; setting a parameter twice does no harm
-            for frame in _gcs_frames(params, bytewise=bytewise, commands=commands, heartbeat=heartbeat):
-                relays[0].inject(frame)
-            time.sleep(0.2)
-        touchdown = math.nan
-        if until_touchdown:
-            touchdown = float(_wait_event(rig.sim, "touchdown", 400)["t_s"])
-        log = rig.wait_log("recovery ended", timeout_s=120)
-        if until_touchdown:
-            _wait_event(rig.sim, "disarmed", 60)
-    finally:
-        for r in relays:
-            r.close()
-    events = _events(record)
-    assert events[-1]["kind"] == "outcome"
-    return rig, log, events, touchdown
+    return fly(tmp_path / "again")
 
 
 def _real_firmware_failsafe_lands(

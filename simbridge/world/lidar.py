@@ -74,17 +74,20 @@ def sweep(
     )  # fmt: skip
     # beyond the modelled area: open ground (soil) at height 0, as the camera and the rangefinder see it
     beyond = (kinds == HIT_MISS) & (dirs[:, 2] < -1e-6)
-    t_open = np.where(beyond, origin[0, 2] / np.where(beyond, -dirs[:, 2], 1.0), np.inf)
-    beyond &= (t_open > 0.0) & (t_open <= model.range_m)  # a vehicle below height 0 sees none of it
-    ts = np.where(beyond, t_open, ts)
-    kinds = np.where(beyond, HIT_TOP, kinds)
+    if beyond.any():
+        idx = np.flatnonzero(beyond)
+        t_open = origin[0, 2] / -dirs[idx, 2]
+        seen = (t_open > 0.0) & (t_open <= model.range_m)  # a vehicle below height 0 sees none of it
+        beyond[idx[~seen]] = False
+        ts[idx[seen]] = t_open[seen]
+        kinds[idx[seen]] = HIT_TOP
     keep = (kinds != HIT_MISS) & (rng.random(ts.shape[0]) >= model.dropout)
     rng_m = ts[keep] + rng.normal(0.0, model.noise_sigma_m, int(keep.sum())).astype(np.float32)
     rng_m = np.clip(rng_m, 0.05, model.range_m)
     pts = rays[keep] * rng_m[:, None]
-    mat = np.where(beyond, int(Material.SOIL), grid.mat[np.clip(ii, 0, grid.mat.shape[0] - 1),
-                                                        np.clip(jj, 0, grid.mat.shape[1] - 1)])  # fmt: skip
-    refl = _REFLECTIVITY[mat[keep]]
+    mat = grid.mat[ii[keep], jj[keep]]  # a ground hit beyond the grid has no cell: its index is -1
+    mat[beyond[keep]] = int(Material.SOIL)
+    refl = _REFLECTIVITY[mat]
     incidence = np.where(kinds[keep] == HIT_TOP, np.abs(dirs[keep, 2]), 0.6)
     intensity = np.clip(refl * (0.3 + 0.7 * incidence) * (1.0 - 0.3 * rng_m / model.range_m), 0.0, 1.0)
     return np.column_stack([pts, intensity]).astype(np.float32)
