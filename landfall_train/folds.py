@@ -14,6 +14,8 @@ confirm reads the middle two thirds in four views and accepts when the clear-sit
 the member's threshold with no water (over 10 % of the cells) or markings (over 2 %); rank orders by the
 reading's hazard (two views), every (clear roof, cluttered roof) pair of the fold. Pooled over the source
 folds, these are the figures that choose ``--alpha`` and ``--steps``; alpha 0 is the member as trained.
+``--sides 0,96`` reads the judged photographs at each listed shorter side as well (0: the sidecar's;
+figures keyed ``ALPHA@SIDE``), which chose the confirmation's 96 px.
 Each fold's model is exported to ONNX and read by :class:`companion.reasoning.landnet.LandNet`, as the
 companion reads it. Folds run in ``--jobs`` processes, one core each.
 """
@@ -54,12 +56,13 @@ ALPHAS = (0.0, 0.25, 0.5, 0.75, 1.0)
 HELD_OUT = "held-out"
 
 
-def readings(model: Path, images: dict[str, np.ndarray]) -> dict[str, dict[str, Any]]:
+def readings(model: Path, images: dict[str, np.ndarray], short_side: int = 0) -> dict[str, dict[str, Any]]:
     """Per photograph (its path, in ``images`` with its pixels): whether the companion's net judgement
     confirms it (:func:`companion.reasoning.net_judge.confirm_reading` on a roof, no LiDAR, the
     middle two thirds), its rank score (higher first) and what they came from (the
     clear-site probability and the spread of its views, the shares of water, markings and objects, the
-    hazard peak), for choosing thresholds afterwards."""
+    hazard peak), for choosing thresholds afterwards. ``short_side`` (pixels, 0: the sidecar's) reads
+    the photographs at another scale, the longer side at most twice it."""
     from companion.reasoning.base import ConfirmRequest
     from companion.reasoning.image_cues import SITE_WINDOW_CROP
     from companion.reasoning.landnet import LandNet
@@ -67,6 +70,9 @@ def readings(model: Path, images: dict[str, np.ndarray]) -> dict[str, dict[str, 
     from companion.reasoning.onboard_params import ConfirmParams
 
     net = LandNet.load(model, backend="onnxruntime")
+    if short_side:
+        net.short_side_px, net.max_long_side_px = short_side, 2 * short_side
+        net.confirm_short_side_px = short_side
     params = ConfirmParams(site_window=SITE_WINDOW_CROP)  # a crop's window, whatever its shape
     out = {}
     for key, rgb in images.items():
@@ -116,10 +122,12 @@ def _fold(job: tuple[str, list[Photo], list[Photo], argparse.Namespace, Sequence
             interpolate(net, start, a)
             path = Path(tmp) / f"a{a:g}"
             export(net, path, meta)
-            seen = readings(path.with_suffix(".onnx"), images)
-            verdicts = {k: (v["confirmed"], v["rank_score"]) for k, v in seen.items()}
-            out["by_alpha"][f"{a:g}"] = scores(judged, verdicts) | {"threshold": meta["thresholds"]["clear"]}
-            out.setdefault("photos", {})[f"{a:g}"] = seen
+            for side in args.sides:
+                key = f"{a:g}@{side}" if side else f"{a:g}"
+                seen = readings(path.with_suffix(".onnx"), images, side)
+                verdicts = {k: (v["confirmed"], v["rank_score"]) for k, v in seen.items()}
+                out["by_alpha"][key] = scores(judged, verdicts) | {"threshold": meta["thresholds"]["clear"]}
+                out.setdefault("photos", {})[key] = seen
     _log.info("fold %s: %.0f s", name, time.monotonic() - t0)
     return out
 
@@ -140,6 +148,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.description = __doc__.split("\n")[0]
     p.add_argument("--alphas", type=lambda s: [float(v) for v in s.split(",")], default=list(ALPHAS))
     p.add_argument("--jobs", type=int, default=2, help="folds fine-tuned side by side")
+    p.add_argument(
+        "--sides", type=lambda s: [int(v) for v in s.split(",")], default=[0],
+        help="short sides (px) to read the judged photographs at, 0 the sidecar's: e.g. 0,96",
+    )  # fmt: skip
     args = p.parse_args(argv)
     photos = load_photos(args.photos)
     learn, held = split(photos, args.hold_out)
@@ -160,16 +172,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         "photo_weight": args.photo_weight, "photo_cells": args.photo_cells,
         "photo_roof": args.photo_roof, "hold_out": args.hold_out,
         "folds": folds,
-        "source_folds": {f"{a:g}": pooled(source_folds, f"{a:g}") for a in args.alphas},
-        "held_out": {f"{a:g}": pooled([held_fold], f"{a:g}") for a in args.alphas},
+        "sides": args.sides,
+        "source_folds": {k: pooled(source_folds, k) for k in held_fold["by_alpha"]},
+        "held_out": {k: pooled([held_fold], k) for k in held_fold["by_alpha"]},
         "seconds": round(time.monotonic() - t0, 1),
     }  # fmt: skip
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.with_suffix(".json").write_text(json.dumps(report, indent=2) + "\n")
-    print(f"{'alpha':>6} {'source folds: confirm':>22} {'rank':>7}   {'held-out: confirm':>18} {'rank':>7}")
-    for a in args.alphas:
-        s, h = report["source_folds"][f"{a:g}"], report["held_out"][f"{a:g}"]
-        print(f"{a:6g} {s['confirm_accuracy']:>22.3f} {s['rank_accuracy']:>7.3f}   "
+    print(f"{'alpha':>8} {'source folds: confirm':>22} {'rank':>7}   {'held-out: confirm':>18} {'rank':>7}")
+    for k in held_fold["by_alpha"]:
+        s, h = report["source_folds"][k], report["held_out"][k]
+        print(f"{k:>8} {s['confirm_accuracy']:>22.3f} {s['rank_accuracy']:>7.3f}   "
               f"{h['confirm_accuracy']:>18.3f} {h['rank_accuracy']:>7.3f}")  # fmt: skip
     return 0
 

@@ -96,6 +96,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="readings averaged per crop when the companion ranks (sidecar input.rank_views)",
     )  # fmt: skip
     p.add_argument(
+        "--confirm-side", type=int, default=INPUT_PX, metavar="PX",
+        help="shorter side a confirmation's window is read at in the companion (sidecar "
+        "input.confirm_short_side_px; the Makefile's model uses 96, chosen on photographs)",
+    )  # fmt: skip
+    p.add_argument(
         "--recalibrate", action="store_true",
         help="only calibrate the model at --out again (its ONNX file; no training) and rewrite its sidecar",
     )  # fmt: skip
@@ -176,7 +181,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     x_val, y_val, val_digest = patches.load_shards(validation_paths(args, args.seed))
     if args.recalibrate:  # the validation renders only
         val = validation_views(x_val, y_val, args.seed)
-        how = (args.views, args.rank_views)
+        how = (args.views, args.rank_views, args.confirm_side)
         return recalibrate(args.out, val, how, command, val_digest, args.clear_floor)
     x_train, y_train, train_digest = patches.load_shards(training_paths(args, args.seed))
     t_render = time.monotonic() - t0
@@ -191,7 +196,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "hazard_classes": [CLASSES[k] for k in HAZARD_CLASSES],
         "input": {"mean": [0.5] * 3, "std": [0.25] * 3, "multiple": 16, "short_side_px": INPUT_PX,
                   "max_long_side_px": 2 * INPUT_PX, "order": "RGB", "scale": 1 / 255, "views": args.views,
-                  "rank_views": args.rank_views},
+                  "rank_views": args.rank_views, "confirm_short_side_px": args.confirm_side},
         "outputs": {"cells": "(N, K, H/8, W/8) presence logits", "clear": "(N, 1, 1, 1) clear-site logit"},
         "thresholds": calib["thresholds"],
         "sim_metrics": calib["metrics"],
@@ -374,14 +379,14 @@ def _predict(predict: Predict, img: np.ndarray, views: int) -> tuple[np.ndarray,
 def recalibrate(
     out: Path,
     val: dict[str, np.ndarray],
-    how: tuple[int, int],
+    how: tuple[int, int, int],
     command: str,
     val_digest: str,
     clear_floor: float = 0.0,
 ) -> int:
     """Calibrate the exported model at ``out`` again (``--recalibrate``) with ``how`` = (views,
-    rank_views) and rewrite its sidecar."""
-    views, rank_views = how
+    rank_views, confirm_side) and rewrite its sidecar."""
+    views, rank_views, confirm_side = how
     meta_path = out.with_suffix(".json")
     meta = json.loads(meta_path.read_text())
     calib = calibrate(_onnx_predict(out.with_suffix(".onnx")), val, views, clear_floor)
@@ -389,8 +394,10 @@ def recalibrate(
     meta["sim_metrics"] = calib["metrics"]
     meta["input"]["views"] = views
     meta["input"]["rank_views"] = rank_views
+    meta["input"]["confirm_short_side_px"] = confirm_side
     meta["calibration"] = {
-        "command": command, "views": views, "rank_views": rank_views, "val_digest": val_digest,
+        "command": command, "views": views, "rank_views": rank_views,
+        "confirm_short_side_px": confirm_side, "val_digest": val_digest,
         "clear_youden": calib["clear_youden"], "clear_floor": clear_floor, "commit": _commit(),
     }  # fmt: skip
     meta_path.write_text(json.dumps(meta, indent=2) + "\n")

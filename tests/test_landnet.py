@@ -154,6 +154,16 @@ def test_landnet_load_bad_sidecar_is_an_error_naming_it(tmp_path: Path) -> None:
     onnx.with_suffix(".json").write_text(json.dumps(meta))
     with pytest.raises(LandNetError, match=r"m\.json: .*hazard_classes must be a non-empty list"):
         LandNet.load(onnx)
+    for bad in (16, "96", 96.0, True):
+        meta = json.loads(DEFAULT_MODEL.with_suffix(".json").read_text())
+        meta["input"]["confirm_short_side_px"] = bad
+        onnx.with_suffix(".json").write_text(json.dumps(meta))
+        with pytest.raises(LandNetError, match=r"m\.json: .*input\.confirm_short_side_px must be an integer"):
+            LandNet.load(onnx)
+    meta = json.loads(DEFAULT_MODEL.with_suffix(".json").read_text())
+    del meta["input"]["confirm_short_side_px"]  # an older sidecar: confirmations read at short_side_px
+    onnx.with_suffix(".json").write_text(json.dumps(meta))
+    assert LandNet.load(onnx).confirm_short_side_px == meta["input"]["short_side_px"]
 
 
 # --- views: the image and its mirror images ------------------------------------------------------------
@@ -202,14 +212,20 @@ def test_landnet_views_four_average_the_mirror_images_and_one_reads_alone(tmp_pa
 
 def test_landnet_ranks_read_with_rank_views(net: LandNet, monkeypatch: pytest.MonkeyPatch) -> None:
     """Ranks read each crop with the sidecar's rank_views (2 for the packaged model: five crops where a
-    confirmation reads one image), confirmations with its views (4)."""
+    confirmation reads one image) at its short side, confirmations with its views (4) at the smaller
+    confirm_short_side_px (96 against 128)."""
     assert (net.views, net.rank_views) == (4, 2)
+    assert (net.short_side_px, net.confirm_short_side_px) == (128, 96)
     asked: list[int | None] = []
+    sides: list[int | None] = []
     read = LandNet.read
 
-    def spy(self: LandNet, rgb: np.ndarray, views: int | None = None) -> SceneReading:
+    def spy(
+        self: LandNet, rgb: np.ndarray, views: int | None = None, short_side: int | None = None
+    ) -> SceneReading:
         asked.append(views)
-        return read(self, rgb, views)
+        sides.append(short_side)
+        return read(self, rgb, views, short_side)
 
     monkeypatch.setattr(LandNet, "read", spy)
     judge = OnboardReasoner(judge="landnet", landnet=net)
@@ -218,9 +234,23 @@ def test_landnet_ranks_read_with_rank_views(net: LandNet, monkeypatch: pytest.Mo
     cands = tuple(Candidate(k, (0, 0, 10, 10), (5.0, 5.0), area_m2=100.0) for k in range(2))
     judge.rank_sync(RankRequest(crops, cands))
     assert asked == [2, 2, 2, 2]
+    assert sides == [None] * 4  # the sidecar's short side
     asked.clear()
+    sides.clear()
     judge.confirm_sync(ConfirmRequest(_image(90, 160, 3)))
     assert asked == [None]  # the sidecar's views
+    assert sides == [96]
+
+
+@pytest.mark.parametrize(("h", "w"), [(90, 160), (300, 300), (200, 1000)])
+def test_landnet_reads_smaller_at_a_given_short_side(net: LandNet, h: int, w: int) -> None:
+    """A short side of 96 scales the image as 128 does, by 96 / 128: the longer side's cap too."""
+    ih, iw = net.input_size(h, w)
+    sh, sw = net.input_size(h, w, 96)
+    assert min(sh, sw) <= min(ih, iw)
+    assert max(sh, sw) <= net.max_long_side_px * 96 // 128
+    assert net.read(_image(h, w), short_side=96).grid == (sh // 8, sw // 8)
+    assert sh % 16 == sw % 16 == 0
 
 
 # --- reading --------------------------------------------------------------------------------------------
@@ -446,6 +476,7 @@ def test_landfall_train_smoke_renders_trains_and_exports(tmp_path: Path) -> None
     assert meta["parity_max_abs_diff"] < 1e-3
     assert tiny.read(_image(64, 64)).grid == (16, 16)
     assert meta["input"]["views"] == 4  # calibrated as the companion reads: with the mirror images
+    assert meta["input"]["confirm_short_side_px"] == 128  # --confirm-side's default: the input's side
     assert tiny.views == 4
     # --recalibrate through OpenCV's DNN module gives the thresholds training gave through torch
     thresholds = meta["thresholds"]

@@ -20,7 +20,10 @@ probabilities averaged: a nadir view has no preferred side, and the average of s
 steadier on imagery unlike the renders it learnt from; :func:`view_batch` and :func:`average_views`,
 which calibration uses too). Ranks read their crops with ``input.rank_views`` (default: ``views``): a
 rank reads five crops where a confirmation reads one image, and only orders them, which two views do
-nearly as well as four on the held-out renders. :meth:`LandNet.read` returns a
+nearly as well as four on the held-out renders. A confirmation reads its site window with the shorter
+side at ``input.confirm_short_side_px`` (default: ``short_side_px``; 96 for the packaged model, where
+ranks read at 128): chosen on real photographs by source-split cross-validation (docs/reasoning.md,
+"Reading a confirmation smaller"). :meth:`LandNet.read` returns a
 :class:`SceneReading`: the clear-site probability, the probability that nothing stands on the surface
 (``bare``: a third output of sidecar format ``landfall-landnet/2``, a head trained on roof-dominated
 renders by ``landfall_train.bare``; ranks weigh it), the hazard peak (the highest probability of an
@@ -276,6 +279,7 @@ class LandNet:
         self.multiple = int(inp["multiple"])
         self.short_side_px = int(inp["short_side_px"])
         self.max_long_side_px = int(inp["max_long_side_px"])
+        self.confirm_short_side_px = int(inp.get("confirm_short_side_px", self.short_side_px))
         self.views = int(inp.get("views", 1))
         self.rank_views = int(inp.get("rank_views", self.views))
         thresholds = meta["thresholds"]
@@ -313,6 +317,11 @@ class LandNet:
             for key in ("views", "rank_views"):
                 if inp.get(key, 1) not in VIEWS:
                     raise ValueError(f"input.{key} must be one of {VIEWS}, got {inp.get(key)!r}")
+            side = inp.get("confirm_short_side_px", inp["short_side_px"])
+            if not isinstance(side, int) or isinstance(side, bool) or side < 2 * int(inp["multiple"]):
+                raise ValueError(
+                    f"input.confirm_short_side_px must be an integer, at least twice input.multiple: {side!r}"
+                )
             float(thr["clear"])
             outputs = model_outputs(meta)
         except (OSError, ValueError, KeyError, TypeError) as exc:
@@ -326,10 +335,13 @@ class LandNet:
         net, used = onnx_runner(onnx_path, backend, outputs)
         return cls(net, meta, str(meta.get("name", onnx_path.stem)), used)
 
-    def input_size(self, h: int, w: int) -> tuple[int, int]:
-        """(height, width) an image of ``h`` x ``w`` pixels is scaled to: sides multiples of 16."""
+    def input_size(self, h: int, w: int, short_side: int | None = None) -> tuple[int, int]:
+        """(height, width) an image of ``h`` x ``w`` pixels is scaled to: the shorter side
+        ``short_side`` (default: ``short_side_px``), the longer at most ``max_long_side_px`` scaled
+        alike, sides multiples of ``multiple``."""
         short, long_ = min(h, w), max(h, w)
-        s = min(self.short_side_px / short, self.max_long_side_px / long_)
+        target = short_side or self.short_side_px
+        s = min(target / short, self.max_long_side_px * target / self.short_side_px / long_)
         m = self.multiple
 
         def side(x: int) -> int:
@@ -337,15 +349,16 @@ class LandNet:
 
         return side(h), side(w)
 
-    def read(self, rgb: np.ndarray, views: int | None = None) -> SceneReading:
+    def read(self, rgb: np.ndarray, views: int | None = None, short_side: int | None = None) -> SceneReading:
         """What the image shows (module docstring), read in ``views`` views (default: the sidecar's
-        ``input.views``; ranks pass ``rank_views``).
+        ``input.views``; ranks pass ``rank_views``) with its shorter side scaled to ``short_side``
+        (default: ``short_side_px``; confirmations pass ``confirm_short_side_px``).
 
         Raises:
             ValueError: not a non-empty (H, W, 3) uint8 numpy array.
         """
         img = check_rgb(rgb)
-        p, clear_p, out = self._infer(img, self.views if views is None else views)
+        p, clear_p, out = self._infer(img, self.views if views is None else views, short_side)
         present = p[0] >= self.cell_thresholds[:, None, None]
         peak = float(p[0][self._hazard_rows].max())
         bare = float(_sigmoid(np.asarray(out[2]).reshape(-1)).mean()) if self.has_bare else None
@@ -353,11 +366,14 @@ class LandNet:
         reading = self._reading(img.shape[:2], present, float(clear_p[0]), peak, bare)
         return replace(reading, clear_spread=float(each.max() - each.min()))
 
-    def _infer(self, img: np.ndarray, views: int) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
-        """One image (H, W, 3) uint8 scaled, normalised and run in ``views`` views: the cells'
-        probabilities (1, K, h, w) and the clear site's (1,), views averaged, and the raw outputs."""
+    def _infer(
+        self, img: np.ndarray, views: int, short_side: int | None = None
+    ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
+        """One image (H, W, 3) uint8 scaled (:meth:`input_size`), normalised and run in ``views`` views:
+        the cells' probabilities (1, K, h, w) and the clear site's (1,), views averaged, and the raw
+        outputs."""
         h, w = img.shape[:2]
-        ih, iw = self.input_size(h, w)
+        ih, iw = self.input_size(h, w, short_side)
         interp = cv2.INTER_AREA if ih * iw < h * w else cv2.INTER_LINEAR
         x = cv2.resize(img, (iw, ih), interpolation=interp).astype(np.float32) * np.float32(1.0 / 255.0)
         blob = view_batch(((x - self.mean) / self.std).transpose(2, 0, 1), views)

@@ -109,7 +109,7 @@ def confirm_reading(
     """
     image = check_rgb(request.image)
     window = centre(image, site_window(image.shape[0], image.shape[1], p.site_window))
-    r = net.read(window)
+    r = net.read(window, short_side=net.confirm_short_side_px)
     vetoes = list(lidar_vetoes)
     categorical = False
     canopy = 0.0 if street_level else canopy_share(window)
