@@ -171,7 +171,10 @@ def add_validation_args(p: argparse.ArgumentParser) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s", stream=sys.stderr)
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.confirm_side < 32:  # LandNet.load refuses a sidecar with less than twice input.multiple
+        parser.error(f"--confirm-side must be at least 32 px, got {args.confirm_side}")
     command = "python -m landfall_train " + " ".join(sys.argv[1:] if argv is None else argv)
     t0 = time.monotonic()
     cache = cache_dir(args.cache, args.seed)

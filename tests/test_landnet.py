@@ -242,15 +242,29 @@ def test_landnet_ranks_read_with_rank_views(net: LandNet, monkeypatch: pytest.Mo
     assert sides == [96]
 
 
-@pytest.mark.parametrize(("h", "w"), [(90, 160), (300, 300), (200, 1000)])
-def test_landnet_reads_smaller_at_a_given_short_side(net: LandNet, h: int, w: int) -> None:
-    """A short side of 96 scales the image as 128 does, by 96 / 128: the longer side's cap too."""
-    ih, iw = net.input_size(h, w)
-    sh, sw = net.input_size(h, w, 96)
-    assert min(sh, sw) <= min(ih, iw)
-    assert max(sh, sw) <= net.max_long_side_px * 96 // 128
-    assert net.read(_image(h, w), short_side=96).grid == (sh // 8, sw // 8)
-    assert sh % 16 == sw % 16 == 0
+@pytest.mark.parametrize(
+    ("h", "w", "at_128", "at_96"),
+    [((90, 160, (128, 224), (96, 176))), (300, 300, (128, 128), (96, 96)), (200, 1000, (48, 256), (32, 192))],
+)
+def test_landnet_reads_smaller_at_a_given_short_side(
+    net: LandNet, h: int, w: int, at_128: tuple[int, int], at_96: tuple[int, int]
+) -> None:
+    """A short side of 96 scales the image by 96 / 128 of what 128 does, the longer side's cap (256 at
+    128) too, sides still multiples of 16; the reading's grid follows."""
+    assert net.input_size(h, w) == at_128
+    assert net.input_size(h, w, 96) == at_96
+    assert net.read(_image(h, w), short_side=96).grid == (at_96[0] // 8, at_96[1] // 8)
+
+
+def test_landfall_train_refuses_a_confirm_side_the_companion_would_refuse(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    pytest.importorskip("torch", reason="training needs torch: pip install -e '.[train]'")
+    from landfall_train.train import main
+
+    with pytest.raises(SystemExit):
+        main(["--recalibrate", "--confirm-side", "16", "--out", "nowhere"])
+    assert "--confirm-side must be at least 32 px, got 16" in capsys.readouterr().err
 
 
 # --- reading --------------------------------------------------------------------------------------------
