@@ -64,7 +64,8 @@ test-fast: $(DEPTH_STAMP)
 # fine-tune each on the labelled photographs of ../shared/realimages-train and ../shared/realimages with
 # renders beside them (landfall_train.photos: never the photographs whose licence bars it, never the held-out
 # source), merge the two into one ONNX model that averages them, calibrate it on held-out renders (a
-# confirmation reads at 96 px, --confirm-side: docs/reasoning.md, "Reading a confirmation smaller").
+# confirmation reads at 96 px and a rank at 144, --confirm-side and --rank-side: docs/reasoning.md,
+# "Reading a confirmation smaller").
 # One seed alone took 38 min here (2,301 s with its patches rendered); the two side by side, roughly 1 to
 # 1.3 h on 2 cores (not timed end to end). Patches are cached under runs/train-cache.
 model: $(DEPTH_STAMP)
@@ -79,7 +80,7 @@ model: $(DEPTH_STAMP)
 	  wait $$a && wait $$b
 	$(VENV)/bin/python -m landfall_train.ensemble runs/landnet/seed0/landnet-s-photos.onnx \
 	  runs/landnet/seed1/landnet-s-photos.onnx --out companion/reasoning/models/landnet-s
-	$(VENV)/bin/python -m landfall_train --recalibrate --seed 0 --clear-floor 0.6 --confirm-side 96 --out companion/reasoning/models/landnet-s
+	$(VENV)/bin/python -m landfall_train --recalibrate --seed 0 --clear-floor 0.6 --confirm-side 96 --rank-side 144 --out companion/reasoning/models/landnet-s
 
 bench: $(STAMP)
 	$(VENV)/bin/python benchmarks/bench_simbridge_rtf.py

@@ -15,7 +15,8 @@ the member's threshold with no water (over 10 % of the cells) or markings (over 
 reading's hazard (two views), every (clear roof, cluttered roof) pair of the fold. Pooled over the source
 folds, these are the figures that choose ``--alpha`` and ``--steps``; alpha 0 is the member as trained.
 ``--sides 0,96`` reads the judged photographs at each listed shorter side as well (0: the sidecar's;
-figures keyed ``ALPHA@SIDE``), which chose the confirmation's 96 px.
+figures keyed ``ALPHA@SIDE``; confirmations and ranks both at it), which chose the confirmation's
+96 px and the rank's 144.
 Each fold's model is exported to ONNX and read by :class:`companion.reasoning.landnet.LandNet`, as the
 companion reads it. Folds run in ``--jobs`` processes, one core each.
 """
@@ -72,14 +73,14 @@ def readings(model: Path, images: dict[str, np.ndarray], short_side: int = 0) ->
     net = LandNet.load(model, backend="onnxruntime")
     if short_side:
         net.short_side_px, net.max_long_side_px = short_side, 2 * short_side
-        net.confirm_short_side_px = short_side
+        net.confirm_short_side_px = net.rank_short_side_px = short_side
     params = ConfirmParams(site_window=SITE_WINDOW_CROP)  # a crop's window, whatever its shape
     out = {}
     for key, rgb in images.items():
         vetoes, _categorical, _note, r = confirm_reading(
             net, ConfirmRequest(rgb), params, lidar_vetoes=[], street_level=False, where=""
         )
-        whole = net.read(rgb, net.rank_views)
+        whole = net.read(rgb, net.rank_views, net.rank_short_side_px)
         out[key] = {
             "confirmed": not vetoes, "rank_score": -whole.hazard,
             "clear_p": round(r.clear_p, 4), "spread": round(r.clear_spread, 4),

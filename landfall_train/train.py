@@ -101,6 +101,11 @@ def build_parser() -> argparse.ArgumentParser:
         "input.confirm_short_side_px; the Makefile's model uses 96, chosen on photographs)",
     )  # fmt: skip
     p.add_argument(
+        "--rank-side", type=int, default=INPUT_PX, metavar="PX",
+        help="shorter side a rank's crops are read at in the companion (sidecar input.rank_short_side_px; "
+        "the Makefile's model uses 144, chosen on photographs)",
+    )  # fmt: skip
+    p.add_argument(
         "--recalibrate", action="store_true",
         help="only calibrate the model at --out again (its ONNX file; no training) and rewrite its sidecar",
     )  # fmt: skip
@@ -173,8 +178,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s", stream=sys.stderr)
     parser = build_parser()
     args = parser.parse_args(argv)
-    if args.confirm_side < 32:  # LandNet.load refuses a sidecar with less than twice input.multiple
-        parser.error(f"--confirm-side must be at least 32 px, got {args.confirm_side}")
+    for flag, side in (("--confirm-side", args.confirm_side), ("--rank-side", args.rank_side)):
+        if side < 32:  # LandNet.load refuses a sidecar with less than twice input.multiple
+            parser.error(f"{flag} must be at least 32 px, got {side}")
     command = "python -m landfall_train " + " ".join(sys.argv[1:] if argv is None else argv)
     t0 = time.monotonic()
     cache = cache_dir(args.cache, args.seed)
@@ -184,7 +190,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     x_val, y_val, val_digest = patches.load_shards(validation_paths(args, args.seed))
     if args.recalibrate:  # the validation renders only
         val = validation_views(x_val, y_val, args.seed)
-        how = (args.views, args.rank_views, args.confirm_side)
+        how = (args.views, args.rank_views, args.confirm_side, args.rank_side)
         return recalibrate(args.out, val, how, command, val_digest, args.clear_floor)
     x_train, y_train, train_digest = patches.load_shards(training_paths(args, args.seed))
     t_render = time.monotonic() - t0
@@ -199,7 +205,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         "hazard_classes": [CLASSES[k] for k in HAZARD_CLASSES],
         "input": {"mean": [0.5] * 3, "std": [0.25] * 3, "multiple": 16, "short_side_px": INPUT_PX,
                   "max_long_side_px": 2 * INPUT_PX, "order": "RGB", "scale": 1 / 255, "views": args.views,
-                  "rank_views": args.rank_views, "confirm_short_side_px": args.confirm_side},
+                  "rank_views": args.rank_views, "confirm_short_side_px": args.confirm_side,
+                  "rank_short_side_px": args.rank_side},
         "outputs": {"cells": "(N, K, H/8, W/8) presence logits", "clear": "(N, 1, 1, 1) clear-site logit"},
         "thresholds": calib["thresholds"],
         "sim_metrics": calib["metrics"],
@@ -382,14 +389,14 @@ def _predict(predict: Predict, img: np.ndarray, views: int) -> tuple[np.ndarray,
 def recalibrate(
     out: Path,
     val: dict[str, np.ndarray],
-    how: tuple[int, int, int],
+    how: tuple[int, int, int, int],
     command: str,
     val_digest: str,
     clear_floor: float = 0.0,
 ) -> int:
     """Calibrate the exported model at ``out`` again (``--recalibrate``) with ``how`` = (views,
-    rank_views, confirm_side) and rewrite its sidecar."""
-    views, rank_views, confirm_side = how
+    rank_views, confirm_side, rank_side) and rewrite its sidecar."""
+    views, rank_views, confirm_side, rank_side = how
     meta_path = out.with_suffix(".json")
     meta = json.loads(meta_path.read_text())
     calib = calibrate(_onnx_predict(out.with_suffix(".onnx")), val, views, clear_floor)
@@ -398,9 +405,10 @@ def recalibrate(
     meta["input"]["views"] = views
     meta["input"]["rank_views"] = rank_views
     meta["input"]["confirm_short_side_px"] = confirm_side
+    meta["input"]["rank_short_side_px"] = rank_side
     meta["calibration"] = {
         "command": command, "views": views, "rank_views": rank_views,
-        "confirm_short_side_px": confirm_side, "val_digest": val_digest,
+        "confirm_short_side_px": confirm_side, "rank_short_side_px": rank_side, "val_digest": val_digest,
         "clear_youden": calib["clear_youden"], "clear_floor": clear_floor, "commit": _commit(),
     }  # fmt: skip
     meta_path.write_text(json.dumps(meta, indent=2) + "\n")

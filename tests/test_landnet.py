@@ -154,16 +154,19 @@ def test_landnet_load_bad_sidecar_is_an_error_naming_it(tmp_path: Path) -> None:
     onnx.with_suffix(".json").write_text(json.dumps(meta))
     with pytest.raises(LandNetError, match=r"m\.json: .*hazard_classes must be a non-empty list"):
         LandNet.load(onnx)
-    for bad in (16, "96", 96.0, True):
-        meta = json.loads(DEFAULT_MODEL.with_suffix(".json").read_text())
-        meta["input"]["confirm_short_side_px"] = bad
-        onnx.with_suffix(".json").write_text(json.dumps(meta))
-        with pytest.raises(LandNetError, match=r"m\.json: .*input\.confirm_short_side_px must be an integer"):
-            LandNet.load(onnx)
+    for key in ("confirm_short_side_px", "rank_short_side_px"):
+        for bad in (16, "96", 96.0, True):
+            meta = json.loads(DEFAULT_MODEL.with_suffix(".json").read_text())
+            meta["input"][key] = bad
+            onnx.with_suffix(".json").write_text(json.dumps(meta))
+            with pytest.raises(LandNetError, match=rf"m\.json: .*input\.{key} must be an integer"):
+                LandNet.load(onnx)
     meta = json.loads(DEFAULT_MODEL.with_suffix(".json").read_text())
-    del meta["input"]["confirm_short_side_px"]  # an older sidecar: confirmations read at short_side_px
+    del meta["input"]["confirm_short_side_px"]  # an older sidecar: both read at short_side_px
+    del meta["input"]["rank_short_side_px"]
     onnx.with_suffix(".json").write_text(json.dumps(meta))
-    assert LandNet.load(onnx).confirm_short_side_px == meta["input"]["short_side_px"]
+    older = LandNet.load(onnx)
+    assert older.confirm_short_side_px == older.rank_short_side_px == meta["input"]["short_side_px"]
 
 
 # --- views: the image and its mirror images ------------------------------------------------------------
@@ -212,10 +215,10 @@ def test_landnet_views_four_average_the_mirror_images_and_one_reads_alone(tmp_pa
 
 def test_landnet_ranks_read_with_rank_views(net: LandNet, monkeypatch: pytest.MonkeyPatch) -> None:
     """Ranks read each crop with the sidecar's rank_views (2 for the packaged model: five crops where a
-    confirmation reads one image) at its short side, confirmations with its views (4) at the smaller
-    confirm_short_side_px (96 against 128)."""
+    confirmation reads one image) at its rank_short_side_px (144), confirmations with its views (4) at
+    its confirm_short_side_px (96; the input's own short side is 128)."""
     assert (net.views, net.rank_views) == (4, 2)
-    assert (net.short_side_px, net.confirm_short_side_px) == (128, 96)
+    assert (net.short_side_px, net.confirm_short_side_px, net.rank_short_side_px) == (128, 96, 144)
     asked: list[int | None] = []
     sides: list[int | None] = []
     read = LandNet.read
@@ -234,7 +237,7 @@ def test_landnet_ranks_read_with_rank_views(net: LandNet, monkeypatch: pytest.Mo
     cands = tuple(Candidate(k, (0, 0, 10, 10), (5.0, 5.0), area_m2=100.0) for k in range(2))
     judge.rank_sync(RankRequest(crops, cands))
     assert asked == [2, 2, 2, 2]
-    assert sides == [None] * 4  # the sidecar's short side
+    assert sides == [144] * 4
     asked.clear()
     sides.clear()
     judge.confirm_sync(ConfirmRequest(_image(90, 160, 3)))
@@ -262,9 +265,10 @@ def test_landfall_train_refuses_a_confirm_side_the_companion_would_refuse(
     pytest.importorskip("torch", reason="training needs torch: pip install -e '.[train]'")
     from landfall_train.train import main
 
-    with pytest.raises(SystemExit):
-        main(["--recalibrate", "--confirm-side", "16", "--out", "nowhere"])
-    assert "--confirm-side must be at least 32 px, got 16" in capsys.readouterr().err
+    for flag in ("--confirm-side", "--rank-side"):
+        with pytest.raises(SystemExit):
+            main(["--recalibrate", flag, "16", "--out", "nowhere"])
+        assert f"{flag} must be at least 32 px, got 16" in capsys.readouterr().err
 
 
 # --- reading --------------------------------------------------------------------------------------------
@@ -491,6 +495,7 @@ def test_landfall_train_smoke_renders_trains_and_exports(tmp_path: Path) -> None
     assert tiny.read(_image(64, 64)).grid == (16, 16)
     assert meta["input"]["views"] == 4  # calibrated as the companion reads: with the mirror images
     assert meta["input"]["confirm_short_side_px"] == 128  # --confirm-side's default: the input's side
+    assert meta["input"]["rank_short_side_px"] == 128  # --rank-side's too
     assert tiny.views == 4
     # --recalibrate through OpenCV's DNN module gives the thresholds training gave through torch
     thresholds = meta["thresholds"]

@@ -15,23 +15,22 @@ file's sha256, which :meth:`LandNet.load` checks.
 :meth:`LandNet.read` takes an RGB uint8 image of any size (H, W, 3), scales it so the shorter side is
 ``short_side_px`` (the longer at most ``max_long_side_px``), both sides multiples of 16, reads it as the
 sidecar's ``input.views`` says (1: as it is; 2: it and its left-right mirror image; 4: it and its three
-mirror images, left-right, up-down and both; in one batch, each answer flipped back and the
-probabilities averaged: a nadir view has no preferred side, and the average of several readings is
-steadier on imagery unlike the renders it learnt from; :func:`view_batch` and :func:`average_views`,
-which calibration uses too). Ranks read their crops with ``input.rank_views`` (default: ``views``): a
-rank reads five crops where a confirmation reads one image, and only orders them, which two views do
-nearly as well as four on the held-out renders. A confirmation reads its site window with the shorter
-side at ``input.confirm_short_side_px`` (default: ``short_side_px``; 96 for the packaged model, where
-ranks read at 128): chosen on real photographs by source-split cross-validation (docs/reasoning.md,
-"Reading a confirmation smaller"). :meth:`LandNet.read` returns a
+mirror images, left-right, up-down and both; in one batch, each answer flipped back and the probabilities
+averaged: a nadir view has no preferred side, and the average of several readings is steadier on imagery
+unlike the renders it learnt from; :func:`view_batch` and :func:`average_views`, which calibration uses
+too). Ranks read their crops with ``input.rank_views`` (default: ``views``): a rank reads five crops where
+a confirmation reads one image, and only orders them, which two views do nearly as well as four on the
+held-out renders. A confirmation reads its site window with the shorter side at
+``input.confirm_short_side_px`` and a rank its crops at ``input.rank_short_side_px`` (both default to
+``short_side_px``; 96 and 144 for the packaged model): chosen on real photographs by source-split
+cross-validation (docs/reasoning.md, "Reading a confirmation smaller"). :meth:`LandNet.read` returns a
 :class:`SceneReading`: the clear-site probability, the probability that nothing stands on the surface
 (``bare``: a third output of sidecar format ``landfall-landnet/2``, a head trained on roof-dominated
 renders by ``landfall_train.bare``; ranks weigh it), the hazard peak (the highest probability of an
-object, person, vehicle, water or marking in any cell), per class the share of the
-image's cells where it is present and where (a 3 x 3 compass: "upper left" ... "centre" ... "lower
-right"), and how many separate groups of cells hold objects, people or vehicles. One ``cv2.dnn.Net``
-is not safe to call from two threads at once (the onboard tier runs in worker threads): a lock guards
-either runtime.
+object, person, vehicle, water or marking in any cell), per class the share of the image's cells where it
+is present and where (a 3 x 3 compass: "upper left" ... "centre" ... "lower right"), and how many separate
+groups of cells hold objects, people or vehicles. One ``cv2.dnn.Net`` is not safe to call from two threads
+at once (the onboard tier runs in worker threads): a lock guards either runtime.
 """
 
 from __future__ import annotations
@@ -280,6 +279,7 @@ class LandNet:
         self.short_side_px = int(inp["short_side_px"])
         self.max_long_side_px = int(inp["max_long_side_px"])
         self.confirm_short_side_px = int(inp.get("confirm_short_side_px", self.short_side_px))
+        self.rank_short_side_px = int(inp.get("rank_short_side_px", self.short_side_px))
         self.views = int(inp.get("views", 1))
         self.rank_views = int(inp.get("rank_views", self.views))
         thresholds = meta["thresholds"]
@@ -317,11 +317,12 @@ class LandNet:
             for key in ("views", "rank_views"):
                 if inp.get(key, 1) not in VIEWS:
                     raise ValueError(f"input.{key} must be one of {VIEWS}, got {inp.get(key)!r}")
-            side = inp.get("confirm_short_side_px", inp["short_side_px"])
-            if not isinstance(side, int) or isinstance(side, bool) or side < 2 * int(inp["multiple"]):
-                raise ValueError(
-                    f"input.confirm_short_side_px must be an integer, at least twice input.multiple: {side!r}"
-                )
+            for key in ("confirm_short_side_px", "rank_short_side_px"):
+                side = inp.get(key, inp["short_side_px"])
+                if not isinstance(side, int) or isinstance(side, bool) or side < 2 * int(inp["multiple"]):
+                    raise ValueError(
+                        f"input.{key} must be an integer, at least twice input.multiple: {side!r}"
+                    )
             float(thr["clear"])
             outputs = model_outputs(meta)
         except (OSError, ValueError, KeyError, TypeError) as exc:
@@ -352,7 +353,8 @@ class LandNet:
     def read(self, rgb: np.ndarray, views: int | None = None, short_side: int | None = None) -> SceneReading:
         """What the image shows (module docstring), read in ``views`` views (default: the sidecar's
         ``input.views``; ranks pass ``rank_views``) with its shorter side scaled to ``short_side``
-        (default: ``short_side_px``; confirmations pass ``confirm_short_side_px``).
+        (default: ``short_side_px``; confirmations pass ``confirm_short_side_px``, ranks
+        ``rank_short_side_px``).
 
         Raises:
             ValueError: not a non-empty (H, W, 3) uint8 numpy array.
