@@ -71,8 +71,7 @@ def readings(model: Path, images: dict[str, np.ndarray], short_side: int = 0) ->
     from companion.reasoning.onboard_params import ConfirmParams
 
     net = LandNet.load(model, backend="onnxruntime")
-    if short_side:
-        net.short_side_px, net.max_long_side_px = short_side, 2 * short_side
+    if short_side:  # both readings below pass their own side; the longer side's cap scales with it
         net.confirm_short_side_px = net.rank_short_side_px = short_side
     params = ConfirmParams(site_window=SITE_WINDOW_CROP)  # a crop's window, whatever its shape
     out = {}

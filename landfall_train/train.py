@@ -190,8 +190,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     x_val, y_val, val_digest = patches.load_shards(validation_paths(args, args.seed))
     if args.recalibrate:  # the validation renders only
         val = validation_views(x_val, y_val, args.seed)
-        how = (args.views, args.rank_views, args.confirm_side, args.rank_side)
-        return recalibrate(args.out, val, how, command, val_digest, args.clear_floor)
+        return recalibrate(args.out, val, reading_input(args), command, val_digest, args.clear_floor)
     x_train, y_train, train_digest = patches.load_shards(training_paths(args, args.seed))
     t_render = time.monotonic() - t0
     _log.info("%d training and %d validation patches in %.0f s", len(x_train), len(x_val), t_render)
@@ -204,9 +203,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "classes": list(CLASSES),
         "hazard_classes": [CLASSES[k] for k in HAZARD_CLASSES],
         "input": {"mean": [0.5] * 3, "std": [0.25] * 3, "multiple": 16, "short_side_px": INPUT_PX,
-                  "max_long_side_px": 2 * INPUT_PX, "order": "RGB", "scale": 1 / 255, "views": args.views,
-                  "rank_views": args.rank_views, "confirm_short_side_px": args.confirm_side,
-                  "rank_short_side_px": args.rank_side},
+                  "max_long_side_px": 2 * INPUT_PX, "order": "RGB", "scale": 1 / 255, **reading_input(args)},
         "outputs": {"cells": "(N, K, H/8, W/8) presence logits", "clear": "(N, 1, 1, 1) clear-site logit"},
         "thresholds": calib["thresholds"],
         "sim_metrics": calib["metrics"],
@@ -386,29 +383,33 @@ def _predict(predict: Predict, img: np.ndarray, views: int) -> tuple[np.ndarray,
     return cells, clear
 
 
+def reading_input(args: argparse.Namespace) -> dict[str, int]:
+    """How the companion reads images with the model, as sidecar ``input`` keys: the views averaged to
+    confirm and to rank, and the shorter sides a confirmation's window and a rank's crops are scaled to."""
+    return {
+        "views": args.views, "rank_views": args.rank_views,
+        "confirm_short_side_px": args.confirm_side, "rank_short_side_px": args.rank_side,
+    }  # fmt: skip
+
+
 def recalibrate(
     out: Path,
     val: dict[str, np.ndarray],
-    how: tuple[int, int, int, int],
+    reading: dict[str, int],
     command: str,
     val_digest: str,
     clear_floor: float = 0.0,
 ) -> int:
-    """Calibrate the exported model at ``out`` again (``--recalibrate``) with ``how`` = (views,
-    rank_views, confirm_side, rank_side) and rewrite its sidecar."""
-    views, rank_views, confirm_side, rank_side = how
+    """Calibrate the exported model at ``out`` again (``--recalibrate``) as the companion reads it
+    (``reading``: :func:`reading_input`) and rewrite its sidecar."""
     meta_path = out.with_suffix(".json")
     meta = json.loads(meta_path.read_text())
-    calib = calibrate(_onnx_predict(out.with_suffix(".onnx")), val, views, clear_floor)
+    calib = calibrate(_onnx_predict(out.with_suffix(".onnx")), val, reading["views"], clear_floor)
     meta["thresholds"] = calib["thresholds"]
     meta["sim_metrics"] = calib["metrics"]
-    meta["input"]["views"] = views
-    meta["input"]["rank_views"] = rank_views
-    meta["input"]["confirm_short_side_px"] = confirm_side
-    meta["input"]["rank_short_side_px"] = rank_side
+    meta["input"].update(reading)
     meta["calibration"] = {
-        "command": command, "views": views, "rank_views": rank_views,
-        "confirm_short_side_px": confirm_side, "rank_short_side_px": rank_side, "val_digest": val_digest,
+        "command": command, **reading, "val_digest": val_digest,
         "clear_youden": calib["clear_youden"], "clear_floor": clear_floor, "commit": _commit(),
     }  # fmt: skip
     meta_path.write_text(json.dumps(meta, indent=2) + "\n")
