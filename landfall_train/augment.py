@@ -28,7 +28,7 @@ import math
 import cv2
 import numpy as np
 
-from landfall_train.labels import CLASSES, IGNORE, site_clear
+from landfall_train.labels import CLASSES, CLEAR_ROOF_SHARE, IGNORE, site_clear
 
 __all__ = ["CELL_PX", "augment", "targets"]
 
@@ -58,9 +58,10 @@ def augment(
     return _degrade(x, rng), lab
 
 
-def targets(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+def targets(labels: np.ndarray, roof_share: float = CLEAR_ROOF_SHARE) -> tuple[np.ndarray, np.ndarray, float]:
     """Cell presence (K, H/8, W/8) float32 0/1, cell validity (H/8, W/8) float32 (not all sky), and
-    site_clear (1.0 or 0.0) of a class map whose sides are multiples of ``CELL_PX``."""
+    site_clear (1.0 or 0.0, at least ``roof_share`` roof) of a class map whose sides are multiples of
+    ``CELL_PX``."""
     h, w = labels.shape
     gh, gw = h // CELL_PX, w // CELL_PX
     cut = labels[: gh * CELL_PX, : gw * CELL_PX].reshape(gh, CELL_PX, gw, CELL_PX).transpose(0, 2, 1, 3)
@@ -70,7 +71,7 @@ def targets(labels: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     need = max(CELL_MIN_PX, CELL_MIN_SHARE * CELL_PX * CELL_PX)
     presence = (counts >= need).astype(np.float32)
     valid = ((blocks != IGNORE).sum(axis=2) > 0).astype(np.float32)
-    return presence, valid, float(site_clear(labels))
+    return presence, valid, float(site_clear(labels, roof_share))
 
 
 def _geometry(

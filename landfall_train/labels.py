@@ -72,8 +72,8 @@ def label_map(hit_class: np.ndarray, hit_material: np.ndarray, hit_kind: np.ndar
     return np.asarray(out, np.uint8)
 
 
-def site_clear(labels: np.ndarray) -> bool:
-    """A patch is a clear landing site: at least ``CLEAR_ROOF_SHARE`` of what is not sky is roof surface,
+def site_clear(labels: np.ndarray, roof_share: float = CLEAR_ROOF_SHARE) -> bool:
+    """A patch is a clear landing site: at least ``roof_share`` of what is not sky is roof surface,
     and not one pixel shows an object, a person, a vehicle, water or a painted marking."""
     seen = labels != IGNORE
     n = int(seen.sum())
@@ -81,4 +81,4 @@ def site_clear(labels: np.ndarray) -> bool:
         return False
     if np.isin(labels, HAZARD_CLASSES).any():
         return False
-    return float((labels == 0).sum()) >= CLEAR_ROOF_SHARE * n
+    return float((labels == 0).sum()) >= roof_share * n

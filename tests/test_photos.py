@@ -300,3 +300,21 @@ def test_closeups_are_roof_with_objects_labelled_where_they_stand_and_seeded() -
     again = closeup(4, 3, 96)
     assert np.array_equal(again[0], x[3])
     assert np.array_equal(again[1], y[3])
+
+
+def test_a_views_clear_site_target_follows_the_roof_share_fine_tuning_asks_for() -> None:
+    """Training calls a render view a clear site at 85 % roof and no hazard pixel; fine-tuning on
+    photographs, whose clear roofs show ground at their margins, may ask for less (--clear-share). No
+    share makes a view with a hazard pixel clear."""
+    from landfall_train.augment import targets
+    from landfall_train.labels import CLASSES, CLEAR_ROOF_SHARE
+
+    lab = np.full((64, 64), CLASSES.index("roof"), np.uint8)
+    lab[:, :19] = CLASSES.index("ground")  # 70 % roof
+    assert targets(lab)[2] == 0.0
+    assert targets(lab, CLEAR_ROOF_SHARE)[2] == 0.0
+    assert targets(lab, 0.6)[2] == 1.0
+    assert targets(lab, 0.75)[2] == 0.0
+    lab[40, 40] = CLASSES.index("object")
+    assert targets(lab, 0.6)[2] == 0.0
+    assert targets(lab, 0.0)[2] == 0.0
