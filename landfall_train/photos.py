@@ -31,8 +31,8 @@ batches this small), every weight is trained with AdamW at ``--lr`` for ``--step
 While fine-tuning, a render view is a clear site with ``--clear-share`` of roof surface (0.6; training
 from renders asks 0.85, :data:`landfall_train.labels.CLEAR_ROOF_SHARE`): a labelled clear roof's
 photograph often shows ground or a tree at its margins, and the two sources should not teach the
-clear-site output two definitions. Both chosen by the source folds and the held-out photographs
-(docs/reasoning.md, "Fine-tuning longer").
+clear-site output two definitions. That share and the 600 steps were chosen by the source folds and the
+held-out photographs (docs/reasoning.md, "Fine-tuning longer").
 Photograph views: a random crop of 45-100 % of the area, a quarter turn and a mirror image, colour,
 contrast and brightness jitter, sometimes blur or sensor noise, scaled to 128 x 128.
 Then the weights are moved back toward the member's: ``--alpha`` of the way from the member's to the
@@ -457,6 +457,13 @@ def split(photos: Sequence[Photo], hold_out: Sequence[str]) -> tuple[list[Photo]
     return learn, [p for p in photos if p not in learn]
 
 
+def _share(text: str) -> float:
+    value = float(text)
+    if not 0.0 < value <= 1.0:
+        raise argparse.ArgumentTypeError(f"{text}: a share of the view, over 0 and at most 1")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="python -m landfall_train.photos", description=__doc__.split("\n")[0])
     p.add_argument("--member", required=True, help="the trained member: X.onnx, or MERGED.onnx#m0/")
@@ -491,7 +498,7 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     p.add_argument("--closeup-share", type=float, default=CLOSEUP_SHARE, help="of each render batch")
     p.add_argument(
-        "--clear-share", type=float, default=CLEAR_SHARE,
+        "--clear-share", type=_share, default=CLEAR_SHARE,
         help="share of roof surface that makes a render view a clear site (hazard-free) while fine-tuning",
     )  # fmt: skip
     p.add_argument("--alpha", type=float, default=ALPHA, help="share of the way to the fine-tuned weights")

@@ -318,3 +318,16 @@ def test_a_views_clear_site_target_follows_the_roof_share_fine_tuning_asks_for()
     lab[40, 40] = CLASSES.index("object")
     assert targets(lab, 0.6)[2] == 0.0
     assert targets(lab, 0.0)[2] == 0.0
+
+
+@pytest.mark.parametrize("share", ["0", "1.5", "-0.2"])
+def test_a_clear_share_outside_the_view_is_refused_with_a_clear_error(
+    share: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from landfall_train.photos import build_parser
+
+    argv = ["--member", "m.onnx", "--seed", "0", "--out", "o", "--clear-share", share]
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(argv)
+    assert "a share of the view" in capsys.readouterr().err
+    assert build_parser().parse_args([*argv[:-1], "0.6"]).clear_share == 0.6
