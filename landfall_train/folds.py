@@ -79,7 +79,7 @@ def readings(model: Path, images: dict[str, np.ndarray], short_side: int = 0) ->
         vetoes, _categorical, _note, r = confirm_reading(
             net, ConfirmRequest(rgb), params, lidar_vetoes=[], street_level=False, where=""
         )
-        whole = net.read(rgb, net.rank_views, net.rank_short_side_px)
+        whole = net.read_rank(rgb)
         out[key] = {
             "confirmed": not vetoes, "rank_score": -whole.hazard,
             "clear_p": round(r.clear_p, 4), "spread": round(r.clear_spread, 4),

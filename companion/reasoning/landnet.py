@@ -352,9 +352,8 @@ class LandNet:
 
     def read(self, rgb: np.ndarray, views: int | None = None, short_side: int | None = None) -> SceneReading:
         """What the image shows (module docstring), read in ``views`` views (default: the sidecar's
-        ``input.views``; ranks pass ``rank_views``) with its shorter side scaled to ``short_side``
-        (default: ``short_side_px``; confirmations pass ``confirm_short_side_px``, ranks
-        ``rank_short_side_px``).
+        ``input.views``) with its shorter side scaled to ``short_side`` (default: ``short_side_px``;
+        confirmations pass ``confirm_short_side_px``; ranks read through :meth:`read_rank`).
 
         Raises:
             ValueError: not a non-empty (H, W, 3) uint8 numpy array.
@@ -367,6 +366,10 @@ class LandNet:
         each = _sigmoid(np.asarray(out[1]).reshape(-1))
         reading = self._reading(img.shape[:2], present, float(clear_p[0]), peak, bare)
         return replace(reading, clear_spread=float(each.max() - each.min()))
+
+    def read_rank(self, rgb: np.ndarray) -> SceneReading:
+        """:meth:`read` as a rank reads each crop: ``rank_views`` views at ``rank_short_side_px``."""
+        return self.read(rgb, self.rank_views, self.rank_short_side_px)
 
     def _infer(
         self, img: np.ndarray, views: int, short_side: int | None = None

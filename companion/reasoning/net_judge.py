@@ -230,7 +230,7 @@ def rank_readings(
     Raises:
         ValueError: a crop that is not a non-empty (H, W, 3) uint8 array.
     """
-    readings = [net.read(c, net.rank_views, net.rank_short_side_px) for c in crops]
+    readings = [net.read_rank(c) for c in crops]
     largest = max(r.size_px[0] * r.size_px[1] for r in readings)
     scores = [w.crop_size * math.sqrt(r.size_px[0] * r.size_px[1] / largest) - r.hazard for r in readings]
     order = tuple(sorted(range(len(readings)), key=lambda k: (-scores[k], k)))

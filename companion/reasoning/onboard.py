@@ -195,7 +195,7 @@ class OnboardReasoner:
         # what reads the crops: the net when it is the judge (its reading replaces the cues' hazard terms
         # beside the geometry too), else the image cues; both validate the crops first
         all_cues: list[ImageCues | SceneReading] = (
-            [self.landnet.read(c, self.landnet.rank_views, self.landnet.rank_short_side_px) for c in cores]
+            [self.landnet.read_rank(c) for c in cores]
             if self.landnet is not None
             else [analyse(c) for c in cores]
         )
