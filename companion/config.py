@@ -359,6 +359,7 @@ class ReasonerConfig(_Section):
     hedge_after_s: float = Field(default=4.0, gt=0)
     override_lone_no_after: int = Field(default=2, ge=1)
     onboard_judge: Literal["cues", "landnet"] = "landnet"
+    onboard_model: str = Field(default="landnet-s", min_length=1)
     profiles: dict[str, LvlmProfileConfig] = Field(default_factory=dict, strict=False)
 
 

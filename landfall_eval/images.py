@@ -98,6 +98,7 @@ class LabelledImage:
     land: bool | None  # the right confirm answer; None: either is right
     what: str
     rgb: np.ndarray = field(repr=False, compare=False)
+    source: str = ""  # labels.json's source_repo, where given: the figures per source
 
 
 # ------------------------------------------------------------------------------------------ reading
@@ -177,8 +178,11 @@ def _entry(folder: Path, entry: int, raw: object) -> LabelledImage:
             entry,
             file,
         )
-    what = raw.get("what")
-    return LabelledImage(entry, file, str(label), land, what if isinstance(what, str) else "", rgb)
+    what, source = raw.get("what"), raw.get("source_repo")
+    return LabelledImage(
+        entry, file, str(label), land, what if isinstance(what, str) else "", rgb,
+        source if isinstance(source, str) else "",
+    )  # fmt: skip
 
 
 def _json_kind(x: object) -> str:
@@ -249,7 +253,7 @@ async def evaluate(
         tiers["confirm"][str(out.get("tier"))] += 1
         latency["confirm"].append(float(out["latency_s"]))
         records.append({
-            "file": img.file, "label": img.label, "land": img.land, "what": img.what,
+            "file": img.file, "label": img.label, "land": img.land, "what": img.what, "source": img.source,
             "confirm": answer, "correct": correct, "rationale": _rationale(out), "tier": out.get("tier"),
             "latency_s": out["latency_s"], "rank_cases": 0, "rank_correct": 0,
         })  # fmt: skip
@@ -283,16 +287,46 @@ async def evaluate(
     for v in by_label.values():
         v["accuracy"] = _fraction(v["correct"], v["cases"])
     (c_ok, c_n), (r_ok, r_n) = tally["confirm"], tally["rank"]
+    by_source = {
+        source: _errors([r for r in records if r["source"] == source])
+        for source in sorted({r["source"] for r in records})
+    }
     return {
         "summary": {
             "confirm_accuracy": _fraction(c_ok, c_n), "rank_accuracy": _fraction(r_ok, r_n),
             "confirm_cases": c_n, "rank_cases": r_n, "confirm_correct": c_ok, "rank_correct": r_ok,
+            **{k: v for k, v in _errors(records).items() if k not in _CASE_KEYS},
             "tiers": {stage: dict(sorted(c.items())) for stage, c in tiers.items()},
         },
         "by_label": by_label,
+        "by_source": by_source,
         "latency_s": {stage: _stats(v) for stage, v in latency.items()},
         "images": records,
         "rank_misses": misses,
+    }  # fmt: skip
+
+
+_CASE_KEYS = ("confirm_cases", "confirm_correct", "rank_cases", "rank_correct")
+
+
+def _errors(records: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """Confirm cases and right answers of ``records``, the false accepts (answered "land" on an image
+    labelled ``land: false``) and false refusals (anything else on one labelled ``land: true``) with
+    their rates, and the rank cases the images took part in and those ranked right (a pair counts for
+    both of its images)."""
+    unsafe = [r for r in records if r["land"] is False]
+    safe = [r for r in records if r["land"] is True]
+    false_accepts = sum(r["confirm"] is True for r in unsafe)
+    false_refusals = sum(r["confirm"] is not True for r in safe)
+    return {
+        "confirm_cases": len(safe) + len(unsafe),
+        "confirm_correct": sum(r["correct"] is True for r in records),
+        "rank_cases": sum(r["rank_cases"] for r in records),
+        "rank_correct": sum(r["rank_correct"] for r in records),
+        "false_accepts": false_accepts, "unsafe_cases": len(unsafe),
+        "false_accept_rate": _fraction(false_accepts, len(unsafe)),
+        "false_refusals": false_refusals, "safe_cases": len(safe),
+        "false_refuse_rate": _fraction(false_refusals, len(safe)),
     }  # fmt: skip
 
 
@@ -379,6 +413,8 @@ def run_images(
     print(
         f"confirm {s['confirm_correct']}/{s['confirm_cases']} ({pct(s['confirm_accuracy'])}), "
         f"rank {s['rank_correct']}/{s['rank_cases']} ({pct(s['rank_accuracy'])}); "
+        f"false accepts {s['false_accepts']}/{s['unsafe_cases']} ({pct(s['false_accept_rate'])}), "
+        f"false refusals {s['false_refusals']}/{s['safe_cases']} ({pct(s['false_refuse_rate'])}); "
         f"results: {out / RESULTS} ({results['wall_s']:.0f} s)",
         file=sys.stderr,
     )
@@ -438,6 +474,21 @@ def write_images_report(results: Mapping[str, Any], out_dir: Path, folder: Path)
          *(_seconds((lat.get(stage) or {}).get(k)) for k in ("median", "p90", "max")))
         for stage in ("confirm", "rank")
     ]))  # fmt: skip
+    parts.append(table(("confirm: safety", "said", "of", "rate"), [
+        ("false accepts (land on a site labelled unsafe)", s.get("false_accepts"), s.get("unsafe_cases"),
+         pct(s.get("false_accept_rate"))),
+        ("false refusals (refuse a site labelled safe)", s.get("false_refusals"), s.get("safe_cases"),
+         pct(s.get("false_refuse_rate"))),
+    ]))  # fmt: skip
+    by_source = results.get("by_source") or {}
+    if len(by_source) > 1:
+        parts.append(table(("source", "confirm right", "false accepts", "false refusals", "rank right*"), [
+            (source or "(none given)", f"{v['confirm_correct']}/{v['confirm_cases']}",
+             f"{v['false_accepts']}/{v['unsafe_cases']}", f"{v['false_refusals']}/{v['safe_cases']}",
+             f"{v['rank_correct']}/{v['rank_cases']}")
+            for source, v in by_source.items()
+        ]))  # fmt: skip
+        parts.append("<p>* the rank cases an image of that source took part in.</p>")
     parts.append(table(("label (confirm)", "cases", "correct", "accuracy"), [
         (label, v.get("cases"), v.get("correct"), pct(v.get("accuracy"))) for label, v in by_label.items()
     ]))  # fmt: skip

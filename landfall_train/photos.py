@@ -386,19 +386,10 @@ def fine_tune(
         blob = torch.from_numpy(normalised(batch))
         logits, clear_logit = net(blob)
         n = args.render_batch
-        bce = torch.nn.functional.binary_cross_entropy_with_logits(
-            logits[:n], torch.from_numpy(np.stack(cells)), pos_weight=pos_weight, reduction="none"
+        weights = (pos_weight, photo_pos_weight)
+        loss, photo_clear = mixed_loss(
+            logits, clear_logit, (cells, valid, clear), p_clear, weights, args.photo_weight
         )
-        v = torch.from_numpy(np.stack(valid))
-        cell_loss = (bce * v[:, None]).sum() / (v.sum() * len(CLASSES)).clamp(min=1.0)
-        render_clear = torch.nn.functional.binary_cross_entropy_with_logits(
-            clear_logit[:n].view(-1), torch.tensor(clear, dtype=torch.float32),
-            pos_weight=torch.tensor(CLEAR_POS_WEIGHT),
-        )  # fmt: skip
-        photo_clear = torch.nn.functional.binary_cross_entropy_with_logits(
-            clear_logit[n:].view(-1), torch.from_numpy(p_clear), pos_weight=photo_pos_weight
-        )
-        loss = cell_loss + render_clear + args.photo_weight * photo_clear
         if args.photo_cells > 0 and p_free.any():
             # a clear photograph's middle holds no object, person, vehicle, water or marking
             free = torch.from_numpy(p_free)
@@ -415,16 +406,58 @@ def fine_tune(
                 logits[n:, ROOF], target.clamp(min=0.0), reduction="none"
             )
             loss = loss + args.photo_roof * (bce * known).sum() / known.sum()
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        opt.step()
-        sched.step()
-        running = 0.95 * running + 0.05 * float(photo_clear.detach()) if step else float(photo_clear.detach())
-        if step % 50 == 0 or step == args.steps - 1:
-            el = time.monotonic() - t0
-            _log.info("step %d/%d photo loss %.3f (%.0f s, %.2f s/step)", step + 1, args.steps, running, el,
-                      el / (step + 1))  # fmt: skip
+        running = take_step(opt, sched, loss, photo_clear, running, (step, args.steps, t0))
     return net.eval(), time.monotonic() - t0
+
+
+def take_step(
+    opt: Any, sched: Any, loss: Any, photo_loss: Any, running: float, when: tuple[int, int, float]
+) -> float:
+    """One optimiser and schedule step on ``loss``; returns the photographs' running loss, which is
+    logged every 50 steps with the time per step (``when``: this step, the steps planned, the start)."""
+    step, steps, t0 = when
+    opt.zero_grad(set_to_none=True)
+    loss.backward()
+    opt.step()
+    sched.step()
+    running = 0.95 * running + 0.05 * float(photo_loss.detach()) if step else float(photo_loss.detach())
+    if step % 50 == 0 or step == steps - 1:
+        el = time.monotonic() - t0
+        _log.info("step %d/%d photo loss %.3f (%.0f s, %.2f s/step)", step + 1, steps, running, el,
+                  el / (step + 1))  # fmt: skip
+    return running
+
+
+def mixed_loss(
+    logits: Any,
+    clear_logit: Any,
+    render: tuple[list[np.ndarray], list[np.ndarray], list[float]],
+    photo_clear: np.ndarray,
+    pos_weights: tuple[Any, Any],
+    photo_weight: float,
+) -> tuple[Any, Any]:
+    """The loss of a batch of render views (first, ``render``: their cell targets, cell validity and
+    clear-site targets) followed by photograph views (``photo_clear``: their clear-site targets): the
+    renders' cells and clear site, and ``photo_weight`` times the photographs' clear site, weighted by
+    ``pos_weights`` (the cells' per class, the photographs' clear sites). Returns (loss, photograph loss)."""
+    import torch
+
+    cells, valid, clear = render
+    cell_pos, photo_pos = pos_weights
+    n = len(cells)
+    bce = torch.nn.functional.binary_cross_entropy_with_logits(
+        logits[:n], torch.from_numpy(np.stack(cells)), pos_weight=cell_pos, reduction="none"
+    )
+    v = torch.from_numpy(np.stack(valid))
+    cell_loss = (bce * v[:, None]).sum() / (v.sum() * len(CLASSES)).clamp(min=1.0)
+    render_clear = torch.nn.functional.binary_cross_entropy_with_logits(
+        clear_logit[:n].view(-1), torch.tensor(clear, dtype=torch.float32),
+        pos_weight=torch.tensor(CLEAR_POS_WEIGHT),
+    )  # fmt: skip
+    photo = torch.nn.functional.binary_cross_entropy_with_logits(
+        clear_logit[n:].view(-1), torch.from_numpy(photo_clear), pos_weight=photo_pos
+    )
+    return cell_loss + render_clear + photo_weight * photo, photo
 
 
 def interpolate(net: Any, start: dict[str, Any], alpha: float) -> Any:

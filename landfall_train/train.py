@@ -352,21 +352,30 @@ def _onnx_predict(path: Path) -> Predict:
     return predict
 
 
-def normalised(img: np.ndarray) -> np.ndarray:
-    """NHWC uint8 images as the net reads them: NCHW float32, RGB / 255 normalised by ``MEAN``, ``STD``."""
-    x = (img.astype(np.float32) / np.float32(255.0) - np.float32(0.5)) / np.float32(0.25)
+Norm = tuple[Sequence[float], Sequence[float]]  # per channel (mean, std) of RGB / 255
+LANDNET_S_NORM: Norm = ((0.5, 0.5, 0.5), (0.25, 0.25, 0.25))
+
+
+def normalised(img: np.ndarray, norm: Norm = LANDNET_S_NORM) -> np.ndarray:
+    """NHWC uint8 images as the net reads them: NCHW float32, RGB / 255 normalised by ``norm``'s mean and
+    standard deviation (LandNet-S's 0.5 and 0.25 by default; a sidecar's ``input.mean`` and ``input.std``)."""
+    mean, std = (np.asarray(v, np.float32) for v in norm)
+    x = (img.astype(np.float32) / np.float32(255.0) - mean) / std
     return np.ascontiguousarray(x.transpose(0, 3, 1, 2))
 
 
 def read_views(
-    predict: Callable[[np.ndarray], tuple[np.ndarray, ...]], img: np.ndarray, views: int
+    predict: Callable[[np.ndarray], tuple[np.ndarray, ...]],
+    img: np.ndarray,
+    views: int,
+    norm: Norm = LANDNET_S_NORM,
 ) -> list[np.ndarray]:
     """Probabilities of NHWC uint8 images, each read in ``views`` views and averaged as the companion
     does (:func:`companion.reasoning.landnet.average_views`): the cells (N, K, h, w), then per image each
     further output ``predict`` gives (the clear site; the bare head where a model has it)."""
     parts: list[list[np.ndarray]] = []
     for k in range(0, len(img), 64):
-        batch = np.concatenate([view_batch(chw, views) for chw in normalised(img[k : k + 64])])
+        batch = np.concatenate([view_batch(chw, views) for chw in normalised(img[k : k + 64], norm)])
         c, *rest = predict(batch)
         probs = [1.0 / (1.0 + np.exp(-np.asarray(r).reshape(-1))) for r in rest]
         c_p, first = average_views(1.0 / (1.0 + np.exp(-c.astype(np.float64))), probs[0], views)
@@ -377,9 +386,11 @@ def read_views(
     return [np.concatenate(a) for a in parts]
 
 
-def _predict(predict: Predict, img: np.ndarray, views: int) -> tuple[np.ndarray, np.ndarray]:
+def _predict(
+    predict: Predict, img: np.ndarray, views: int, norm: Norm = LANDNET_S_NORM
+) -> tuple[np.ndarray, np.ndarray]:
     """Cell and clear probabilities of NHWC uint8 images (:func:`read_views`)."""
-    cells, clear = read_views(predict, img, views)
+    cells, clear = read_views(predict, img, views, norm)
     return cells, clear
 
 
@@ -404,7 +415,8 @@ def recalibrate(
     (``reading``: :func:`reading_input`) and rewrite its sidecar."""
     meta_path = out.with_suffix(".json")
     meta = json.loads(meta_path.read_text())
-    calib = calibrate(_onnx_predict(out.with_suffix(".onnx")), val, reading["views"], clear_floor)
+    norm = (meta["input"]["mean"], meta["input"]["std"])
+    calib = calibrate(_onnx_predict(out.with_suffix(".onnx")), val, reading["views"], clear_floor, norm)
     meta["thresholds"] = calib["thresholds"]
     meta["sim_metrics"] = calib["metrics"]
     meta["input"].update(reading)
@@ -419,11 +431,16 @@ def recalibrate(
 
 
 def calibrate(
-    predict: Predict, val: dict[str, np.ndarray], views: int = 1, clear_floor: float = 0.0
+    predict: Predict,
+    val: dict[str, np.ndarray],
+    views: int = 1,
+    clear_floor: float = 0.0,
+    norm: Norm = LANDNET_S_NORM,
 ) -> dict[str, Any]:
-    """Thresholds and sim metrics on the validation views (module docstring, 3); the clear threshold is
-    ``clear_floor`` where Youden's is lower (the metrics are those at the threshold kept)."""
-    cells, clear = _predict(predict, val["img"], views)
+    """Thresholds and sim metrics on the validation views (module docstring, 3) read as ``norm``
+    normalises them; the clear threshold is ``clear_floor`` where Youden's is lower (the metrics are
+    those at the threshold kept)."""
+    cells, clear = _predict(predict, val["img"], views, norm)
     truth = val["clear"] > 0.5
     youden, _j = _youden(clear, truth)
     t_clear = max(youden, clear_floor)

@@ -32,11 +32,12 @@ from landfall_eval.images import (
 REAL = Path(__file__).resolve().parents[2] / "shared" / "realimages"
 SUMMARY_KEYS = {
     "confirm_accuracy", "rank_accuracy", "confirm_cases", "rank_cases", "confirm_correct", "rank_correct",
+    "false_accepts", "unsafe_cases", "false_accept_rate", "false_refusals", "safe_cases", "false_refuse_rate",
     "tiers",
 }  # fmt: skip
 IMAGE_KEYS = {
     "file", "label", "land", "what", "confirm", "correct", "rationale", "tier", "latency_s", "rank_cases",
-    "rank_correct",
+    "rank_correct", "source",
 }  # fmt: skip
 
 
@@ -85,7 +86,10 @@ def _make_folder(root: Path) -> list[dict[str, Any]]:
     labels = []
     for file, label, land, rgb in pictures:
         assert cv2.imwrite(str(root / file), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
-        labels.append({"file": file, "label": label, "land": land, "what": f"synthetic {label}"})
+        source = "water/repo" if label == "not_roof" else "roofs/repo"
+        labels.append(
+            {"file": file, "label": label, "land": land, "what": f"synthetic {label}", "source_repo": source}
+        )
     (root / "labels.json").write_text(json.dumps(labels, indent=1))
     return labels
 
@@ -198,6 +202,17 @@ async def test_evaluate_counts_cases_from_the_labels(folder: Path, tmp_path: Pat
     s = figures["summary"]
     # "yes" is right for the 3 clear roofs (land true) and wrong for the 4 with land false
     assert (s["confirm_cases"], s["confirm_correct"], s["confirm_accuracy"]) == (7, 3, 3 / 7)
+    # every "yes" on a site labelled unsafe is a false accept; no safe site was refused
+    assert (s["false_accepts"], s["unsafe_cases"], s["false_accept_rate"]) == (4, 4, 1.0)
+    assert (s["false_refusals"], s["safe_cases"], s["false_refuse_rate"]) == (0, 3, 0.0)
+    # per source (labels.json's source_repo): the water and the field, then the six roofs
+    by = figures["by_source"]
+    assert set(by) == {"roofs/repo", "water/repo"}
+    assert (by["water/repo"]["confirm_cases"], by["water/repo"]["false_accepts"]) == (1, 1)
+    assert by["water/repo"]["rank_cases"] == 0
+    assert (by["roofs/repo"]["confirm_cases"], by["roofs/repo"]["confirm_correct"]) == (6, 3)
+    assert (by["roofs/repo"]["false_accepts"], by["roofs/repo"]["unsafe_cases"]) == (3, 3)
+    assert by["roofs/repo"]["rank_cases"] == 2 * 18  # every pair counts for both of its images
     # "first crop first" is right exactly when the clear roof was sent first: half the cases
     assert (s["rank_cases"], s["rank_correct"], s["rank_accuracy"]) == (18, 9, 0.5)
     assert figures["by_label"]["clear_roof"] == {"cases": 3, "correct": 3, "accuracy": 1.0}

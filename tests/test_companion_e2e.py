@@ -362,6 +362,11 @@ def test_an_lvlm_tier_flies_the_loop_and_a_lone_no_is_overridden(
     assert any(c["accept"] and "accepted over 2 lone no" in c["rationale"] for c in confirms)
     ranks = [e for e in events if e["kind"] == "rank"]
     assert all(r["tier"] == "edge" and r["images"] for r in ranks)
+    # the first round's frame goes into the search's map once the vehicle moves, not before its setpoint
+    move = next(k for k, e in enumerate(events) if e["kind"] == "state" and e["state"] == "move")
+    observed = next(k for k, e in enumerate(events) if e["kind"] == "observed")
+    assert events[move]["round"] == events[observed]["round"] == 1
+    assert move < observed
 
 
 def _events(record: Path) -> list[dict[str, Any]]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import logging
 import sys
 import tomllib
@@ -657,3 +658,25 @@ def test_reasoner_onboard_judge_from_file_and_env(in_tmp: Path) -> None:
     assert load_config(path, {}, {}).reasoner.onboard_judge == "cues"
     env = {"LANDFALL_REASONER_ONBOARD_JUDGE": "landnet"}
     assert load_config(path, env, {}).reasoner.onboard_judge == "landnet"
+
+
+def test_reasoner_onboard_model_names_a_packaged_net_or_a_file_and_a_bad_one_fails_start_up(
+    in_tmp: Path,
+) -> None:
+    import shutil
+
+    from companion.reasoning.landnet import DEFAULT_MODEL
+    from companion.reasoning.tiers import build_cascade
+
+    assert CompanionConfig().reasoner.onboard_model == "landnet-s"
+    Path("nets").mkdir()
+    shutil.copy(DEFAULT_MODEL, "nets/mine.onnx")
+    meta = json.loads(DEFAULT_MODEL.with_suffix(".json").read_text()) | {"name": "mine"}
+    Path("nets/mine.json").write_text(json.dumps(meta))
+    path = write(Path("companion.toml"), '[reasoner]\nonboard_model = "nets/mine.onnx"\n')
+    net = build_cascade(load_config(path, {}, {}).reasoner).onboard.landnet
+    assert net is not None
+    assert net.name == "mine"
+    gone = write(Path("other.toml"), '[reasoner]\nonboard_model = "nets/gone.onnx"\n')
+    with pytest.raises(ConfigError, match=r"onboard_model = 'nets/gone.onnx'.*gone\.onnx: model file not"):
+        build_cascade(load_config(gone, {}, {}).reasoner)

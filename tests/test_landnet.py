@@ -20,11 +20,13 @@ from companion.reasoning.base import ConfirmRequest, Ranking, RankRequest
 from companion.reasoning.landnet import (
     DEFAULT_MODEL,
     OUTPUTS,
+    PACKAGED,
     LandNet,
     LandNetError,
     SceneReading,
     average_views,
     model_outputs,
+    model_path,
     rank_hazard,
     view_batch,
 )
@@ -78,6 +80,15 @@ def test_landnet_load_packaged_model_and_sidecar(net: LandNet) -> None:
     assert all(m["command"].startswith("python -m landfall_train --seed") for m in meta["members"])
     assert meta["calibration"]["views"] == net.views
     assert DEFAULT_MODEL.stat().st_size < 4_000_000
+
+
+def test_a_packaged_model_is_named_and_a_path_is_a_file(tmp_path: Path) -> None:
+    assert model_path(None) == model_path("") == model_path("landnet-s") == DEFAULT_MODEL
+    onnx = tmp_path / "mine.onnx"
+    shutil.copy(DEFAULT_MODEL, onnx)
+    shutil.copy(DEFAULT_MODEL.with_suffix(".json"), onnx.with_suffix(".json"))
+    assert model_path(str(onnx)) == onnx
+    assert LandNet.load(str(onnx)).name == "landnet-s"  # the sidecar's name
 
 
 def test_landnet_load_missing_file_is_an_error_naming_it(tmp_path: Path) -> None:
@@ -421,9 +432,10 @@ def test_companion_defaults_to_landnet_the_class_to_cues_and_unknown_is_refused(
 def test_onboard_landnet_missing_weights_fail_start_up_naming_the_file(
     monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
-    monkeypatch.setattr("companion.reasoning.landnet.DEFAULT_MODEL", tmp_path / "gone.onnx")
+    monkeypatch.setitem(PACKAGED, "landnet-s", tmp_path / "gone.onnx")
     with pytest.raises(
-        ConfigError, match=r"reasoner.onboard_judge = 'landnet': .*gone.onnx: model file not found"
+        ConfigError,
+        match=r"onboard_judge = 'landnet', onboard_model = 'landnet-s': .*gone.onnx: model file not found",
     ):
         build_cascade(ReasonerConfig(onboard_judge="landnet"))
     assert build_cascade(ReasonerConfig(onboard_judge="cues")).onboard is not None  # cues need no file

@@ -51,8 +51,9 @@ import numpy as np
 from companion.reasoning.image_cues import check_rgb
 
 __all__ = [
-    "BACKENDS", "BARE", "DEFAULT_MODEL", "OUTPUTS", "VIEWS", "LandNet", "LandNetError", "SceneReading",
-    "average_views", "model_outputs", "onnx_runner", "rank_hazard", "view_batch",
+    "BACKENDS", "BARE", "DEFAULT_MODEL", "LANDNET_S", "OUTPUTS", "PACKAGED", "VIEWS", "LandNet",
+    "LandNetError", "SceneReading", "average_views", "model_outputs", "model_path", "onnx_runner",
+    "rank_hazard", "view_batch",
 ]  # fmt: skip
 
 _log = logging.getLogger(__name__)
@@ -61,7 +62,12 @@ Runner = Callable[[np.ndarray], tuple[np.ndarray, ...]]  # NCHW float32 -> the o
 OUTPUTS = ("cells", "clear")  # every model's outputs; a landfall-landnet/2 model adds BARE
 BARE = "bare"  # (N, 1, 1, 1) logit: nothing (no object, person, vehicle, water, marking) on the surface
 
-DEFAULT_MODEL = Path(__file__).with_name("models") / "landnet-s.onnx"
+MODELS = Path(__file__).with_name("models")
+# The packaged models by name (``reasoner.onboard_model``); any other value is the path of an ONNX file
+# with its sidecar (``python -m landfall_train.pretrained`` writes LandNet-E's: docs/reasoning.md).
+PACKAGED = {"landnet-s": MODELS / "landnet-s.onnx"}
+LANDNET_S = PACKAGED["landnet-s"]
+DEFAULT_MODEL = LANDNET_S
 HAZARD_SCALE = 3.0  # rank: hazard points of a surely-not-clear site (the image cues' water weight)
 # rank, a model with the bare head (landfall-landnet/2; the packaged model has none): weight of the
 # clear-site probability in a site's hazard, the rest on the probability that nothing stands on it.
@@ -291,14 +297,15 @@ class LandNet:
 
     @classmethod
     def load(cls, path: Path | str | None = None, backend: str = "auto") -> LandNet:
-        """The model at ``path`` (``X.onnx`` with its sidecar ``X.json``; default: the packaged one), run
+        """The model at ``path`` (``X.onnx`` with its sidecar ``X.json``, or a packaged model's name:
+        :func:`model_path`; default: the packaged LandNet-S), run
         by ``backend`` (module docstring; ``"auto"``: ONNX Runtime where installed, else OpenCV).
 
         Raises:
             LandNetError: a missing or unreadable file, a sidecar without what inference needs, a sha256
                 that does not match, or an ONNX file OpenCV cannot load.
         """
-        onnx_path = Path(path) if path is not None else DEFAULT_MODEL
+        onnx_path = model_path(path)
         meta_path = onnx_path.with_suffix(".json")
         for p in (onnx_path, meta_path):
             if not p.is_file():
@@ -421,6 +428,16 @@ class LandNet:
         return SceneReading(
             self.name, size, (gh, gw), clear_p, shares, tuple(places), tuple(counts), peak, bare
         )
+
+
+def model_path(model: str | Path | None) -> Path:
+    """The ONNX file ``model`` names: a packaged model's name (``PACKAGED``), a path to an ``.onnx``
+    file with its sidecar beside it, or None / "" for the default (LandNet-S)."""
+    if model is None or model == "":
+        return DEFAULT_MODEL
+    if isinstance(model, str) and model in PACKAGED:
+        return PACKAGED[model]
+    return Path(model)
 
 
 def model_outputs(meta: dict[str, Any]) -> tuple[str, ...]:

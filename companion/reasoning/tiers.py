@@ -21,7 +21,7 @@ import httpx
 from companion.config import CompanionConfig, ConfigError, LvlmProfileConfig, ReasonerConfig
 from companion.reasoning.base import Reasoner
 from companion.reasoning.cascade import Cascade, CascadeParams, Hedged
-from companion.reasoning.landnet import LandNetError
+from companion.reasoning.landnet import LandNet, LandNetError
 from companion.reasoning.lvlm import LvlmProfile, LvlmReasoner
 from companion.reasoning.onboard import OnboardReasoner
 
@@ -200,8 +200,11 @@ def build_cascade(
         critical_deadline_factor=cfg.critical_deadline_factor,
         override_after=cfg.override_lone_no_after,
     )
-    try:  # loads LandNet-S now: a missing or corrupt file fails start-up, naming it
-        onboard = OnboardReasoner(judge=cfg.onboard_judge)
+    try:  # loads the model now: a missing or corrupt file fails start-up, naming it
+        net = LandNet.load(cfg.onboard_model) if cfg.onboard_judge == "landnet" else None
+        onboard = OnboardReasoner(judge=cfg.onboard_judge, landnet=net)
     except LandNetError as exc:
-        raise ConfigError(f"reasoner.onboard_judge = {cfg.onboard_judge!r}", str(exc)) from exc
+        raise ConfigError(
+            f"reasoner.onboard_judge = {cfg.onboard_judge!r}, onboard_model = {cfg.onboard_model!r}", str(exc)
+        ) from exc
     return Cascade(stages["rank"], stages["confirm"], onboard, params, record)

@@ -178,6 +178,7 @@ class RecoveryBase:
         # the site being followed: the last frame it was found in, and where it was then (following.py)
         self._track: tuple[SiteView, tuple[float, float, float]] | None = None
         self._first_look: asyncio.Task[Any] | None = None  # the first frame, asked for while engaging
+        self._unobserved: Any = None  # a round's frame not yet in the search's map (Recovery._observed)
 
     @property
     def budget(self) -> int:
@@ -283,6 +284,9 @@ class RecoveryBase:
         raise NotImplementedError
 
     def _observe(self, frame: Any) -> None:
+        raise NotImplementedError
+
+    async def _observed(self) -> None:
         raise NotImplementedError
 
     async def _rank(self, candidates: list[Candidate], frame: Any) -> tuple[Ranking, int | None]:

@@ -317,7 +317,18 @@ class Recovery(Searching, SiteChoice, Following, Looking):
             raise
         self._first_look = look
 
+    async def _observed(self) -> None:
+        """The last round's frame into the search's map (:meth:`_observe`), once. A round defers it:
+        choosing and flying toward this round's site does not need the map, a search leg does, so it
+        runs while the vehicle moves, or before a search leg or the next round, whichever comes first."""
+        frame, self._unobserved = self._unobserved, None
+        if frame is not None:
+            t0 = time.monotonic()
+            await asyncio.to_thread(self._observe, frame)
+            self.record.record_event("observed", {"round": self.round, "s": round(time.monotonic() - t0, 3)})
+
     async def _round(self) -> bool:
+        await self._observed()  # a round that ended before its move leaves its frame here
         look, self._first_look = self._first_look, None
         self._new_vantage = False  # this round looks from here
         self._track = None  # a new round, a new site
@@ -325,13 +336,14 @@ class Recovery(Searching, SiteChoice, Following, Looking):
         self._set(State.SURFACE_ID)
         camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
         candidates = await asyncio.to_thread(self._surface_id, frame, camera)
-        await asyncio.to_thread(self._observe, frame)  # the search's map of what was seen
+        self._unobserved = frame  # the search's map of what was seen: after the first setpoint
         # a roof in view makes it a built-up area; so do roofs the LiDAR saw near a site (_built_up)
         self._roofs_in_view = any(c.elevated for c in candidates)
         candidates = [c for c in candidates if not self._near_rejected(c)]
         if frame.image_rgb is not None:  # JPEG encoding off the event loop: the setpoint stream runs there
             await asyncio.to_thread(self.record.save_image, f"round{self.round:02d}-acquire", frame.image_rgb)
         if not candidates or all(c.fallback for c in candidates):
+            await self._observed()  # the search's next leg is planned on it
             await self._explore(blind=lidar_silent(frame.lidar_frd))
             return False
         self._set(State.RANK)
@@ -340,6 +352,7 @@ class Recovery(Searching, SiteChoice, Following, Looking):
             await asyncio.to_thread(self._note_candidates, candidates, frame, camera)
         choice = candidates[chosen] if chosen is not None else None
         if choice is None:
+            await self._observed()  # the search's next leg is planned on it
             await self._explore()
             return False
         if await self._search_instead(choice):
@@ -357,6 +370,7 @@ class Recovery(Searching, SiteChoice, Following, Looking):
         self._say(6, ranking.rationale[:200])
         self._set(State.MOVE)
         self._fault.check("move", self.round)
+        observing = asyncio.create_task(self._observed(), name="observe")  # once the setpoint is out
         try:
             await self.ctl.goto(
                 target[0],
@@ -369,6 +383,8 @@ class Recovery(Searching, SiteChoice, Following, Looking):
         except TargetTimeout as exc:
             self._say(4, f"target not reached ({exc.error_m:.1f} m off): next round")
             return False
+        finally:
+            await observing
         return await self._confirm_and_descend(target, choice)
 
     async def _confirm_and_descend(self, target: tuple[float, float, float], choice: Candidate) -> bool:

@@ -100,6 +100,7 @@ class Searching(RecoveryBase):
         against it: flown to and confirmed as any round would), or, with none, a round from here when
         the last round ended by climbing or descending to see (:meth:`_explore`), else a step outward
         to a view not yet judged and a round there. True when it landed."""
+        await self._observed()  # the last round's frame, if it ended before its move
         self.extra += 1
         self.round += 1
         self._descending = None
@@ -148,7 +149,9 @@ class Searching(RecoveryBase):
     async def _search_leg(self) -> Leg:
         """Fly the planner's next leg (:meth:`SearchPlanner.next_leg`): climb first when the leg goes
         higher, descend last when it goes lower, so the level part flies at the safer height. Said,
-        recorded (``search_leg``) and shown on the ground feed."""
+        recorded (``search_leg``) and shown on the ground feed. The last frame goes into the search's
+        map first (:meth:`_observed`): the leg is planned on it."""
+        await self._observed()
         self._set(State.EXPLORE)
         s = self.tm.state
         n, e, d = s.pos_ned_m
