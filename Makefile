@@ -89,7 +89,7 @@ model: $(DEPTH_STAMP)
 # whole places, 2 side by side) that chooses the clear-site threshold (false accepts at most 3 % over the
 # folds), then the model on all the photographs with that threshold, in runs/landnet-e/ (use it with
 # reasoner.onboard_model = "runs/landnet-e/landnet-e.onnx"). On this repository's 2-core machine
-# (2026-12-01): the folds 76 min, the model 42 min beside them.
+# (2026-12-01): the folds 78 min, the model 42 min beside them.
 model-e: $(DEPTH_STAMP)
 	$(VENV)/bin/pip install --quiet -e '.[sim,train]'
 	$(VENV)/bin/python -m landfall_train.pretrained --folds 4 --jobs 2 --out runs/landnet-e/folds

@@ -54,12 +54,57 @@ class Sample:
     threads: int
 
 
-def proc_figures(pid: int) -> tuple[float, int, int]:
-    """Resident memory (MB), open file descriptors and threads of ``pid`` (Linux /proc)."""
+HELD_SAMPLES = 8  # file descriptors count when held through this many samples ...
+HELD_EVERY_S = 0.25  # ... this far apart
+
+
+def proc_figures(pid: int, simulator_port: int | None = None) -> tuple[float, int, int]:
+    """Resident memory (MB), open file descriptors and threads of ``pid`` (Linux /proc).
+
+    The file descriptors counted are those held through ``HELD_SAMPLES`` looks ``HELD_EVERY_S`` apart,
+    less the companion's TCP connection to the simulator's sensor port ``simulator_port``: with its
+    simulator stopped, the sensor client holds that connection until it notices, then tries to
+    reconnect, each try's socket living for a moment, so a look counts one of them or none by chance (a
+    soak's 3 episodes read 7, 8, 8 that way). A leaked descriptor is held throughout and counted (a socket
+    by its inode, not its number, which a new socket may reuse)."""
+    held: set[tuple[str, str]] | None = None
+    for k in range(HELD_SAMPLES):
+        if k:
+            time.sleep(HELD_EVERY_S)
+        now = set(_open_files(pid))
+        held = now if held is None else held & now
+    to_sim = _sockets_to(simulator_port) if simulator_port is not None else set()
+    counted = [f for f in held or () if f[1] not in to_sim]
     status = Path(f"/proc/{pid}/status").read_text()
     rss = int(re.search(r"VmRSS:\s+(\d+)", status).group(1)) / 1024  # type: ignore[union-attr]
     threads = int(re.search(r"Threads:\s+(\d+)", status).group(1))  # type: ignore[union-attr]
-    return rss, len(os.listdir(f"/proc/{pid}/fd")), threads
+    return rss, len(counted), threads
+
+
+def _open_files(pid: int) -> list[tuple[str, str]]:
+    """(descriptor, what it is: a path or socket:[inode]) of ``pid``."""
+    out = []
+    for fd in os.listdir(f"/proc/{pid}/fd"):
+        try:
+            out.append((fd, os.readlink(f"/proc/{pid}/fd/{fd}")))
+        except FileNotFoundError:  # closed since the listing
+            continue
+    return out
+
+
+def _sockets_to(port: int) -> set[str]:
+    """``socket:[inode]`` of every TCP socket on this machine whose remote port is ``port``."""
+    out = set()
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        try:
+            rows = Path(table).read_text().splitlines()[1:]
+        except OSError:
+            continue
+        for row in rows:
+            cols = row.split()
+            if len(cols) > 9 and int(cols[2].rsplit(":", 1)[1], 16) == port:
+                out.add(f"socket:[{cols[9]}]")
+    return out
 
 
 def _slope(ys: list[float]) -> float:
@@ -111,7 +156,7 @@ def run_episode(k: int, comp: subprocess.Popen[bytes], comp_log: Path, udp: int,
         stop_process(sim)
         tail.close()
     wall = time.monotonic() - t0
-    rss, fds, threads = proc_figures(comp.pid) if comp.poll() is None else (0.0, 0, 0)
+    rss, fds, threads = proc_figures(comp.pid, tcp) if comp.poll() is None else (0.0, 0, 0)
     return Sample(
         k, scenario, autopilot, outcome,
         touchdown.get("surface") if touchdown else None,
@@ -143,7 +188,7 @@ def main(argv: list[str] | None = None) -> int:
     samples: list[Sample] = []
     try:
         time.sleep(2.0)
-        start_rss, start_fds, start_threads = proc_figures(comp.pid)
+        start_rss, start_fds, start_threads = proc_figures(comp.pid, tcp)
         print(f"companion pid {comp.pid}: {start_rss:.1f} MB, {start_fds} fds, {start_threads} threads "
               f"at start; {args.episodes} episodes at {args.speed:g}x", flush=True)  # fmt: skip
         print(" ep  scenario   autopilot  outcome  surface           safe  wall s  RSS MB  fds  threads")

@@ -329,6 +329,18 @@ def figures(
     }  # fmt: skip
 
 
+def pooled(
+    groups: Sequence[Sequence[Photo]],
+    seen: dict[str, dict[str, Any]],
+    threshold: float,
+    fold_threshold: float,
+) -> dict[str, Any]:
+    """:func:`figures` of each fold's photographs summed: rank pairs within a fold only (two folds' models
+    score on scales of their own), every confirmation once."""
+    each = [figures(g, seen, threshold, fold_threshold) for g in groups]
+    return {k: sum(f[k] for f in each) for k in each[0]}
+
+
 def choose_threshold(
     photos: Sequence[Photo], seen: dict[str, dict[str, Any]], fold_threshold: float, max_false_accept: float
 ) -> float:
@@ -360,10 +372,11 @@ def run_folds(args: argparse.Namespace, learn: list[Photo], command: str) -> int
         name: figures([p for p in learn if place(p) == name], seen, chosen, t_fold)
         for name in sorted({place(p) for p in learn})
     }
+    groups = [[p for p in learn if place(p) in names] for names in dealt]
     report = {
         "command": command, "folds": [{k: v for k, v in f.items() if k != "photos"} for f in folds],
         "max_false_accept": args.max_false_accept, "chosen_threshold": chosen,
-        "pooled": {f"{t:.2f}": figures(learn, seen, t, t_fold) for t in (0.3, 0.4, 0.5, 0.6, chosen)},
+        "pooled": {f"{t:.2f}": pooled(groups, seen, t, t_fold) for t in (0.3, 0.4, 0.5, 0.6, chosen)},
         "per_place": per_place, "photos": seen, "seconds": round(time.monotonic() - t0, 1),
         "commit": _commit(),
     }  # fmt: skip

@@ -213,3 +213,15 @@ def test_rethreshold_sets_the_folds_threshold_in_the_sidecar_only(tmp_path: Path
     folds.write_text("{}")  # a report without the folds' choice: a clear error naming it
     with pytest.raises(SystemExit, match=r"folds\.json: no source folds' threshold"):
         main(["--rethreshold", "--clear-threshold-from", str(folds), "--out", str(model)])
+
+
+def test_pooled_fold_figures_pair_ranks_within_a_fold_only() -> None:
+    from landfall_train.pretrained import pooled
+
+    a = [_photo("a", True), _photo("a", False, "cluttered_roof")]
+    b = [_photo("b", True), _photo("b", False, "cluttered_roof")]
+    seen = {str(a[0].path): _seen(0.9, True, 1.0), str(a[1].path): _seen(0.1, True, 0.0)}
+    seen |= {str(b[0].path): _seen(0.9, True, 101.0), str(b[1].path): _seen(0.1, True, 100.0)}
+    f = pooled([a, b], seen, 0.5, 0.5)
+    assert (f["rank_right"], f["rank_cases"]) == (2, 2)  # never a against b: two models, two scales
+    assert (f["confirm_right"], f["confirm_cases"], f["false_accepts"]) == (4, 4, 0)
