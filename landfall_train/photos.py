@@ -140,6 +140,17 @@ def load_photos(dirs: Sequence[Path]) -> list[Photo]:
     return out
 
 
+def photos_or_exit(dirs: Sequence[Path]) -> list[Photo]:
+    """:func:`load_photos` for a command: SystemExit saying what could not be read and where the
+    photographs are expected."""
+    try:
+        return load_photos(dirs)
+    except (OSError, ValueError, KeyError) as exc:
+        raise SystemExit(
+            f"cannot read the photographs: {exc} (../shared/realimages* beside the repository)"
+        ) from None
+
+
 def read_rgb(path: Path) -> np.ndarray:
     bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
     if bgr is None:
@@ -536,10 +547,16 @@ def build_parser() -> argparse.ArgumentParser:
     )  # fmt: skip
     p.add_argument("--alpha", type=float, default=ALPHA, help="share of the way to the fine-tuned weights")
     p.add_argument("--threads", type=int, default=1)
+    add_render_set_args(p)
+    return p
+
+
+def add_render_set_args(p: argparse.ArgumentParser) -> None:
+    """The renders options of :func:`render_set` (and the validation renders'), with the smaller render
+    set that learning from photographs beside renders uses: 8 cities and 300 vignettes."""
     add_training_args(p)
     add_validation_args(p)
     p.set_defaults(train_cities=8, vignettes=300)
-    return p
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -551,12 +568,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     for f in (path, meta_path):
         if not f.is_file():
             raise SystemExit(f"{f}: not found (train the member first: python -m landfall_train --seed S)")
-    try:
-        photos = load_photos(args.photos)
-    except (OSError, ValueError, KeyError) as exc:
-        raise SystemExit(
-            f"cannot read the photographs: {exc} (../shared/realimages* beside the repository)"
-        ) from None
+    photos = photos_or_exit(args.photos)
     learn, held = split(photos, args.hold_out)
     if not any(p.land for p in learn) or not any(p.land is False for p in learn):
         raise SystemExit("the photographs to learn from need both clear and unclear sites")

@@ -53,15 +53,17 @@ import numpy as np
 
 from landfall_train import patches
 from landfall_train.augment import augment, targets
+from landfall_train.folds import scores
 from landfall_train.labels import CLASSES, HAZARD_CLASSES
 from landfall_train.photos import (
     CLEAR_SHARE,
     CLOSEUP_SHARE,
     CLOSEUPS,
     Photo,
-    load_photos,
+    add_render_set_args,
     mixed_loss,
     photo_view,
+    photos_or_exit,
     read_rgb,
     render_set,
     split,
@@ -72,11 +74,10 @@ from landfall_train.train import (
     POS_WEIGHT,
     _commit,
     _torch_version,
-    add_training_args,
-    add_validation_args,
     calibrate,
     export,
     normalised,
+    reading_input,
     training_paths,
     validation_paths,
     validation_views,
@@ -235,8 +236,7 @@ def sidecar(
         "input": {
             "mean": list(IMAGENET_MEAN), "std": list(IMAGENET_STD), "multiple": 16,
             "short_side_px": INPUT_PX, "max_long_side_px": 2 * INPUT_PX, "order": "RGB", "scale": 1 / 255,
-            "views": args.views, "rank_views": args.rank_views,
-            "confirm_short_side_px": args.confirm_side, "rank_short_side_px": args.rank_side,
+            **reading_input(args),
         },
         "outputs": {"cells": "(N, K, H/8, W/8) presence logits", "clear": "(N, 1, 1, 1) clear-site logit"},
         "thresholds": thresholds,
@@ -316,16 +316,17 @@ def figures(
     (refused, labelled safe) of ``photos`` at ``threshold``."""
     safe = [p for p in photos if p.land is True]
     unsafe = [p for p in photos if p.land is False]
-    acc = {str(p.path): judged_at(seen[str(p.path)], threshold, fold_threshold) for p in safe + unsafe}
-    clear = [seen[str(p.path)]["rank_score"] for p in photos if p.label == "clear_roof"]
-    cluttered = [seen[str(p.path)]["rank_score"] for p in photos if p.label == "cluttered_roof"]
-    fa = sum(acc[str(p.path)] for p in unsafe)
-    fr = sum(not acc[str(p.path)] for p in safe)
-    return {
-        "confirm_right": len(safe) + len(unsafe) - fa - fr, "confirm_cases": len(safe) + len(unsafe),
+    verdicts = {
+        str(p.path): (
+            judged_at(seen[str(p.path)], threshold, fold_threshold),
+            seen[str(p.path)]["rank_score"],
+        )
+        for p in photos
+    }
+    fa = sum(verdicts[str(p.path)][0] for p in unsafe)
+    fr = sum(not verdicts[str(p.path)][0] for p in safe)
+    return scores(photos, verdicts) | {
         "false_accepts": fa, "unsafe": len(unsafe), "false_refusals": fr, "safe": len(safe),
-        "rank_right": int(sum(a > b for a in clear for b in cluttered)),
-        "rank_cases": len(clear) * len(cluttered),
     }  # fmt: skip
 
 
@@ -464,9 +465,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--folds", type=int, default=0, help="source-split cross-validation with this many folds")
     p.add_argument("--jobs", type=int, default=2, help="folds trained side by side")
     p.add_argument("--max-false-accept", type=float, default=0.03, help="folds: the threshold's limit")
-    add_training_args(p)
-    add_validation_args(p)
-    p.set_defaults(train_cities=8, vignettes=300)
+    add_render_set_args(p)
     return p
 
 
@@ -478,12 +477,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.clear_threshold = folds_threshold(args.clear_threshold_from)
     if args.rethreshold:
         return rethreshold(args.out, args.clear_threshold, str(args.clear_threshold_from), command)
-    try:
-        photos = load_photos(args.photos)
-    except (OSError, ValueError, KeyError) as exc:
-        raise SystemExit(
-            f"cannot read the photographs: {exc} (../shared/realimages* beside the repository)"
-        ) from None
+    photos = photos_or_exit(args.photos)
     learn, held = learnable(photos, args.hold_out, args.no_copyleft)
     _log.info("%d photographs from %d places may be learnt from; %d not", len(learn),
               len({place(p) for p in learn}), len(held))  # fmt: skip

@@ -51,7 +51,7 @@ import numpy as np
 from companion.reasoning.image_cues import check_rgb
 
 __all__ = [
-    "BACKENDS", "BARE", "DEFAULT_MODEL", "LANDNET_S", "OUTPUTS", "PACKAGED", "VIEWS", "LandNet",
+    "BACKENDS", "BARE", "DEFAULT_MODEL", "OUTPUTS", "PACKAGED", "VIEWS", "LandNet",
     "LandNetError", "SceneReading", "average_views", "model_outputs", "model_path", "onnx_runner",
     "rank_hazard", "view_batch",
 ]  # fmt: skip
@@ -66,8 +66,7 @@ MODELS = Path(__file__).with_name("models")
 # The packaged models by name (``reasoner.onboard_model``); any other value is the path of an ONNX file
 # with its sidecar (``python -m landfall_train.pretrained`` writes LandNet-E's: docs/reasoning.md).
 PACKAGED = {"landnet-s": MODELS / "landnet-s.onnx"}
-LANDNET_S = PACKAGED["landnet-s"]
-DEFAULT_MODEL = LANDNET_S
+DEFAULT_MODEL = PACKAGED["landnet-s"]
 HAZARD_SCALE = 3.0  # rank: hazard points of a surely-not-clear site (the image cues' water weight)
 # rank, a model with the bare head (landfall-landnet/2; the packaged model has none): weight of the
 # clear-site probability in a site's hazard, the rest on the probability that nothing stands on it.
