@@ -199,6 +199,7 @@ def _take_off_then(c: MavClient, autopilot: str, alt_m: float, mode: str) -> Any
     assert c.command(M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, 0, 0, alt_m) == M.MAV_RESULT_ACCEPTED
     c.wait_position(0.0, 0.0, -alt_m, 1.0, 90)
     c.stream_position(0.0, 0.0, -alt_m, wall_s=0.3)
+    c.drop_backlog()  # the position at the switch, not one still queued from before (a loaded machine)
     start = c.position()
     assert c.set_mode_ap(mode) == M.MAV_RESULT_ACCEPTED, f"{autopilot}: {mode} in the air"
     return start
