@@ -137,7 +137,12 @@ class LandNetE(_Backbone):
         self.clear = nn.Conv2d(HEAD_FEATURES + 2 * classes, 1, 1)
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        s8, s16, head = self.features(x)
+        return self.heads(*self.features(x))
+
+    def heads(
+        self, s8: torch.Tensor, s16: torch.Tensor, head: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """The outputs from the backbone's features (:meth:`_Backbone.features`)."""
         f = nn.functional.relu6(self.up(self.proj16(s16)) + self.proj8(s8))
         f = nn.functional.relu6(self.fuse_pw(nn.functional.relu6(self.fuse_dw(f))))
         cells = self.cells(f)
@@ -196,3 +201,39 @@ def freeze_blocks(net: _Backbone, upto: int) -> list[nn.Parameter]:
         for p in m.parameters():
             p.requires_grad_(False)
     return [p for p in net.parameters() if p.requires_grad]
+
+
+class _Features(nn.Module):  # type: ignore[misc]
+    def __init__(self, net: _Backbone) -> None:
+        super().__init__()
+        self.net = net
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        return self.net.features(x)
+
+
+def features_runner(net: _Backbone, path: Path, threads: int) -> Any:
+    """The backbone's features (stride 8, stride 16, the 1,280 head) exported to ONNX at ``path`` and run by
+    ONNX Runtime on ``threads`` threads: a function from normalised NCHW float32 to the three arrays. For a
+    frozen backbone: ONNX Runtime reads a batch about four times as fast as PyTorch on a CPU (its
+    depthwise convolutions)."""
+    import warnings
+
+    import onnxruntime as ort
+
+    with warnings.catch_warnings():  # the TorchScript exporter (dynamo=False) is deprecated, and works
+        warnings.simplefilter("ignore", DeprecationWarning)
+        torch.onnx.export(
+            _Features(net).eval(), (torch.zeros(1, 3, 128, 128),), str(path), input_names=["image"],
+            output_names=["s8", "s16", "head"], dynamic_axes={"image": {0: "n", 2: "h", 3: "w"}},
+            opset_version=13, dynamo=False, do_constant_folding=True,
+        )  # fmt: skip
+    options = ort.SessionOptions()
+    options.intra_op_num_threads = threads
+    options.inter_op_num_threads = 1
+    session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+
+    def run(x: Any) -> Any:
+        return session.run(None, {"image": x})
+
+    return run

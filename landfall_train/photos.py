@@ -439,22 +439,18 @@ def take_step(
     return running
 
 
-def mixed_loss(
+def render_loss(
     logits: Any,
     clear_logit: Any,
     render: tuple[list[np.ndarray], list[np.ndarray], list[float]],
-    photo_clear: np.ndarray,
-    pos_weights: tuple[Any, Any],
-    photo_weight: float,
-) -> tuple[Any, Any]:
-    """The loss of a batch of render views (first, ``render``: their cell targets, cell validity and
-    clear-site targets) followed by photograph views (``photo_clear``: their clear-site targets): the
-    renders' cells and clear site, and ``photo_weight`` times the photographs' clear site, weighted by
-    ``pos_weights`` (the cells' per class, the photographs' clear sites). Returns (loss, photograph loss)."""
+    cell_pos: Any,
+) -> Any:
+    """The loss of the first ``len(render[0])`` views of a batch, renders (``render``: their cell targets,
+    cell validity and clear-site targets): the cells' (weighted per class by ``cell_pos``) and the
+    clear site's."""
     import torch
 
     cells, valid, clear = render
-    cell_pos, photo_pos = pos_weights
     n = len(cells)
     bce = torch.nn.functional.binary_cross_entropy_with_logits(
         logits[:n], torch.from_numpy(np.stack(cells)), pos_weight=cell_pos, reduction="none"
@@ -465,10 +461,29 @@ def mixed_loss(
         clear_logit[:n].view(-1), torch.tensor(clear, dtype=torch.float32),
         pos_weight=torch.tensor(CLEAR_POS_WEIGHT),
     )  # fmt: skip
+    return cell_loss + render_clear
+
+
+def mixed_loss(
+    logits: Any,
+    clear_logit: Any,
+    render: tuple[list[np.ndarray], list[np.ndarray], list[float]],
+    photo_clear: np.ndarray,
+    pos_weights: tuple[Any, Any],
+    photo_weight: float,
+) -> tuple[Any, Any]:
+    """The loss of a batch of render views (first: :func:`render_loss`) followed by photograph views
+    (``photo_clear``: their clear-site targets): the renders' loss and ``photo_weight`` times the
+    photographs' clear site, weighted by ``pos_weights`` (the cells' per class, the photographs' clear
+    sites). Returns (loss, photograph loss)."""
+    import torch
+
+    cell_pos, photo_pos = pos_weights
+    n = len(render[0])
     photo = torch.nn.functional.binary_cross_entropy_with_logits(
         clear_logit[n:].view(-1), torch.from_numpy(photo_clear), pos_weight=photo_pos
     )
-    return cell_loss + render_clear + photo_weight * photo, photo
+    return render_loss(logits, clear_logit, render, cell_pos) + photo_weight * photo, photo
 
 
 def interpolate(net: Any, start: dict[str, Any], alpha: float) -> Any:

@@ -36,6 +36,7 @@ from landfall_train.pretrained import (  # noqa: E402
     judged_at,
     learnable,
     place,
+    warm_state,
 )
 
 EGYPTIAN_CAT, TABBY, TIGER_CAT = 285, 281, 282  # ImageNet-1k class indices
@@ -161,9 +162,7 @@ def test_fit_trains_on_renders_and_photographs_and_exports_for_the_companion(tmp
         path = tmp_path / f"p{k}.jpg"
         cv2.imwrite(str(path), rng.integers(0, 255, (180, 200, 3), dtype=np.uint8))
         photos.append(Photo(path, "clear_roof" if land else "not_roof", land, f"s{k}", "MIT"))
-    x = rng.integers(0, 255, (6, 160, 160, 3), dtype=np.uint8)
-    y = rng.integers(0, len(CLASSES), (6, 160, 160)).astype(np.uint8)
-    y[::2] = CLASSES.index("roof")  # clear sites beside cluttered ones
+    x, y = _renders(rng)  # clear sites beside cluttered ones
     args = build_parser().parse_args(["--out", str(tmp_path / "e"), "--steps", "2", "--photo-batch", "2",
                                       "--render-batch", "4"])  # fmt: skip
     net, seconds = fit(photos, x, y, 4, args)  # the last two renders are close-ups
@@ -180,6 +179,51 @@ def test_fit_trains_on_renders_and_photographs_and_exports_for_the_companion(tmp
     reading = got.read(rng.integers(0, 255, (120, 170, 3), dtype=np.uint8))
     assert 0.0 <= reading.clear_p <= 1.0
     assert json.loads(args.out.with_suffix(".json").read_text())["parity_max_abs_diff"] < 1e-3
+
+
+def _renders(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    x = rng.integers(0, 255, (6, 160, 160, 3), dtype=np.uint8)
+    y = rng.integers(0, len(CLASSES), (6, 160, 160)).astype(np.uint8)
+    y[::2] = CLASSES.index("roof")
+    return x, y
+
+
+def test_the_heads_learn_first_over_the_frozen_backbone_once_and_fit_starts_from_them(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import landfall_train.pretrained as pretrained
+
+    x, y = _renders(np.random.default_rng(1))
+    args = build_parser().parse_args([
+        "--out", str(tmp_path / "e"), "--cache", str(tmp_path / "cache"), "--head-steps", "3",
+        "--head-batch", "4", "--steps", "0",
+    ])  # fmt: skip
+    torch.manual_seed(args.seed)  # as warm_heads starts: the same heads before any step
+    fresh = landnet_e(len(CLASSES)).state_dict()
+    warm = warm_state(x, y, "digest", 4, args)
+    assert warm is not None
+    backbone = [k for k in warm if k.startswith(("_conv", "_bn", "_blocks"))]
+    heads = [k for k in warm if k.startswith(("proj8.", "proj16.", "fuse_", "cells.", "clear."))]
+    assert backbone
+    assert heads
+    assert all(torch.equal(warm[k], fresh[k]) for k in backbone)  # ImageNet's, untouched
+    assert not any(torch.equal(warm[k], fresh[k]) for k in heads if k.endswith("weight"))  # learnt
+    # cached by the renders and the settings: a second call (another fold) reads it, a change trains anew
+    monkeypatch.setattr(pretrained, "warm_heads", lambda *a: pytest.fail("trained again"))
+    again = warm_state(x, y, "digest", 4, args)
+    assert all(torch.equal(again[k], warm[k]) for k in warm)
+    with pytest.raises(pytest.fail.Exception):
+        warm_state(x, y, "other renders", 4, args)
+    args.head_steps = 0
+    assert warm_state(x, y, "digest", 4, args) is None
+    rng = np.random.default_rng(0)
+    photos = []
+    for k, land in enumerate((True, False)):
+        path = tmp_path / f"p{k}.jpg"
+        cv2.imwrite(str(path), rng.integers(0, 255, (180, 200, 3), dtype=np.uint8))
+        photos.append(Photo(path, "clear_roof" if land else "not_roof", land, f"s{k}", "MIT"))
+    net, _seconds = fit(photos, x, y, 4, args, warm)  # no step: the warm start as it is
+    assert all(torch.equal(net.state_dict()[k], warm[k]) for k in heads)
 
 
 def test_no_copyleft_leaves_the_share_alike_sources_out_of_what_is_learnt() -> None:
