@@ -105,6 +105,7 @@ class VehicleController:
         # the autopilot's precision landing, read from its parameters once it is heard (the daemon)
         self.precision: PrecisionLanding | None = None
         self.longest_stream_gap_s = 0.0  # wall seconds between two setpoints: the event loop's health
+        self._failing: str | None = None  # the stream's failure last logged, until a send succeeds
 
     # ------------------------------------------------------------------ basics
     @property
@@ -291,14 +292,32 @@ class VehicleController:
             yaw,
             0,
         )
-        self._send_to(msg, sys_id, comp_id)
+        try:
+            self._send_to(msg, sys_id, comp_id)
+        except OSError as exc:  # the link gone for a moment: the stream sends it again next tick
+            self._fault("setpoint not sent", exc)
+            return
+        self._failing = None
+
+    def _fault(self, what: str, exc: BaseException) -> None:
+        """Log a failure once until the next success (``_failing``): 20 a second would drown the log."""
+        if self._failing != repr(exc):
+            self._log.error("%s (%r): the setpoint stream goes on", what, exc)
+        self._failing = repr(exc)
 
     async def _stream(self) -> None:
+        """The setpoint stream: the target (and the takeover check) ``STREAM_HZ`` times a second until
+        cancelled. A send that fails (a link gone for a moment: ``OSError``) or any other error in one
+        tick is logged, once until a tick succeeds again, and the stream goes on: an autopilot without
+        fresh setpoints leaves OFFBOARD or GUIDED by its own failsafe."""
         period = 1.0 / STREAM_HZ
         last = time.monotonic()
         while True:
-            self._check_takeover()
-            self._send_target()
+            try:
+                self._check_takeover()
+                self._send_target()
+            except Exception as exc:
+                self._fault("setpoint tick failed", exc)
             await asyncio.sleep(period)
             now = time.monotonic()
             self.longest_stream_gap_s = max(self.longest_stream_gap_s, now - last)
@@ -343,6 +362,8 @@ class VehicleController:
             raise TouchedDown(
                 f"on the ground ({'disarmed' if not s.armed else 'landed'}) while the companion flew it"
             )
+        if self._streamer is not None and self._streamer.done():
+            self._streaming()  # a stream that ended while engaged starts again
         self._check_takeover()
         if self.takeover is not None:
             raise self.takeover
@@ -403,17 +424,32 @@ class VehicleController:
         self.failsafe = None
         self._engaged_mode = None  # not ours yet: no takeover checks until our mode is acknowledged
         self.set_target(n, e, d)
-        if self._streamer is None:
-            self._streamer = asyncio.create_task(self._stream(), name="setpoint-stream")
+        self._streaming()
         await self.set_mode(Mode.GUIDED)
         self.set_target(n, e, d)
 
+    def _streaming(self) -> None:
+        """The setpoint stream running: started when there is none, or started again when it ended
+        (its failure logged): :meth:`engage` and every :meth:`check_interruption` while engaged."""
+        task = self._streamer
+        if task is not None and not task.done():
+            return
+        if task is not None and not task.cancelled() and task.exception() is not None:
+            self._log.error("the setpoint stream had stopped (%r): started again", task.exception())
+        self._streamer = asyncio.create_task(self._stream(), name="setpoint-stream")
+
     async def release(self) -> None:
-        if self._streamer is not None:
-            self._streamer.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._streamer
-            self._streamer = None
+        """Stop the setpoint stream and command nothing more. A stream that had failed is logged,
+        never raised: releasing the vehicle always succeeds."""
+        task, self._streamer = self._streamer, None
+        if task is not None:
+            task.cancel()
+            try:
+                await task
+            except asyncio.CancelledError:
+                pass
+            except Exception as exc:
+                self._log.error("the setpoint stream had failed: %r", exc)
         self._engaged_mode = None
 
     async def ride_out_failsafe(self, grace_s: float) -> bool:

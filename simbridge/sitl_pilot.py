@@ -183,9 +183,7 @@ class SitlPilot:
         """PARAM_SET each (REAL32), unconfirmed: simulation knobs (``SIM_*``) set while it flies."""
         for name, value in params.items():
             self.link.send(
-                self.link.mav.param_set_encode(
-                    self.sysid, 1, name.encode(), value, M.MAV_PARAM_TYPE_REAL32
-                )
+                self.link.mav.param_set_encode(self.sysid, 1, name.encode(), value, M.MAV_PARAM_TYPE_REAL32)
             )
 
     async def _wait(self, until: Callable[[], bool], deadline_s: float, what: str) -> None:

@@ -137,6 +137,79 @@ def _moved(
     return dataclasses.replace(view, pos_ned_m=(p[0] + dn, p[1] + de, p[2])), (n + dn, e + de, d)
 
 
+@dataclasses.dataclass(frozen=True)
+class FollowState:
+    """What a look for the site reads (a copy: the worker thread that looks never writes the
+    follower's state). ``resets`` / ``reset_times_s``: the estimate's resets the follower has taken,
+    (north, east) shifts and their boot times."""
+
+    track: tuple[SiteView, tuple[float, float, float]]  # the frame looked against, the site in it
+    anchor: tuple[SiteView, tuple[float, float, float]] | None  # the frame the site was chosen in
+    seen: tuple[tuple[float, float, float], ...]  # (t_boot_s, north, east) of the recent finds
+    resets: tuple[tuple[float, float], ...] = ()
+    reset_times_s: tuple[float, ...] = ()
+
+
+@dataclasses.dataclass(frozen=True)
+class Look:
+    """A look's outcome: the match, the frame to look against next when it becomes that (else None),
+    and the find for the drift's history ((t_boot_s, north, east); None when not found or untimed)."""
+
+    result: TrackResult
+    track: tuple[SiteView, tuple[float, float, float]] | None
+    seen: tuple[float, float, float] | None
+
+
+def look_for_site(
+    frame: Any, state: FollowState, params: TrackParams, adopt: bool = True, reanchor: bool = False
+) -> Look | None:
+    """The site in ``frame`` (a worker-thread job: it reads ``state`` and writes nothing); None when
+    the frame has no usable view. Looked for against the last frame it was found in, else against the
+    one it was chosen in (from higher up, it saw more: what a jump of the estimate took out of the last
+    one's view). Found, ``frame`` becomes the one to look against next when ``adopt``: each such link
+    adds its match's error to the chain, so the looks during a descent step, twice a second, do not,
+    unless the site lies ``ADOPT_SHIFT_M`` or more from where it was expected (the estimate moved: the
+    next search from the older frame might not reach it). Where the site drifts steadily in the
+    estimate (:func:`drift_prediction`), the search is centred where the drift carried it: a drift
+    needs no chain of references then, and no look rate to keep up with it.
+
+    ``reanchor``: looked for against the frame it was chosen in first, about where the last frame puts
+    it, and found there, that frame becomes the one to look against: one link from the choice instead
+    of the chain a drift built (each of its links added its match's error; scenario2's plain membrane
+    roof on real ArduCopter, 18 m of drift over 30 s: 0.4-0.75 m)."""
+    view = site_view(frame)
+    if view is None:
+        return None
+    # a frame placed before a reset the follower has taken: into the follower's frame
+    taken = _frame_time(frame)
+    later = [r for t, r in zip(state.reset_times_s, state.resets, strict=True) if t > taken]
+    if later:
+        (n, e, d), dn, de = view.pos_ned_m, sum(r[0] for r in later), sum(r[1] for r in later)
+        view = dataclasses.replace(view, pos_ned_m=(n + dn, e + de, d))
+    ref, site = state.track
+    # a steady drift of the estimate carried forward: the search is centred where it puts the site
+    predicted = drift_prediction(site_drift_line(list(state.seen)), taken)
+    expected = predicted if predicted is not None else (site[0], site[1])
+    anchor = state.anchor
+    if reanchor and anchor is not None and anchor[0] is not ref:
+        result = track_site(anchor[0], anchor[1], view, params, expected)
+        if result.found:
+            adopt = True
+        else:
+            result = track_site(ref, site, view, params, predicted)
+    else:
+        result = track_site(ref, site, view, params, predicted)
+        if not result.found and anchor is not None and anchor[0] is not ref:
+            again = track_site(anchor[0], anchor[1], view, params, predicted)
+            result = again if again.found else result
+    if not result.found:
+        return Look(result, None, None)
+    surprise = math.dist(result.site_ned_m[:2], expected)
+    track = (view, result.site_ned_m) if adopt or surprise >= ADOPT_SHIFT_M else None
+    seen = (taken, result.site_ned_m[0], result.site_ned_m[1]) if math.isfinite(taken) else None
+    return Look(result, track, seen)
+
+
 class Following(RecoveryBase):
     """The site kept in view from its choice to the touchdown."""
 
@@ -172,8 +245,9 @@ class Following(RecoveryBase):
         self._track = _moved(self._track, dn, de)
         self._anchor = _moved(self._anchor, dn, de)
         if self._site_seen is not None:  # a reset is not a drift
-            moved = ((t, n + dn, e + de) for t, n, e in self._site_seen)
-            self._site_seen = collections.deque(moved, maxlen=64)
+            moved = [(t, n + dn, e + de) for t, n, e in self._site_seen]
+            self._site_seen.clear()
+            self._site_seen.extend(moved)
         shift = [round(dn, 3), round(de, 3)]
         when = round(new[-1][0], 2)
         self.record.record_event("estimate_reset", {"round": self.round, "t_boot_s": when, "shift_m": shift})
@@ -184,55 +258,34 @@ class Following(RecoveryBase):
         )  # fmt: skip
         return (dn, de)
 
-    def _track_once(self, frame: Any, adopt: bool = True, reanchor: bool = False) -> TrackResult | None:
-        """The site in ``frame`` (a worker-thread job); None when there is nothing to follow. Looked
-        for against the last frame it was found in, else against the one it was chosen in (from
-        higher up, it saw more: what a jump of the estimate took out of the last one's view). Found,
-        ``frame`` becomes the one to look against next when ``adopt``: each such link adds its match's
-        error to the chain, so the looks during a descent step, twice a second, do not, unless the
-        site lies ``ADOPT_SHIFT_M`` or more from where it was expected (the estimate moved: the next
-        search from the older frame might not reach it). Where the site drifts steadily in the
-        estimate (:func:`drift_prediction`), the search is centred where the drift carried it: a
-        drift needs no chain of references then, and no look rate to keep up with it.
+    async def _track_once(self, frame: Any, adopt: bool = True, reanchor: bool = False) -> TrackResult | None:
+        """The site in ``frame``; None when there is nothing to follow. The look runs in a worker thread
+        on a copy of the follower's state (:func:`look_for_site`), and what it found is taken into that
+        state here, on the event loop, which alone writes it (a worker appending to the drift's history
+        while a hold iterated it ended recoveries with "deque mutated during iteration"). A reset of
+        the estimate taken while the look ran moves what it found into the estimate's frame now.
 
-        ``reanchor``: looked for against the frame it was chosen in first, about where the last
-        frame puts it, and found there, that frame becomes the one to look against: one link from
-        the choice instead of the chain a drift built (each of its links added its match's error;
-        scenario2's plain membrane roof on real ArduCopter, 18 m of drift over 30 s: 0.4-0.75 m)."""
+        Raises:
+            ValueError, cv2.error: a malformed frame (the callers say so and try the next)."""
         if self._track is None:
             return None
-        view = site_view(frame)
-        if view is None:
+        state = FollowState(
+            self._track, self._anchor, tuple(self._site_seen or ()),
+            tuple(r for _t, r in self.tm.position_resets.resets[: self._resets_seen]),
+            tuple(t for t, _r in self.tm.position_resets.resets[: self._resets_seen]),
+        )  # fmt: skip
+        resets_before = self._resets_seen
+        look = await asyncio.to_thread(look_for_site, frame, state, self._track_params, adopt, reanchor)
+        if look is None:
             return None
-        # a frame placed before a reset the tracker has taken: into the tracker's frame
-        taken = _frame_time(frame)
-        later = [r for t, r in self.tm.position_resets.resets[: self._resets_seen] if t > taken]
-        if later:
-            (n, e, d), dn, de = view.pos_ned_m, sum(r[0] for r in later), sum(r[1] for r in later)
-            view = dataclasses.replace(view, pos_ned_m=(n + dn, e + de, d))
-        ref, site = self._track
-        # a steady drift of the estimate carried forward: the search is centred where it puts the site
-        predicted = drift_prediction(site_drift_line(list(self._site_seen or ())), taken)
-        expected = predicted if predicted is not None else (site[0], site[1])
-        anchor = self._anchor
-        if reanchor and anchor is not None and anchor[0] is not ref:
-            result = track_site(anchor[0], anchor[1], view, self._track_params, expected)
-            if result.found:
-                adopt = True
-            else:
-                result = track_site(ref, site, view, self._track_params, predicted)
-        else:
-            result = track_site(ref, site, view, self._track_params, predicted)
-            if not result.found and anchor is not None and anchor[0] is not ref:
-                again = track_site(anchor[0], anchor[1], view, self._track_params, predicted)
-                result = again if again.found else result
-        if result.found:
-            surprise = math.dist(result.site_ned_m[:2], expected)
-            if adopt or surprise >= ADOPT_SHIFT_M:
-                self._track = (view, result.site_ned_m)
-            if self._site_seen is not None and math.isfinite(taken):
-                self._site_seen.append((taken, result.site_ned_m[0], result.site_ned_m[1]))
-        return result
+        new = self.tm.position_resets.resets[resets_before : self._resets_seen]
+        dn, de = sum(r[1][0] for r in new), sum(r[1][1] for r in new)
+        if look.track is not None and self._track is not None:
+            self._track = _moved(look.track, dn, de)
+        if look.seen is not None and self._site_seen is not None:
+            t, n, e = look.seen
+            self._site_seen.append((t, n + dn, e + de))
+        return look.result
 
     async def _follow(self, frame: Any, target: tuple[float, float, float]) -> tuple[float, float, float]:
         """The descent's target after looking for the site in ``frame``: moved onto it when found,
@@ -241,7 +294,7 @@ class Following(RecoveryBase):
         dn, de = self._catch_up()
         target = (target[0] + dn, target[1] + de, target[2])
         reanchor, self._reanchor = self._reanchor, False
-        result = await asyncio.to_thread(self._track_once, frame, True, reanchor)
+        result = await self._track_once(frame, True, reanchor)
         if result is None:
             return target
         self.record.record_event(
@@ -297,7 +350,7 @@ class Following(RecoveryBase):
                     self.ctl.retarget(n + dn, e + de)
             try:
                 frame = await self._frames()
-                result = await asyncio.to_thread(self._track_once, frame, adopt)
+                result = await self._track_once(frame, adopt)
             except (FrameUnavailable, ValueError, cv2.error) as exc:
                 self.log.debug("site not looked for during the step: %s", exc)
                 continue
@@ -433,7 +486,7 @@ class Following(RecoveryBase):
             t, (n, e, d) = stats["seen"]
             stats["seen"] = (t, np.array([n + dn, e + de, d]))
         try:
-            result = await asyncio.to_thread(self._track_once, frame, not local_ned)
+            result = await self._track_once(frame, not local_ned)
         except (ValueError, cv2.error) as exc:  # a malformed frame: said, and the next one tried
             return f"frame not usable: {exc}", math.nan
         if result is None:

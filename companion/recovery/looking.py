@@ -7,6 +7,7 @@ import asyncio
 import itertools
 import math
 import time
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -34,6 +35,24 @@ from companion.recovery.core import (
     State,
 )
 from companion.site_ledger import LedgerSite, hazard_of
+
+
+def surface_id_ranking(candidates: Sequence[Candidate]) -> Ranking:
+    """The ranking when a frame has no camera image: Surface ID's own order (its score), said so.
+    Positions in ``candidates``, as a reasoner's order is, not the candidates' Surface ID indices:
+    the candidates near a rejected site are no longer in the list, so the two differ."""
+    return Ranking(
+        tuple(range(len(candidates))),
+        "no camera image: Surface ID's order (flat area, clearance, elevation)",
+        "surface-id",
+        0.0,
+    )
+
+
+def chosen_position(ranking: Ranking, candidates: Sequence[Candidate]) -> int | None:
+    """The position in ``candidates`` of the one the vehicle flies to: the first in the ranking's order
+    that is not a fallback crop (a quadrant has no measured site); None when there is none."""
+    return next((k for k in ranking.order if 0 <= k < len(candidates) and not candidates[k].fallback), None)
 
 
 class Looking(RecoveryBase):
@@ -108,13 +127,7 @@ class Looking(RecoveryBase):
         image = frame.image_rgb
         names: list[str] = []
         if image is None:
-            # no camera image this frame: Surface ID's own order (its score), said so in the record
-            ranking = Ranking(
-                tuple(c.index for c in candidates),
-                "no camera image: Surface ID's order (flat area, clearance, elevation)",
-                "surface-id",
-                0.0,
-            )
+            ranking = surface_id_ranking(candidates)
         else:
             crops, cores, names = await asyncio.to_thread(self._rank_crops, image, candidates)
             request = RankRequest(
@@ -125,7 +138,7 @@ class Looking(RecoveryBase):
                 cores=cores if pad_of(self.p.context) > 0 else None,
             )
             ranking = await self.reasoner.rank(request)
-        chosen = next((k for k in ranking.order if not candidates[k].fallback), None)
+        chosen = chosen_position(ranking, candidates)
         self.record.record_event(
             "rank",
             {
