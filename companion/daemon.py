@@ -5,11 +5,13 @@ and at most one recovery at a time."""
 from __future__ import annotations
 
 import asyncio
+import collections
 import contextlib
 import dataclasses
 import logging
 import math
 import time
+from collections.abc import Awaitable, Callable
 from typing import Any
 
 import numpy as np
@@ -24,6 +26,7 @@ from companion.reasoning.base import Reasoner
 from companion.reasoning.cascade import Cascade
 from companion.reasoning.onboard import OnboardReasoner
 from companion.recovery import FrameUnavailable, Outcome, Record, Recovery, RecoveryParams
+from companion.supervise import supervised
 from companion.telemetry import TelemetryCache
 from landfall_link.mavlink import MavlinkUdpLink
 
@@ -121,6 +124,7 @@ class Companion:
         self._recovery_task: asyncio.Task[Outcome] | None = None
         self.outcomes: list[Outcome] = []
         self.alarms_refused = 0
+        self.restarts: collections.Counter[str] = collections.Counter()  # supervised tasks started again
         self._stop = asyncio.Event()
         self._client: Any = None
         self._gps_was_ok = False
@@ -537,22 +541,30 @@ class Companion:
 
         async with contextlib.AsyncExitStack() as stack:
             await stack.enter_async_context(self.link)
-            tasks = [
-                asyncio.create_task(self._heartbeats(), name="heartbeat"),
-                asyncio.create_task(self._streams(), name="streams"),
-                asyncio.create_task(self._watchers(), name="watchers"),
-                asyncio.create_task(self._precision_check(), name="precision-check"),
-            ]
+            tasks: list[asyncio.Task[None]] = []
+
+            def start(name: str, factory: Callable[[], Awaitable[object]], forever: bool = True) -> None:
+                run = supervised(name, factory, self.log, forever=forever, restarts=self.restarts)
+                tasks.append(asyncio.create_task(run, name=name))
+
+            start("heartbeat", self._heartbeats)
+            start("streams", self._streams)
+            start("watchers", self._watchers)
+            start("precision-check", self._precision_check)
             if self._sensors is not None:
-                tasks.append(asyncio.create_task(self._connect_sensors(stack, SensorClient), name="sensors"))
+                start("sensors", lambda: self._connect_sensors(stack, SensorClient), forever=False)
             if self._camera is not None:
                 self._camera.start()
                 stack.callback(self._camera.close)
             if self._resume_alarm is not None:
-                tasks.append(asyncio.create_task(self._resume(self._resume_alarm), name="resume"))
+                alarm = self._resume_alarm
+                start("resume", lambda: self._resume(alarm), forever=False)
             if self.ground is not None:
-                feed = self.ground.run(lambda: telemetry_snapshot(self.tm.state), self.raise_alarm)
-                tasks.append(asyncio.create_task(feed, name="ground-feed"))
+                ground = self.ground
+                start(
+                    "ground-feed",
+                    lambda: ground.run(lambda: telemetry_snapshot(self.tm.state), self.raise_alarm),
+                )
             self.log.info("companion up on %s (component %d)", self.link.url, self.component_id)
             try:
                 await self._stop.wait()
@@ -567,6 +579,8 @@ class Companion:
                 for t in tasks:
                     with contextlib.suppress(asyncio.CancelledError):
                         await t
+                if self.restarts:
+                    self.log.warning("tasks started again after a failure: %s", dict(self.restarts))
                 st = self.link.stats
                 self.log.info(
                     "companion stopped: %d frames in, %d bad, %d unsigned and %d badly signed refused, "

@@ -1,0 +1,133 @@
+"""The daemon's long-lived tasks under supervision: a task that fails is logged and started again,
+a one-shot task that ends is done, cancellation ends them (companion/supervise.py)."""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import itertools
+import logging
+import socket
+import threading
+
+import pytest
+from pymavlink.dialects.v20 import common as mavlink2
+
+from companion.daemon import Companion
+from companion.supervise import supervised
+
+LOG = logging.getLogger("test.supervise")
+
+
+def test_a_failing_task_is_logged_and_started_again_with_a_growing_back_off(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    runs: list[float] = []
+    fourth = asyncio.Event()
+
+    async def flaky() -> None:
+        runs.append(asyncio.get_running_loop().time())
+        if len(runs) == 4:
+            fourth.set()
+        if len(runs) <= 3:
+            raise RuntimeError(f"fault {len(runs)}")
+        await asyncio.sleep(10.0)  # then it runs as it should
+
+    async def scenario() -> collections.Counter[str]:
+        counts: collections.Counter[str] = collections.Counter()
+        task = asyncio.create_task(
+            supervised("watchers", flaky, LOG, restarts=counts, first_s=0.05, max_s=1.0)
+        )
+        await asyncio.wait_for(fourth.wait(), 5.0)
+        task.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await task
+        return counts
+
+    with caplog.at_level(logging.ERROR, logger="test.supervise"):
+        counts = asyncio.run(scenario())
+    assert counts == {"watchers": 3}
+    gaps = [b - a for a, b in itertools.pairwise(runs)]
+    assert gaps[0] >= 0.05
+    assert gaps[1] >= 0.1
+    assert gaps[2] >= 0.2  # doubled each time
+    failures = [r for r in caplog.records if "the watchers task failed" in r.getMessage()]
+    assert len(failures) == 3
+    assert all(r.exc_info is not None for r in failures)  # with the traceback
+    assert "fault 3" in caplog.text
+
+
+def test_a_task_meant_to_run_for_ever_that_returns_is_started_again_and_a_one_shot_is_done(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    calls = {"forever": 0, "once": 0}
+    third = asyncio.Event()
+
+    async def forever() -> None:
+        calls["forever"] += 1
+        if calls["forever"] > 2:
+            third.set()
+            await asyncio.sleep(10.0)
+
+    async def once() -> None:
+        calls["once"] += 1
+
+    async def scenario() -> None:
+        await asyncio.wait_for(supervised("sensors", once, LOG, forever=False), 1.0)
+        task = asyncio.create_task(supervised("heartbeat", forever, LOG, first_s=0.01))
+        await asyncio.wait_for(third.wait(), 5.0)
+        task.cancel()
+        with pytest.raises(asyncio.CancelledError):
+            await task
+
+    with caplog.at_level(logging.ERROR, logger="test.supervise"):
+        asyncio.run(scenario())
+    assert calls == {"forever": 3, "once": 1}
+    assert caplog.text.count("the heartbeat task ended by itself") == 2
+
+
+def test_the_daemon_starts_a_failed_watcher_again_and_keeps_its_heartbeat(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """A fault in the alarm watchers (here: the first check raises) costs one check, not the
+    watchers: the daemon starts them again, keeps sending its heartbeat and says so when it stops."""
+    gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    gcs.bind(("127.0.0.1", 0))
+    gcs.settimeout(5.0)
+    c = Companion(
+        mavlink_url=f"udpout:127.0.0.1:{gcs.getsockname()[1]}", sensors=None, watch_battery_pct=None
+    )
+    checks = {"n": 0}
+    again = threading.Event()
+
+    def watch_once() -> None:
+        checks["n"] += 1
+        if checks["n"] == 2:
+            again.set()
+        if checks["n"] == 1:
+            raise KeyError("a telemetry field the watcher expected")
+
+    c.watch_once = watch_once  # type: ignore[method-assign]
+
+    async def scenario() -> None:
+        run = asyncio.create_task(c.run())
+        assert await asyncio.to_thread(again.wait, 10.0)
+        heard = await asyncio.to_thread(_heartbeat, gcs)
+        assert heard.type == mavlink2.MAV_TYPE_ONBOARD_CONTROLLER
+        c.stop()
+        await asyncio.wait_for(run, 10.0)
+
+    with caplog.at_level(logging.INFO):
+        asyncio.run(scenario())
+    gcs.close()
+    assert c.restarts == {"watchers": 1}
+    assert "the watchers task failed" in caplog.text
+    assert "tasks started again after a failure: {'watchers': 1}" in caplog.text
+
+
+def _heartbeat(sock: socket.socket) -> mavlink2.MAVLink_heartbeat_message:
+    mav = mavlink2.MAVLink(None)
+    while True:
+        for msg in mav.parse_buffer(sock.recv(65536)) or []:
+            if msg.get_type() == "HEARTBEAT":
+                return msg
