@@ -255,6 +255,8 @@ class Companion:
         if exc is not None:
             self.log.error("recovery failed: %r", exc)
             self.announce(2, f"Landfall: recovery failed: {exc}"[:150])
+            if self.record is not None:
+                self.record.record_event("recovery_failed", {"error": repr(exc)[:300]})
             return
         outcome = task.result()
         self.outcomes.append(outcome)
@@ -525,6 +527,8 @@ class Companion:
                 client = client_cls(self._sensors[0], self._sensors[1], timeout_s=self._frame_timeout_s)
                 self._client = await stack.enter_async_context(client)
                 self.log.info("sensor stream connected: %s:%d", *self._sensors)
+                if self.record is not None:  # what a harness waits for before its alarm
+                    self.record.record_event("sensors", {"host": self._sensors[0], "port": self._sensors[1]})
                 return
             except SensorStreamError as exc:
                 if not warned:

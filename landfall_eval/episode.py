@@ -177,23 +177,35 @@ class ProcessSample:
         self.cpu_s = (int(fields[11]) + int(fields[12])) / self._tick  # utime + stime
 
 
-class JsonlTail:
-    """Reads the JSON lines another process appends to a file, as they come (no line read twice)."""
+class LineTail:
+    """Reads the lines another process appends to a text file, as they come (no line read twice; a
+    line still being written waits for its newline)."""
 
     def __init__(self, path: Path) -> None:
         self.path = path
         self._fh: TextIO | None = None
         self._partial = ""
 
-    def lines(self) -> list[dict[str, Any]]:
+    def text_lines(self) -> list[str]:
         if self._fh is None:
             if not self.path.exists():
                 return []
-            self._fh = self.path.open("r", encoding="utf-8")
+            self._fh = self.path.open("r", encoding="utf-8", errors="replace")
         text = self._partial + self._fh.read()
         rows, _, self._partial = text.rpartition("\n")
+        return rows.splitlines()
+
+    def close(self) -> None:
+        if self._fh is not None:
+            self._fh.close()
+
+
+class JsonlTail(LineTail):
+    """Reads the JSON lines another process appends to a file, as they come (no line read twice)."""
+
+    def lines(self) -> list[dict[str, Any]]:
         out = []
-        for line in rows.splitlines():
+        for line in self.text_lines():
             if line.strip():
                 try:
                     out.append(json.loads(line))
@@ -201,11 +213,9 @@ class JsonlTail:
                     continue  # a torn line from a killed writer: nothing to grade in it
         return out
 
-    def close(self) -> None:
-        if self._fh is not None:
-            self._fh.close()
 
-
+SENSORS_UP = "sensors"  # the companion's record: its sensor stream connected
+RECOVERY_ENDED = ("outcome", "recovery_failed")  # the companion's record: a recovery ended
 RTP_WALL_FPS = 2.0  # an rtp episode's camera frames per wall second (simbridge renders each: ~160 ms)
 
 
@@ -263,6 +273,12 @@ def _record_events(record_dir: Path) -> list[dict[str, Any]]:
     for path in sorted(record_dir.glob("*/events.jsonl")):
         events += [json.loads(x) for x in path.read_text().splitlines() if x.strip()]
     return events
+
+
+def _recorded(record_dir: Path, *kinds: str) -> bool:
+    """Whether the companion's flight record holds an event of one of ``kinds`` yet (it replaces
+    ``events.jsonl`` whole and atomically with each event: what is read is always complete)."""
+    return any(e.get("kind") in kinds for e in _record_events(record_dir))
 
 
 def send_alarm(
@@ -452,17 +468,31 @@ def run_episode(
     }
     t_wall = time.monotonic()
     sim_err = (workdir / "simbridge.log").open("wb")
-    sim = subprocess.Popen(sim_cmd, stdout=subprocess.DEVNULL, stderr=sim_err, preexec_fn=_die_with_parent)
-    if video is not None:
-        # the companion reads the camera's calibration at start: simbridge writes it as it starts
-        while (
-            not camera_info.exists() and sim.poll() is None and time.monotonic() - t_wall < times.start_wall_s
-        ):
-            time.sleep(0.1)
-    with comp_log.open("wb") as fh:
-        comp = subprocess.Popen(
-            comp_cmd, env=env, stdout=fh, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent
+    try:
+        sim = subprocess.Popen(
+            sim_cmd, stdout=subprocess.DEVNULL, stderr=sim_err, preexec_fn=_die_with_parent
         )
+    except BaseException:
+        sim_err.close()
+        raise
+    try:
+        if video is not None:
+            # the companion reads the camera's calibration at start: simbridge writes it as it starts
+            while (
+                not camera_info.exists()
+                and sim.poll() is None
+                and time.monotonic() - t_wall < times.start_wall_s
+            ):
+                time.sleep(0.1)
+        with comp_log.open("wb") as fh:
+            comp = subprocess.Popen(
+                comp_cmd, env=env, stdout=fh, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent
+            )
+    except BaseException:  # the companion never started: nothing of simbridge's is left behind
+        stop_process(sim)
+        sim_err.close()
+        raise
+    comp_lines = LineTail(comp_log)
     with _RUNNING_LOCK:
         _RUNNING.update((sim, comp))
         if STOPPING.is_set():  # the campaign was stopped while these started
@@ -473,9 +503,8 @@ def run_episode(
     log = LogWatch()
     alarm_t_s: float | None = None  # the takeover where the vehicle already holds in GUIDED
     outcome, error, infrastructure = "landed", None, False
-    shown = 0
     try:
-        while log.ready is None or "sensor stream connected" not in comp_log.read_text(errors="replace"):
+        while log.ready is None or not _recorded(record_dir, SENSORS_UP):
             log.take(tail.lines())
             if comp.poll() is not None or sim.poll() is not None:
                 who = "simbridge" if sim.poll() is not None else "the companion"
@@ -504,14 +533,12 @@ def run_episode(
             usage.sample()
             log.take(tail.lines())
             if on_line is not None:
-                lines = comp_log.read_text(errors="replace").splitlines()
-                for line in lines[shown:]:
+                for line in comp_lines.text_lines():
                     on_line("companion", line)
-                shown = len(lines)
             if log.touchdown is not None:
                 if ended is None:
                     ended = time.monotonic()
-                if "recovery ended" in comp_log.read_text(errors="replace"):
+                if _recorded(record_dir, *RECOVERY_ENDED):
                     break
                 if time.monotonic() - ended > times.settle_wall_s:
                     break
@@ -539,8 +566,9 @@ def run_episode(
         with _RUNNING_LOCK:
             _RUNNING.difference_update((sim, comp))
         if on_line is not None:
-            for line in comp_log.read_text(errors="replace").splitlines()[shown:]:
+            for line in comp_lines.text_lines():
                 on_line("companion", line)
+        comp_lines.close()
         sim_err.close()
         log.take(tail.lines(), final=True)  # what simbridge wrote since the last look
         tail.close()

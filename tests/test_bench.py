@@ -540,6 +540,49 @@ def test_city_episode_starts_at_its_halton_point(tmp_path: Path) -> None:
     assert e["last_state"]["round"] == e["rounds"]
 
 
+def test_a_companion_that_cannot_start_is_an_error_and_leaves_no_simulator_behind(tmp_path: Path) -> None:
+    """The companion exits at once (its configuration is not TOML): the episode is an infrastructure
+    error saying so, and simbridge is stopped with it (nothing of the episode left running)."""
+    import landfall_eval.episode as episode
+
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[reasoner\nonboard_model = ")
+    spec = EpisodeSpec("curated", "scenario1", 0)
+    e = run_episode(spec, tmp_path / "ep", times=EpisodeTimes(speed=2.0), config_path=bad)
+    assert e["outcome"] == "error"
+    assert e["error"].startswith("the companion exited before the vehicle was ready"), e["error"]
+    assert e["error_kind"] == "infrastructure"
+    assert not episode._RUNNING
+    assert "bad.toml" in (tmp_path / "ep" / "companion.log").read_text()  # the companion said why
+
+
+def test_line_tail_reads_each_line_once_and_waits_for_a_line_being_written(tmp_path: Path) -> None:
+    from landfall_eval.episode import JsonlTail, LineTail, _recorded
+
+    path = tmp_path / "companion.log"
+    tail = LineTail(path)
+    assert tail.text_lines() == []  # not there yet
+    with path.open("w") as fh:
+        fh.write("companion up on udp:1\nsensor str")
+        fh.flush()
+        assert tail.text_lines() == ["companion up on udp:1"]
+        fh.write("eam connected\n\nrecovery ended\n")
+        fh.flush()
+        assert tail.text_lines() == ["sensor stream connected", "", "recovery ended"]
+        assert tail.text_lines() == []
+    tail.close()
+    jl = tmp_path / "e.jsonl"
+    jl.write_text('{"a": 1}\n{"torn": \n{"b": 2}\n')
+    jt = JsonlTail(jl)
+    assert jt.lines() == [{"a": 1}, {"b": 2}]
+    jt.close()
+    record = tmp_path / "record" / "session"
+    record.mkdir(parents=True)
+    (record / "events.jsonl").write_text('{"kind": "state"}\n{"kind": "sensors"}\n')
+    assert _recorded(tmp_path / "record", "sensors")
+    assert not _recorded(tmp_path / "record", "outcome", "recovery_failed")
+
+
 @pytest.mark.slow
 def test_episode_that_never_lands_says_where_it_stood(tmp_path: Path) -> None:
     spec = EpisodeSpec("city", "city", 5, launch_index=5, city_seed=2)
