@@ -367,6 +367,7 @@ def test_an_lvlm_tier_flies_the_loop_and_a_lone_no_is_overridden(
     observed = next(k for k, e in enumerate(events) if e["kind"] == "observed")
     assert events[move]["round"] == events[observed]["round"] == 1
     assert move < observed
+    assert events[observed]["jobs"] == 1  # a roof chosen: the candidates' notes waited for the move too
 
 
 def _events(record: Path) -> list[dict[str, Any]]:

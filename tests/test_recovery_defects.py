@@ -84,13 +84,16 @@ def _follower(frame: Any) -> Any:
     return me
 
 
+@pytest.mark.parametrize(("reset_t_s", "moved"), [(12.5, True), (11.5, False)])
 def test_a_look_runs_on_a_copy_and_only_the_event_loop_writes_what_it_found(
-    monkeypatch: pytest.MonkeyPatch,
+    monkeypatch: pytest.MonkeyPatch, reset_t_s: float, moved: bool
 ) -> None:
     """The look (a worker thread) reads a copy of the follower's state and returns what it found; the
     event loop takes it in. A hold over a drifting site iterates the drift history on the event loop
     while the step's looks run: an append from the worker thread raised "deque mutated during
-    iteration" there. A reset of the estimate taken while the look ran moves its find with it."""
+    iteration" there. A reset of the estimate taken while the look ran moves its find with it when
+    the frame predates the reset (12.5 s after a frame of 12.0 s); a frame taken after it (11.5 s)
+    is in the new frame already."""
     found = TrackResult(True, (5.0, 6.0, 0.0), (1.0, 3.0), 0.9, 0.3, 0.1)
     in_look = threading.Event()
     go_on = threading.Event()
@@ -109,7 +112,7 @@ def test_a_look_runs_on_a_copy_and_only_the_event_loop_writes_what_it_found(
         assert await asyncio.to_thread(in_look.wait, 5.0)
         assert list(me._site_seen) == []  # the loop iterates freely while the look runs
         # the estimate resets while the look runs: the loop takes it (as _catch_up does)
-        me.tm.position_resets.resets.append((12.5, (2.0, -1.0)))
+        me.tm.position_resets.resets.append((reset_t_s, (2.0, -1.0)))
         me._catch_up()
         go_on.set()
         return await look
@@ -117,8 +120,9 @@ def test_a_look_runs_on_a_copy_and_only_the_event_loop_writes_what_it_found(
     result = asyncio.run(scenario())
     assert result is found
     assert me._site_seen.threads == [threading.main_thread()]  # appended on the event loop only
-    assert list(me._site_seen) == [(12.0, 7.0, 5.0)]  # the find, moved by the reset taken meanwhile
-    assert me._track[1] == (7.0, 5.0, 0.0)
+    expected = (7.0, 5.0) if moved else (5.0, 6.0)  # the find, moved by the reset taken meanwhile
+    assert list(me._site_seen) == [(12.0, *expected)]
+    assert me._track[1] == (*expected, 0.0)
     # the look itself: a pure function of its copy
     state = FollowState(me._track, me._anchor, ((11.0, 6.0, 5.0),))
     go_on.set()

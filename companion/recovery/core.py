@@ -179,6 +179,7 @@ class RecoveryBase:
         self._track: tuple[SiteView, tuple[float, float, float]] | None = None
         self._first_look: asyncio.Task[Any] | None = None  # the first frame, asked for while engaging
         self._unobserved: Any = None  # a round's frame not yet in the search's map (Recovery._observed)
+        self._later: list[Callable[[], object]] = []  # a round's other work that waits for its setpoint
 
     @property
     def budget(self) -> int:

@@ -263,7 +263,8 @@ class Following(RecoveryBase):
         on a copy of the follower's state (:func:`look_for_site`), and what it found is taken into that
         state here, on the event loop, which alone writes it (a worker appending to the drift's history
         while a hold iterated it ended recoveries with "deque mutated during iteration"). A reset of
-        the estimate taken while the look ran moves what it found into the estimate's frame now.
+        the estimate taken while the look ran, which the frame predates, moves what it found into the
+        estimate's frame now.
 
         Raises:
             ValueError, cv2.error: a malformed frame (the callers say so and try the next)."""
@@ -278,8 +279,11 @@ class Following(RecoveryBase):
         look = await asyncio.to_thread(look_for_site, frame, state, self._track_params, adopt, reanchor)
         if look is None:
             return None
-        new = self.tm.position_resets.resets[resets_before : self._resets_seen]
-        dn, de = sum(r[1][0] for r in new), sum(r[1][1] for r in new)
+        # resets taken while it ran: the find moves with those the frame predates (a frame taken after
+        # a reset is already in the estimate's new frame)
+        taken = _frame_time(frame)
+        new = [r for t, r in self.tm.position_resets.resets[resets_before : self._resets_seen] if t > taken]
+        dn, de = sum(r[0] for r in new), sum(r[1] for r in new)
         if look.track is not None and self._track is not None:
             self._track = _moved(look.track, dn, de)
         if look.seen is not None and self._site_seen is not None:

@@ -17,9 +17,11 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import math
 import time
 import traceback
+from collections.abc import Callable
 
 from companion.control import (
     MAV_STATE_CRITICAL,
@@ -44,6 +46,11 @@ from companion.recovery.searching import Searching
 from companion.recovery.site_choice import SiteChoice
 
 TAKEOVER_TEXTS_S = 5.0  # the autopilot's texts this recent go with a takeover into the record
+
+
+def _run_all(jobs: list[Callable[[], object]]) -> None:
+    for job in jobs:
+        job()
 
 
 class Recovery(Searching, SiteChoice, Following, Looking):
@@ -318,14 +325,21 @@ class Recovery(Searching, SiteChoice, Following, Looking):
         self._first_look = look
 
     async def _observed(self) -> None:
-        """The last round's frame into the search's map (:meth:`_observe`), once. A round defers it:
-        choosing and flying toward this round's site does not need the map, a search leg does, so it
-        runs while the vehicle moves, or before a search leg or the next round, whichever comes first."""
+        """The last round's frame into the search's map (:meth:`_observe`), and the round's other
+        deferred work (``_later``: the candidates' notes when the site chosen is a roof), once, in a
+        worker thread. A round defers them: choosing and flying toward this round's site needs none
+        of them, a search leg needs the map, so they run while the vehicle moves, or before a search
+        leg or the next round, whichever comes first."""
         frame, self._unobserved = self._unobserved, None
-        if frame is not None:
-            t0 = time.monotonic()
-            await asyncio.to_thread(self._observe, frame)
-            self.record.record_event("observed", {"round": self.round, "s": round(time.monotonic() - t0, 3)})
+        later, self._later = self._later, []
+        if frame is None and not later:
+            return
+        t0 = time.monotonic()
+        await asyncio.to_thread(
+            _run_all, ([lambda: self._observe(frame)] if frame is not None else []) + later
+        )
+        s = round(time.monotonic() - t0, 3)
+        self.record.record_event("observed", {"round": self.round, "s": s, "jobs": len(later)})
 
     async def _round(self) -> bool:
         await self._observed()  # a round that ended before its move leaves its frame here
@@ -341,6 +355,7 @@ class Recovery(Searching, SiteChoice, Following, Looking):
         self._roofs_in_view = any(c.elevated for c in candidates)
         candidates = [c for c in candidates if not self._near_rejected(c)]
         if frame.image_rgb is not None:  # JPEG encoding off the event loop: the setpoint stream runs there
+            # (before the ranking: a ground feed boxes the ranking's candidates on this frame)
             await asyncio.to_thread(self.record.save_image, f"round{self.round:02d}-acquire", frame.image_rgb)
         if not candidates or all(c.fallback for c in candidates):
             await self._observed()  # the search's next leg is planned on it
@@ -348,9 +363,13 @@ class Recovery(Searching, SiteChoice, Following, Looking):
             return False
         self._set(State.RANK)
         ranking, chosen = await self._rank(candidates, frame)
-        if frame.image_rgb is not None:
-            await asyncio.to_thread(self._note_candidates, candidates, frame, camera)
         choice = candidates[chosen] if chosen is not None else None
+        if frame.image_rgb is not None:  # the ledger's view of every candidate from afar
+            notes = functools.partial(self._note_candidates, candidates, frame, camera)
+            if choice is not None and choice.elevated and not choice.strip:
+                self._later.append(notes)  # a roof: nothing before its move reads the notes
+            else:
+                await asyncio.to_thread(notes)  # whether to search instead reads them
         if choice is None:
             await self._observed()  # the search's next leg is planned on it
             await self._explore()
