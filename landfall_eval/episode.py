@@ -18,7 +18,7 @@ after the alarm; where the vehicle already holds in GUIDED, as real ArduCopter d
 the alarm's acceptance, placed on the log's clock through the autopilot's boot clock) to the touchdown.
 The companion's peak RSS and CPU time are sampled from ``/proc`` every poll (Linux).
 
-Kept whole (about 660 lines): one episode's life, from starting the processes to the graded entry,
+Kept whole: one episode's life, from starting the processes to the graded entry,
 in the order it happens.
 """
 

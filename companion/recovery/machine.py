@@ -55,7 +55,8 @@ def _run_all(jobs: list[Callable[[], object]]) -> None:
 
 class Recovery(Searching, SiteChoice, Following, Looking):
     """One recovery, from the alarm to the ground (module docstring): the state machine; its parts
-    (:class:`Looking`, :class:`SiteChoice`, :class:`Searching`) each hold one idea of it."""
+    (:class:`Looking`, :class:`Following`, :class:`SiteChoice`, :class:`Searching`) each hold one idea
+    of it."""
 
     # ------------------------------------------------------------------ the loop
     async def run(self) -> Outcome:
