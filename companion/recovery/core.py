@@ -207,7 +207,7 @@ class RecoveryBase:
 
     # ------------------------------------------------------------------ what the parts provide
     # Declared here so that each part can call the others; the parts' own definitions come first in
-    # Recovery's method resolution order (Recovery, Searching, SiteChoice, Looking, RecoveryBase).
+    # Recovery's method resolution order (Recovery, Searching, SiteChoice, Following, Looking, RecoveryBase).
     async def _round(self) -> bool:
         raise NotImplementedError
 
