@@ -290,6 +290,9 @@ class RecoveryBase:
     async def _observed(self) -> None:
         raise NotImplementedError
 
+    async def _observed_or_said(self) -> None:
+        raise NotImplementedError
+
     async def _rank(self, candidates: list[Candidate], frame: Any) -> tuple[Ranking, int | None]:
         raise NotImplementedError
 

@@ -155,6 +155,7 @@ class Recovery(Searching, SiteChoice, Following, Looking):
         )
         # a STATUSTEXT holds 50 characters: what happened and what the vehicle does come first
         self._say(SEVERITY_CRITICAL, f"internal error, landing: {type(exc).__name__} in {where}: {exc}"[:150])
+        await self._observed_or_said()  # the round's candidates noted from afar: sites to land at
         site = self._fallback_site()
         self._track = None  # nothing measured anew, the camera's view of a site included
         try:
@@ -342,6 +343,15 @@ class Recovery(Searching, SiteChoice, Following, Looking):
         s = round(time.monotonic() - t0, 3)
         self.record.record_event("observed", {"round": self.round, "s": s, "jobs": len(later)})
 
+    async def _observed_or_said(self) -> None:
+        """:meth:`_observed` before a landing at the best site measured (the deferred notes are the
+        ledger's sites); a failure of its own is logged and recorded, never in the landing's way."""
+        try:
+            await self._observed()
+        except Exception as exc:
+            self.log.error("the round's deferred work failed (%r): landing on what the ledger holds", exc)
+            self.record.record_event("defect", {"round": self.round, "state": "observed", "error": repr(exc)})
+
     async def _round(self) -> bool:
         await self._observed()  # a round that ended before its move leaves its frame here
         look, self._first_look = self._first_look, None
@@ -380,6 +390,7 @@ class Recovery(Searching, SiteChoice, Following, Looking):
         target = await asyncio.to_thread(self._ipm, choice, frame, camera)
         if target is None:
             self._say(4, f"site {choice.index} cannot be placed in the world: next round")
+            await self._observed()  # the search's verdict before the next round reads the notes
             return False
         self._follow_from(frame, target)
         n, e, d = self.tm.state.pos_ned_m

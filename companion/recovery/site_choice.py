@@ -44,6 +44,7 @@ class SiteChoice(RecoveryBase):
         judging the spot under the vehicle too when sensors allow (``measure_here``); "here" only when
         nothing at all was measured, and said so."""
         self._track = None  # the site it lands on may not be the one last followed
+        await self._observed_or_said()  # the round's candidates noted from afar: sites to land at
         if measure_here and self.best is None:
             await self._look_around()
             await self._measure_here()
