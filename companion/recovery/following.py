@@ -140,14 +140,13 @@ def _moved(
 @dataclasses.dataclass(frozen=True)
 class FollowState:
     """What a look for the site reads (a copy: the worker thread that looks never writes the
-    follower's state). ``resets`` / ``reset_times_s``: the estimate's resets the follower has taken,
-    (north, east) shifts and their boot times."""
+    follower's state). ``resets``: the estimate's resets the follower has taken, (boot time,
+    (north, east) shift) as :class:`~companion.telemetry.TelemetryCache` keeps them."""
 
     track: tuple[SiteView, tuple[float, float, float]]  # the frame looked against, the site in it
     anchor: tuple[SiteView, tuple[float, float, float]] | None  # the frame the site was chosen in
     seen: tuple[tuple[float, float, float], ...]  # (t_boot_s, north, east) of the recent finds
-    resets: tuple[tuple[float, float], ...] = ()
-    reset_times_s: tuple[float, ...] = ()
+    resets: tuple[tuple[float, tuple[float, float]], ...] = ()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -182,7 +181,7 @@ def look_for_site(
         return None
     # a frame placed before a reset the follower has taken: into the follower's frame
     taken = _frame_time(frame)
-    later = [r for t, r in zip(state.reset_times_s, state.resets, strict=True) if t > taken]
+    later = [r for t, r in state.resets if t > taken]
     if later:
         (n, e, d), dn, de = view.pos_ned_m, sum(r[0] for r in later), sum(r[1] for r in later)
         view = dataclasses.replace(view, pos_ned_m=(n + dn, e + de, d))
@@ -272,8 +271,7 @@ class Following(RecoveryBase):
             return None
         state = FollowState(
             self._track, self._anchor, tuple(self._site_seen or ()),
-            tuple(r for _t, r in self.tm.position_resets.resets[: self._resets_seen]),
-            tuple(t for t, _r in self.tm.position_resets.resets[: self._resets_seen]),
+            tuple(self.tm.position_resets.resets[: self._resets_seen]),
         )  # fmt: skip
         resets_before = self._resets_seen
         look = await asyncio.to_thread(look_for_site, frame, state, self._track_params, adopt, reanchor)
