@@ -61,6 +61,7 @@ BACKENDS = ("auto", "onnxruntime", "opencv")
 Runner = Callable[[np.ndarray], tuple[np.ndarray, ...]]  # NCHW float32 -> the outputs' logits, in order
 OUTPUTS = ("cells", "clear")  # every model's outputs; a landfall-landnet/2 model adds BARE
 BARE = "bare"  # (N, 1, 1, 1) logit: nothing (no object, person, vehicle, water, marking) on the surface
+WHOLE = "whole"  # (N, 1) logit of a whole-image read (sidecar whole_read; landfall_train.whole_read)
 
 MODELS = Path(__file__).with_name("models")
 # The packaged models by name (``reasoner.onboard_model``); any other value is the path of an ONNX file
@@ -147,6 +148,10 @@ class SceneReading:
     hazard_peak: float = 0.0  # the highest probability of a hazard class in any cell (views averaged)
     bare_p: float | None = None  # probability that nothing stands on the surface (None: no bare head)
     clear_spread: float = 0.0  # the clear-site probabilities of the views read: highest minus lowest
+    # with a whole-image read (a confirmation, sidecar ``whole_read``): clear_p is the weighted mean of
+    # the net's own clear-site probability (net_clear_p) and the whole read's (whole_p)
+    net_clear_p: float | None = None
+    whole_p: float | None = None
 
     @property
     def hazard(self) -> float:
@@ -178,7 +183,13 @@ class SceneReading:
         order = names or ("person", "vehicle", "object", "water", "marking", "tree", "low_vegetation", "road")
         out = [self.phrase(n) for n in order if self.share(n) > 0.0]
         out.append(f"roof surface {100 * self.share('roof'):.0f} %")
-        out.append(f"clear-site confidence {self.clear_p:.2f} [{self.model}]")
+        if self.whole_p is not None and self.net_clear_p is not None:
+            out.append(
+                f"clear-site confidence {self.clear_p:.2f} [{self.model}: net {self.net_clear_p:.2f}, "
+                f"whole image {self.whole_p:.2f}]"
+            )
+        else:
+            out.append(f"clear-site confidence {self.clear_p:.2f} [{self.model}]")
         return tuple(out)
 
     def to_json(self) -> dict[str, Any]:
@@ -194,7 +205,11 @@ class SceneReading:
             "bare_p": None if self.bare_p is None else round(self.bare_p, 4),
             "clear_spread": round(self.clear_spread, 4),
             "hazard": round(self.hazard, 3),
-        }
+        } | (
+            {}
+            if self.whole_p is None or self.net_clear_p is None
+            else {"net_clear_p": round(self.net_clear_p, 4), "whole_p": round(self.whole_p, 4)}
+        )
 
 
 def rank_hazard(clear_p: Any, hazard_peak: Any, bare_p: Any | None, weight: float | None = None) -> Any:
@@ -271,8 +286,16 @@ def onnx_runner(
 class LandNet:
     """One loaded model; :meth:`read` is safe to call from several threads."""
 
-    def __init__(self, net: Runner, meta: dict[str, Any], name: str, backend: str = "opencv") -> None:
+    def __init__(
+        self,
+        net: Runner,
+        meta: dict[str, Any],
+        name: str,
+        backend: str = "opencv",
+        whole: Runner | None = None,
+    ) -> None:
         self._net = net
+        self._whole = whole
         self._lock = threading.Lock()
         self.name = name
         self.backend = backend
@@ -289,6 +312,14 @@ class LandNet:
         self.rank_views = int(inp.get("rank_views", self.views))
         thresholds = meta["thresholds"]
         self.clear_threshold = float(thresholds["clear"])
+        # the net's own clear-site threshold: a rank's readings (no whole read) are described against it
+        self.net_clear_threshold = float(thresholds.get("net_clear", thresholds["clear"]))
+        whole_read = meta.get("whole_read") if whole is not None else None
+        self.whole_side_px = int(whole_read["side_px"]) if whole_read else 0
+        self.whole_views = int(whole_read["views"]) if whole_read else 0
+        self.whole_weight = float(whole_read["weight"]) if whole_read else 0.0
+        self.whole_mean = np.array(whole_read["mean"] if whole_read else inp["mean"], np.float32)
+        self.whole_std = np.array(whole_read["std"] if whole_read else inp["std"], np.float32)
         self.cell_thresholds = np.array([float(thresholds["cells"][c]) for c in self.classes], np.float32)
         hazards = meta["hazard_classes"]
         self.has_bare = model_outputs(meta) == (*OUTPUTS, BARE)
@@ -330,17 +361,20 @@ class LandNet:
                         f"input.{key} must be an integer, at least twice input.multiple: {side!r}"
                     )
             float(thr["clear"])
+            float(thr.get("net_clear", 0.0))
             outputs = model_outputs(meta)
+            whole_path = _whole_read_path(meta.get("whole_read"), onnx_path)
         except (OSError, ValueError, KeyError, TypeError) as exc:
             raise LandNetError(f"unreadable model sidecar: {exc!r}", meta_path) from exc
-        blob = onnx_path.read_bytes()
-        digest = hashlib.sha256(blob).hexdigest()
-        if meta.get("sha256") != digest:
-            raise LandNetError(
-                f"sha256 {digest[:12]}... does not match the sidecar's ({meta.get('sha256')})", onnx_path
-            )
+        _check_sha256(onnx_path, meta.get("sha256"))
         net, used = onnx_runner(onnx_path, backend, outputs)
-        return cls(net, meta, str(meta.get("name", onnx_path.stem)), used)
+        whole = None
+        if whole_path is not None:
+            if not whole_path.is_file():
+                raise LandNetError("the whole read's file is missing (sidecar whole_read.file)", whole_path)
+            _check_sha256(whole_path, meta["whole_read"].get("sha256"))
+            whole, _used = onnx_runner(whole_path, used, (WHOLE,))
+        return cls(net, meta, str(meta.get("name", onnx_path.stem)), used, whole)
 
     def input_size(self, h: int, w: int, short_side: int | None = None) -> tuple[int, int]:
         """(height, width) an image of ``h`` x ``w`` pixels is scaled to: the shorter side
@@ -372,6 +406,27 @@ class LandNet:
         each = _sigmoid(np.asarray(out[1]).reshape(-1))
         reading = self._reading(img.shape[:2], present, float(clear_p[0]), peak, bare)
         return replace(reading, clear_spread=float(each.max() - each.min()))
+
+    def confirmation(self, reading: SceneReading, rgb: np.ndarray) -> SceneReading:
+        """``reading`` (of a confirmation's site window) with the whole-image read of ``rgb`` (the whole
+        close-up) weighed into its clear-site probability (sidecar ``whole_read``); unchanged for a
+        model without one.
+
+        Raises:
+            ValueError: not a non-empty (H, W, 3) uint8 numpy array.
+        """
+        if self._whole is None:
+            return reading
+        img = check_rgb(rgb)
+        side = self.whole_side_px
+        x = cv2.resize(img, (side, side), interpolation=cv2.INTER_AREA).astype(np.float32) / np.float32(255)
+        blob = view_batch(((x - self.whole_mean) / self.whole_std).transpose(2, 0, 1), self.whole_views)
+        with self._lock:
+            logits = self._whole(np.ascontiguousarray(blob, np.float32))[0]
+        # the views' features were averaged when the read was fitted; the logit is linear in them
+        whole_p = float(_sigmoid(np.asarray(logits, np.float64).reshape(-1).mean(keepdims=True))[0])
+        mixed = (1.0 - self.whole_weight) * reading.clear_p + self.whole_weight * whole_p
+        return replace(reading, clear_p=mixed, net_clear_p=reading.clear_p, whole_p=whole_p)
 
     def read_rank(self, rgb: np.ndarray) -> SceneReading:
         """:meth:`read` as a rank reads each crop: ``rank_views`` views at ``rank_short_side_px``."""
@@ -427,6 +482,33 @@ class LandNet:
         return SceneReading(
             self.name, size, (gh, gw), clear_p, shares, tuple(places), tuple(counts), peak, bare
         )
+
+
+def _check_sha256(path: Path, expected: object) -> None:
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    if expected != digest:
+        raise LandNetError(f"sha256 {digest[:12]}... does not match the sidecar's ({expected})", path)
+
+
+def _whole_read_path(entry: Any, onnx_path: Path) -> Path | None:
+    """The whole read's ONNX file (beside the model's) that a sidecar's ``whole_read`` names, checked;
+    None without one. ValueError, KeyError or TypeError for an entry that lacks what inference needs."""
+    if entry is None:
+        return None
+    name = str(entry["file"])
+    if Path(name).name != name:
+        raise ValueError(f"whole_read.file must be a file name beside the model, got {name!r}")
+    if entry.get("views") not in (1, 2):
+        raise ValueError(f"whole_read.views must be 1 or 2, got {entry.get('views')!r}")
+    side, weight = entry["side_px"], float(entry["weight"])
+    if not isinstance(side, int) or isinstance(side, bool) or side < 32:
+        raise ValueError(f"whole_read.side_px must be an integer of at least 32, got {side!r}")
+    if not 0.0 <= weight <= 1.0:
+        raise ValueError(f"whole_read.weight must lie in 0..1, got {weight!r}")
+    for key in ("mean", "std"):
+        if len(entry[key]) != 3 or (key == "std" and min(entry[key]) <= 0):
+            raise ValueError(f"whole_read.{key} must be three numbers (RGB), got {entry[key]!r}")
+    return onnx_path.with_name(name)
 
 
 def model_path(model: str | Path | None) -> Path:

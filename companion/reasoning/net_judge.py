@@ -109,7 +109,7 @@ def confirm_reading(
     """
     image = check_rgb(request.image)
     window = centre(image, site_window(image.shape[0], image.shape[1], p.site_window))
-    r = net.read(window, short_side=net.confirm_short_side_px)
+    r = net.confirmation(net.read(window, short_side=net.confirm_short_side_px), image)
     vetoes = list(lidar_vetoes)
     categorical = False
     canopy = 0.0 if street_level else canopy_share(window)
@@ -235,11 +235,11 @@ def rank_readings(
     scores = [w.crop_size * math.sqrt(r.size_px[0] * r.size_px[1] / largest) - r.hazard for r in readings]
     order = tuple(sorted(range(len(readings)), key=lambda k: (-scores[k], k)))
     best = order[0]
-    text = f"site {best}: {_describe(readings[best], net.clear_threshold, 3)}"
+    text = f"site {best}: {_describe(readings[best], net.net_clear_threshold, 3)}"
     if len(order) > 1:
         nxt = order[1]
-        verdict = "rejected" if readings[nxt].clear_p < net.clear_threshold else "next"
-        text += f"; site {nxt} {verdict}: {_describe(readings[nxt], net.clear_threshold, 2)}"
+        verdict = "rejected" if readings[nxt].clear_p < net.net_clear_threshold else "next"
+        text += f"; site {nxt} {verdict}: {_describe(readings[nxt], net.net_clear_threshold, 2)}"
     text += " (no geometry: LandNet-S reading only)"
     body = {
         "scores": {str(k): round(s, 3) for k, s in enumerate(scores)},

@@ -213,7 +213,7 @@ class OnboardReasoner:
             fallback = cand is not None and cand.fallback
             sites.append(_Site(k, g - cues.hazard, fallback, geometry, cues))
         ranked = sorted(sites, key=lambda s: (s.fallback, -s.score, s.index))
-        threshold = None if self.landnet is None else self.landnet.clear_threshold
+        threshold = None if self.landnet is None else self.landnet.net_clear_threshold
         rationale = _rank_rationale(ranked, request.candidates is None, threshold)
         if request.transcript is not None:
             request.transcript.append(
