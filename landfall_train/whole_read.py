@@ -227,8 +227,8 @@ def attach(model: Path, whole: Path, entry: dict[str, Any], threshold: float, so
     meta["clear_threshold_from"] = source
     meta["whole_read"] = {
         "file": whole.name, "sha256": hashlib.sha256(whole.read_bytes()).hexdigest(),
-        "side_px": SIDE_PX, "views": VIEWS, "mean": [float(v) for v in _imagenet()[0]],
-        "std": [float(v) for v in _imagenet()[1]], **entry,
+        "side_px": SIDE_PX, "views": VIEWS, "mean": [round(float(v), 6) for v in _imagenet()[0]],
+        "std": [round(float(v), 6) for v in _imagenet()[1]], **entry,
     }  # fmt: skip
     meta_path.write_text(json.dumps(meta, indent=2) + "\n")
 
