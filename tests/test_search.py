@@ -1,4 +1,5 @@
-"""The search planner (companion/search.py): when searching stops, and where the next leg goes."""
+"""The search planner (companion/recovery/search_plan.py): when searching stops and where the next
+leg goes."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ import numpy as np
 import pytest
 
 from companion.alarms import Criticality
-from companion.search import CAMERA_BAD, SearchLimits, SearchPlanner
+from companion.recovery.search_plan import CAMERA_BAD, SearchLimits, SearchPlanner
 from companion.site_ledger import Hazard, LedgerSite, SiteLedger
 
 LEVEL = (1.0, 0.0, 0.0, 0.0)  # body FRD = NED: nose north, level

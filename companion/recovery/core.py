@@ -27,7 +27,7 @@ from companion.perception.surface_id import (
 from companion.precision import PrecisionLanding
 from companion.reasoning.base import Decision, Ranking, Reasoner
 from companion.reasoning.onboard import OnboardReasoner
-from companion.search import Leg, SearchLimits, SearchPlanner, Verdict
+from companion.recovery.search_plan import Leg, SearchLimits, SearchPlanner, Verdict
 from companion.site_ledger import LedgerSite, SiteLedger
 from companion.telemetry import TelemetryCache
 

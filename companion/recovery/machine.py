@@ -4,7 +4,7 @@ One :class:`Recovery` per alarm. Its state is explicit (:class:`State`); every d
 (STATUSTEXT), recorded, and taken from telemetry, never from sleeps. A round that finds nothing
 explores (climbs, or flies a search leg); a target never reached or a site rejected at confirmation
 ends the round. When the round budget runs out with nothing acceptable seen, the vehicle searches on,
-leg by leg (:mod:`companion.search`), while the battery holds more than the landing needs plus a
+leg by leg (:mod:`companion.recovery.search_plan`), while the battery holds more than the landing needs plus a
 reserve and the alarm's window allows; then it lands at the least bad site it measured
 (:mod:`companion.site_ledger`), never "here" blindly. The battery and the window also end the rounds
 within the budget: a battery at its reserve lands at the least bad site after the first look. A

@@ -1,5 +1,5 @@
 """When nothing in view will do: whether the search goes on (the battery, the alarm's window, the
-budget) and its legs (companion/search.py plans them; docs/recovery.md, "The search")."""
+budget) and its legs (companion/recovery/search_plan.py plans them; docs/recovery.md, "The search")."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from companion.perception.surface_id import (
     Candidate,
 )
 from companion.recovery.core import RecoveryBase, State
-from companion.search import Leg, Verdict
+from companion.recovery.search_plan import Leg, Verdict
 from companion.site_ledger import Hazard, LedgerSite
 
 
