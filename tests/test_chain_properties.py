@@ -919,7 +919,7 @@ def test_recovery_ipm_with_no_lidar_and_a_zero_rangefinder_places_nothing() -> N
     frame = SimpleNamespace(
         lidar_frd=None, pos_ned_m=(0.0, 0.0, -50.0), quat_wxyz=(1.0, 0.0, 0.0, 0.0), rangefinder_m=0.0
     )
-    me = SimpleNamespace(_fault=FaultHook(), log=logging.getLogger("test"), round=1)
+    me = SimpleNamespace(ctx=SimpleNamespace(fault=FaultHook(), log=logging.getLogger("test"), round=1))
     cand = Candidate(0, (470, 260, 490, 280), (480.0, 270.0))
     assert Recovery._ipm(me, cand, frame, cam) is None  # type: ignore[arg-type]
     frame.rangefinder_m = 50.0  # flat ground 50 m below: placed under the pixel

@@ -77,10 +77,12 @@ def _follower(frame: Any) -> Any:
     me._site_seen = _LoopOnlyDeque(maxlen=64)
     me._resets_seen = 0
     me._track_params = TrackParams()
-    me.tm = types.SimpleNamespace(position_resets=types.SimpleNamespace(resets=[]))
-    me.record = types.SimpleNamespace(record_event=lambda *a: None)
-    me.log = logging.getLogger("test")
-    me.round = 1
+    me.ctx = types.SimpleNamespace(
+        tm=types.SimpleNamespace(position_resets=types.SimpleNamespace(resets=[])),
+        record=types.SimpleNamespace(record_event=lambda *a: None),
+        log=logging.getLogger("test"),
+        round=1,
+    )
     return me
 
 
@@ -112,7 +114,7 @@ def test_a_look_runs_on_a_copy_and_only_the_event_loop_writes_what_it_found(
         assert await asyncio.to_thread(in_look.wait, 5.0)
         assert list(me._site_seen) == []  # the loop iterates freely while the look runs
         # the estimate resets while the look runs: the loop takes it (as _catch_up does)
-        me.tm.position_resets.resets.append((reset_t_s, (2.0, -1.0)))
+        me.ctx.tm.position_resets.resets.append((reset_t_s, (2.0, -1.0)))
         me._catch_up()
         go_on.set()
         return await look

@@ -227,7 +227,7 @@ class Following(RecoveryBase):
         self._track = (view, target) if view is not None else None
         self._anchor = self._track
         taken = _frame_time(frame)
-        self._resets_seen = sum(1 for t, _ in self.tm.position_resets.resets if t <= taken)
+        self._resets_seen = sum(1 for t, _ in self.ctx.tm.position_resets.resets if t <= taken)
         self._site_seen = collections.deque(maxlen=64)
         self._drift_budget_s = DRIFT_WAIT_S
         self._reanchor = False
@@ -236,7 +236,7 @@ class Following(RecoveryBase):
         """The estimate's resets not taken yet, added up (north, east): the followed site and the frames
         it is looked for in move by them into the estimate's frame now. The caller moves its target
         alike (a reset moves the vehicle's frame of reference, not the site)."""
-        resets = self.tm.position_resets.resets
+        resets = self.ctx.tm.position_resets.resets
         new, self._resets_seen = resets[self._resets_seen :], len(resets)
         if not new:
             return (0.0, 0.0)
@@ -249,8 +249,10 @@ class Following(RecoveryBase):
             self._site_seen.extend(moved)
         shift = [round(dn, 3), round(de, 3)]
         when = round(new[-1][0], 2)
-        self.record.record_event("estimate_reset", {"round": self.round, "t_boot_s": when, "shift_m": shift})
-        self.log.info(
+        self.ctx.record.record_event(
+            "estimate_reset", {"round": self.ctx.round, "t_boot_s": when, "shift_m": shift}
+        )
+        self.ctx.log.info(
             "the autopilot's position estimate jumped %.1f m (north %.1f, east %.1f): the site and the "
             "target move with it",
             math.hypot(dn, de), dn, de,
@@ -271,7 +273,7 @@ class Following(RecoveryBase):
             return None
         state = FollowState(
             self._track, self._anchor, tuple(self._site_seen or ()),
-            tuple(self.tm.position_resets.resets[: self._resets_seen]),
+            tuple(self.ctx.tm.position_resets.resets[: self._resets_seen]),
         )  # fmt: skip
         resets_before = self._resets_seen
         look = await asyncio.to_thread(look_for_site, frame, state, self._track_params, adopt, reanchor)
@@ -280,7 +282,9 @@ class Following(RecoveryBase):
         # resets taken while it ran: the find moves with those the frame predates (a frame taken after
         # a reset is already in the estimate's new frame)
         taken = _frame_time(frame)
-        new = [r for t, r in self.tm.position_resets.resets[resets_before : self._resets_seen] if t > taken]
+        new = [
+            r for t, r in self.ctx.tm.position_resets.resets[resets_before : self._resets_seen] if t > taken
+        ]
         dn, de = sum(r[0] for r in new), sum(r[1] for r in new)
         if look.track is not None and self._track is not None:
             self._track = _moved(look.track, dn, de)
@@ -299,11 +303,11 @@ class Following(RecoveryBase):
         result = await self._track_once(frame, True, reanchor)
         if result is None:
             return target
-        self.record.record_event(
+        self.ctx.record.record_event(
             "site_track", self._track_fields(result, "reanchor" if reanchor else "descent", frame)
         )
         if not result.found:
-            self.log.info("site not found in the frame (%s): keeping the target", result.reason)
+            self.ctx.log.info("site not found in the frame (%s): keeping the target", result.reason)
             return target
         return (result.site_ned_m[0], result.site_ned_m[1], target[2])
 
@@ -314,12 +318,12 @@ class Following(RecoveryBase):
         (module docstring). Returns the target as it ended, down at the step's start."""
         moved = [target]
         async with self._following(moved, adopt=False):
-            await self.ctl.goto(
+            await self.ctx.ctl.goto(
                 target[0],
                 target[1],
                 down_m,
-                tolerance_m=self.p.arrival_tolerance_m,
-                speed_m_s=self.p.arrival_speed_m_s,
+                tolerance_m=self.ctx.p.arrival_tolerance_m,
+                speed_m_s=self.ctx.p.arrival_speed_m_s,
                 timeout_s=timeout_s,
             )
         return moved[-1]
@@ -349,12 +353,12 @@ class Following(RecoveryBase):
                 if dn or de:  # the estimate jumped: the target with it, at once
                     n, e, d = moved[-1]
                     moved.append((n + dn, e + de, d))
-                    self.ctl.retarget(n + dn, e + de)
+                    self.ctx.ctl.retarget(n + dn, e + de)
             try:
-                frame = await self._frames()
+                frame = await self.ctx.frames()
                 result = await self._track_once(frame, adopt)
             except (FrameUnavailable, ValueError, cv2.error) as exc:
-                self.log.debug("site not looked for during the step: %s", exc)
+                self.ctx.log.debug("site not looked for during the step: %s", exc)
                 continue
             if result is None or not result.found:
                 continue
@@ -362,10 +366,10 @@ class Following(RecoveryBase):
             if math.hypot(result.site_ned_m[0] - n, result.site_ned_m[1] - e) < STEP_FOLLOW_MIN_M:
                 continue
             moved.append((result.site_ned_m[0], result.site_ned_m[1], d))
-            self.ctl.retarget(result.site_ned_m[0], result.site_ned_m[1])
-            self.record.record_event("site_track", self._track_fields(result, "step", frame))
+            self.ctx.ctl.retarget(result.site_ned_m[0], result.site_ned_m[1])
+            self.ctx.record.record_event("site_track", self._track_fields(result, "step", frame))
             if result.reacquired:
-                self.log.info(
+                self.ctx.log.info(
                     "site found %.1f m from where the estimate had it: the target follows it",
                     math.hypot(result.shift_m[0], result.shift_m[1]),
                 )
@@ -382,11 +386,11 @@ class Following(RecoveryBase):
         drift = self._site_drift_m_s()
         if not drift >= DRIFT_MIN_M_S or self._drift_budget_s <= 0:  # NaN: too few frames to say
             return target
-        self._say(
+        self.ctx.say(
             5, f"the site drifts {drift:.1f} m/s in the autopilot's estimate (a GPS drifting?): "
             "holding over it until it stops",
         )  # fmt: skip
-        start = self.tm.state.t_boot_s
+        start = self.ctx.tm.state.t_boot_s
         moved = [target]
         why = "it stopped"
         # the looks search where the drift carries the site (:meth:`_track_once`), against the last
@@ -395,8 +399,8 @@ class Following(RecoveryBase):
         async with self._following(moved, adopt=False):
             while True:
                 await asyncio.sleep(STEP_FOLLOW_PERIOD_S)
-                self.ctl.check_interruption()
-                now = self.tm.state.t_boot_s
+                self.ctx.ctl.check_interruption()
+                now = self.ctx.tm.state.t_boot_s
                 seen = [p for p in (self._site_seen or ()) if p[0] > start]
                 if self._site_drift_m_s(since_s=start) < DRIFT_MIN_M_S:  # False while NaN
                     break
@@ -406,16 +410,16 @@ class Following(RecoveryBase):
                 if now - start >= self._drift_budget_s:
                     why = "the round's time for holding is spent"
                     break
-        waited = self.tm.state.t_boot_s - start
+        waited = self.ctx.tm.state.t_boot_s - start
         self._drift_budget_s -= waited
         self._reanchor = True
         still = self._site_drift_m_s(since_s=start)
-        self.record.record_event(
+        self.ctx.record.record_event(
             "drift_hold",
-            {"round": self.round, "drift_m_s": round(drift, 3), "waited_s": round(waited, 1), "why": why,
+            {"round": self.ctx.round, "drift_m_s": round(drift, 3), "waited_s": round(waited, 1), "why": why,
              "drift_after_m_s": round(still, 3) if math.isfinite(still) else None},
         )  # fmt: skip
-        self._say(5, f"held {waited:.0f} s over the site ({why}): going on")
+        self.ctx.say(5, f"held {waited:.0f} s over the site ({why}): going on")
         return moved[-1]
 
     def _track_fields(self, result: TrackResult, phase: str, frame: Any) -> dict[str, Any]:
@@ -423,7 +427,7 @@ class Following(RecoveryBase):
             return round(v, 3) if math.isfinite(v) else None
 
         return {
-            "round": self.round,
+            "round": self.ctx.round,
             "phase": phase,
             "t_boot_s": r(_frame_time(frame)),
             "found": result.found,
@@ -441,7 +445,7 @@ class Following(RecoveryBase):
         ``PRECLAND_FIRST_S``; True if one went out."""
         deadline = time.monotonic() + PRECLAND_FIRST_S
         while stats["sent"] == 0:
-            self.ctl.check_interruption()
+            self.ctx.ctl.check_interruption()
             if time.monotonic() > deadline:
                 return False
             await asyncio.sleep(0.05)
@@ -462,12 +466,12 @@ class Following(RecoveryBase):
                 if reason and reason != last_reason:
                     stats["lost"].append(
                         {
-                            "t_boot_s": round(self.tm.state.t_boot_s, 2),
+                            "t_boot_s": round(self.ctx.tm.state.t_boot_s, 2),
                             "why": reason,
                             "score": round(score, 3) if math.isfinite(score) else None,
                         }
                     )
-                    self.log.info("precision landing: the site not found (%s)", reason)
+                    self.ctx.log.info("precision landing: the site not found (%s)", reason)
                 last_reason = reason
                 await asyncio.sleep(max(0.0, LAND_FEED_PERIOD_S - (time.monotonic() - started)))
         finally:
@@ -480,7 +484,7 @@ class Following(RecoveryBase):
         and the site in the estimate; ``("", score)``), or why not and the match's score (NaN when no
         match was tried). ``local_ned`` (PX4): the looks are not chained into references."""
         try:
-            frame = await self._frames()
+            frame = await self.ctx.frames()
         except FrameUnavailable as exc:
             return f"no frame: {exc}", math.nan
         dn, de = self._catch_up()
@@ -497,7 +501,7 @@ class Following(RecoveryBase):
             return result.reason, result.score
         taken = _frame_time(frame)
         stats["seen"] = (
-            taken if math.isfinite(taken) else self.tm.state.t_boot_s,
+            taken if math.isfinite(taken) else self.ctx.tm.state.t_boot_s,
             np.asarray(result.site_ned_m),
         )
         stats["looks_found"] += 1
@@ -511,21 +515,23 @@ class Following(RecoveryBase):
         last = -math.inf
         while True:
             await asyncio.sleep(0.02)
-            s = self.tm.state
+            s = self.ctx.tm.state
             now = s.t_boot_s
             seen = stats.get("seen")
             if seen is None or now - last < LAND_SEND_PERIOD_S or now - seen[0] > LAND_TARGET_MAX_AGE_S:
                 continue
             site = seen[1]
             if local_ned:  # PX4: where the site is in its local frame
-                self.ctl.send_landing_target_local(
+                self.ctx.ctl.send_landing_target_local(
                     (float(site[0]), float(site[1]), float(site[2])), int(now * 1e6)
                 )
             else:  # from where the vehicle is now (it moved since the frame), in its body axes now
                 frd = quat_to_matrix(s.quat_wxyz).T @ (site - np.asarray(s.pos_ned_m))
                 if frd[2] <= 0.05:  # level with the vehicle: no line of sight to give
                     continue
-                self.ctl.send_landing_target((float(frd[0]), float(frd[1]), float(frd[2])), int(now * 1e6))
+                self.ctx.ctl.send_landing_target(
+                    (float(frd[0]), float(frd[1]), float(frd[2])), int(now * 1e6)
+                )
             last = now
             stats["sent"] += 1
             stats["last_site_ned_m"] = [round(float(v), 3) for v in site]
@@ -562,19 +568,19 @@ class Following(RecoveryBase):
                     why = f"no landing target within {PRECLAND_FIRST_S:g} s: the absolute target"
                     ready = False
                     feed.cancel()  # AUTO.LAND reads no target
-            await self.ctl.land(self.p.land_timeout_s, mode)
+            await self.ctx.ctl.land(self.ctx.p.land_timeout_s, mode)
         finally:
             if feed is not None:
                 feed.cancel()
                 with contextlib.suppress(asyncio.CancelledError):
                     await feed
-            self.record.record_event(
+            self.ctx.record.record_event(
                 "precision_landing",
                 {
-                    "round": self.round,
+                    "round": self.ctx.round,
                     "used": ready,
                     "why": why,
-                    "mode": self.ctl.flavour.mode_name(self.ctl.flavour.modes[mode]),
+                    "mode": self.ctx.ctl.flavour.mode_name(self.ctx.ctl.flavour.modes[mode]),
                     "targets_sent": stats["sent"],
                     "looks_found": stats["looks_found"],
                     "lost": stats["lost"],

@@ -60,12 +60,15 @@ class Recovery(Searching, SiteChoice, Following, Looking):
 
     # ------------------------------------------------------------------ the loop
     async def run(self) -> Outcome:
-        self._say(5, f"alarm '{self.alarm.reason}' ({self.criticality.name.lower()}), {self.budget} rounds")
-        self.search.start(self._clock_s(), self.tm.state.battery_pct)
+        ctx = self.ctx
+        ctx.say(5, f"alarm '{ctx.alarm.reason}' ({ctx.criticality.name.lower()}), {ctx.budget} rounds")
+        self.search.start(self._clock_s(), self.ctx.tm.state.battery_pct)
         try:
             held = self._failsafe_in_charge()
             if held is not None:  # an alarm after the autopilot's own failsafe took the vehicle
-                self.record.record_event("autopilot_failsafe", {"round": 0, "state": "idle", "mode": held})
+                self.ctx.record.record_event(
+                    "autopilot_failsafe", {"round": 0, "state": "idle", "mode": held}
+                )
                 return await self._leave_to_autopilot(held)
             await self._engage_and_look()
             resume: tuple[tuple[float, float, float], Candidate] | None = None
@@ -73,10 +76,10 @@ class Recovery(Searching, SiteChoice, Following, Looking):
                 try:
                     if resume is not None:  # the link came back mid-descent: same site, confirm first
                         landed = await self._confirm_and_descend(*resume)
-                    elif self.round >= self.budget:
+                    elif self.ctx.round >= self.ctx.budget:
                         landed = await self._extra_round()
                     else:
-                        self.round += 1
+                        self.ctx.round += 1
                         self._descending = None
                         landed = await self._round()
                     resume = None
@@ -95,37 +98,39 @@ class Recovery(Searching, SiteChoice, Following, Looking):
                 except SensorsLost as exc:
                     # policy: no sensors, no new site; the alarm still stands, so come down: at the
                     # best site measured so far (flown to on the autopilot's position hold), else here
-                    self._say(3, f"{exc}: landing without them")
+                    self.ctx.say(3, f"{exc}: landing without them")
                     return await self._land_at_best("sensors lost", measure_here=False)
                 if landed:
-                    return Outcome(State.LANDED, self.round, self._site_ned(), "landed")
+                    return Outcome(State.LANDED, self.ctx.round, self.ctx.site_ned(), "landed")
             if self._ended is not None:
                 return await self._land_at_best(f"search ended ({self._ended.why})")
             return await self._land_at_best("round budget spent")
         except TouchedDown as exc:
             # the surface came sooner than measured: the vehicle is down, and says so
-            self._set(State.LANDED)
-            self._say(4, f"touched down before the final approach: {exc}")
-            await self.ctl.release()
-            return Outcome(State.LANDED, self.round, self._site_ned(), "touched down during a descent step")
+            self.ctx.set_state(State.LANDED)
+            self.ctx.say(4, f"touched down before the final approach: {exc}")
+            await self.ctx.ctl.release()
+            return Outcome(
+                State.LANDED, self.ctx.round, self.ctx.site_ned(), "touched down during a descent step"
+            )
         except OperatorTakeover as exc:
-            self._set(State.ABORTED)
-            self._say(4, "operator took over: stopped commanding")
-            await self.ctl.release()
+            self.ctx.set_state(State.ABORTED)
+            self.ctx.say(4, "operator took over: stopped commanding")
+            await self.ctx.ctl.release()
             # what the autopilot said just before may be the real cause: ArduCopter's fence breach
             # switches to LAND or RTL without the critical status of its other failsafes
-            said = [text for t, _, text in self.tm.texts if time.monotonic() - t < TAKEOVER_TEXTS_S]
+            said = [text for t, _, text in self.ctx.tm.texts if time.monotonic() - t < TAKEOVER_TEXTS_S]
             said = [t for t in said if not t.startswith("Landfall:")]
-            self.record.record_event(
-                "takeover", {"round": self.round, "mode": str(exc), "autopilot_said": said}
+            self.ctx.record.record_event(
+                "takeover", {"round": self.ctx.round, "mode": str(exc), "autopilot_said": said}
             )
             why = f"{exc} (the autopilot said: {'; '.join(said)})" if said else str(exc)
-            return Outcome(State.ABORTED, self.round, None, why)
+            return Outcome(State.ABORTED, self.ctx.round, None, why)
         except ControlError as exc:
-            self._set(State.ABORTED)
-            self._say(2, f"aborted: {exc}")
-            await self.ctl.release()
-            return Outcome(State.ABORTED, self.round, None, str(exc))
+            self.ctx.set_state(State.ABORTED)
+            self.ctx.say(2, f"aborted: {exc}")
+            await self.ctx.ctl.release()
+            return Outcome(State.ABORTED, self.ctx.round, None, str(exc))
         except Exception as exc:  # a defect of the companion's own: never leave the vehicle uncommanded
             return await self._fail_safe(exc)
         finally:
@@ -141,20 +146,22 @@ class Recovery(Searching, SiteChoice, Following, Looking):
         measured (accepted, else the ledger's least bad; nothing is measured anew), else with the
         autopilot's land mode where the vehicle is. Should that landing fail too, land mode once more,
         then the vehicle is left to the autopilot."""
-        where = self.state.value
+        where = self.ctx.state.value
         text = f"{type(exc).__name__}: {exc}"
-        self.log.error("defect in the recovery (%s): %s", where, text, exc_info=exc)
-        self.record.record_event(
+        self.ctx.log.error("defect in the recovery (%s): %s", where, text, exc_info=exc)
+        self.ctx.record.record_event(
             "defect",
             {
-                "round": self.round,
+                "round": self.ctx.round,
                 "state": where,
                 "error": text,
                 "traceback": "".join(traceback.format_exception(exc)),
             },
         )
         # a STATUSTEXT holds 50 characters: what happened and what the vehicle does come first
-        self._say(SEVERITY_CRITICAL, f"internal error, landing: {type(exc).__name__} in {where}: {exc}"[:150])
+        self.ctx.say(
+            SEVERITY_CRITICAL, f"internal error, landing: {type(exc).__name__} in {where}: {exc}"[:150]
+        )
         await self._observed_or_said()  # the round's candidates noted from afar: sites to land at
         site = self._fallback_site()
         self._track = None  # nothing measured anew, the camera's view of a site included
@@ -166,34 +173,34 @@ class Recovery(Searching, SiteChoice, Following, Looking):
             except (TouchedDown, OperatorTakeover):
                 raise
             except Exception as again:  # the landing itself failed: the autopilot's land mode, once more
-                self.log.error("fail-safe landing failed (%r): autopilot land mode", again)
-                self.record.record_event(
-                    "defect", {"round": self.round, "state": "land", "error": repr(again)}
+                self.ctx.log.error("fail-safe landing failed (%r): autopilot land mode", again)
+                self.ctx.record.record_event(
+                    "defect", {"round": self.ctx.round, "state": "land", "error": repr(again)}
                 )
                 await self._final_land()
         except TouchedDown:
-            self._set(State.LANDED)
+            self.ctx.set_state(State.LANDED)
         except OperatorTakeover as taken:
-            self._set(State.ABORTED)
-            await self.ctl.release()
-            return Outcome(State.ABORTED, self.round, None, f"defect ({text}), then {taken}")
+            self.ctx.set_state(State.ABORTED)
+            await self.ctx.ctl.release()
+            return Outcome(State.ABORTED, self.ctx.round, None, f"defect ({text}), then {taken}")
         except Exception as last:
-            self._set(State.ABORTED)
-            self._say(SEVERITY_CRITICAL, "fail-safe landing failed: the autopilot has the vehicle")
+            self.ctx.set_state(State.ABORTED)
+            self.ctx.say(SEVERITY_CRITICAL, "fail-safe landing failed: the autopilot has the vehicle")
             with contextlib.suppress(Exception):
-                await self.ctl.release()
-            return Outcome(State.ABORTED, self.round, None, f"defect ({text}); landing failed ({last!r})")
+                await self.ctx.ctl.release()
+            return Outcome(State.ABORTED, self.ctx.round, None, f"defect ({text}); landing failed ({last!r})")
         return Outcome(
-            State.LANDED, self.round, site.ned_m if site is not None else None, f"defect ({text}): landed"
+            State.LANDED, self.ctx.round, site.ned_m if site is not None else None, f"defect ({text}): landed"
         )
 
     def _failsafe_in_charge(self) -> str | None:
         """The mode of an autopilot failsafe that lands or flies home and has the vehicle now
         (system status critical): the companion does not take the vehicle from it."""
-        s = self.tm.state
+        s = self.ctx.tm.state
         if s.system_status != MAV_STATE_CRITICAL:
             return None
-        return self.ctl.flavour.lands_or_returns(s.custom_mode)
+        return self.ctx.ctl.flavour.lands_or_returns(s.custom_mode)
 
     async def _on_failsafe(self, exc: AutopilotFailsafe) -> Outcome | None:
         """Policy for the autopilot leaving the companion's mode in a failsafe of its own. A failsafe
@@ -205,21 +212,25 @@ class Recovery(Searching, SiteChoice, Following, Looking):
         or flies home (a battery, GPS, geofence or link failsafe), or already down: the autopilot keeps
         the vehicle (:meth:`_leave_to_autopilot`). Still holding (PX4's POSCTL or AUTO.LOITER,
         ArduPilot's LOITER or BRAKE): re-engaged from where it is (:meth:`_reengage`)."""
-        flavour = self.ctl.flavour
+        flavour = self.ctx.ctl.flavour
         seen = flavour.mode_name(exc.custom_mode)
-        fields = {"round": self.round, "state": self.state.value, "mode": seen}
-        self.record.record_event("autopilot_failsafe", fields)
-        self._say(4, f"autopilot failsafe: {seen}; waiting {self.p.failsafe_grace_s:g} s for it to clear")
-        if await self.ctl.ride_out_failsafe(self.p.failsafe_grace_s):
-            self.record.record_event("autopilot_failsafe_cleared", fields)
-            self._say(5, f"the autopilot's failsafe cleared ({seen} -> back to the companion): going on")
+        fields = {"round": self.ctx.round, "state": self.ctx.state.value, "mode": seen}
+        self.ctx.record.record_event("autopilot_failsafe", fields)
+        self.ctx.say(
+            4, f"autopilot failsafe: {seen}; waiting {self.ctx.p.failsafe_grace_s:g} s for it to clear"
+        )
+        if await self.ctx.ctl.ride_out_failsafe(self.ctx.p.failsafe_grace_s):
+            self.ctx.record.record_event("autopilot_failsafe_cleared", fields)
+            self.ctx.say(5, f"the autopilot's failsafe cleared ({seen} -> back to the companion): going on")
             return None
-        now = self.tm.state
+        now = self.ctx.tm.state
         mode = flavour.lands_or_returns(now.custom_mode)
         if now.on_ground and mode is None:
             # down already (an autopilot may leave its landing mode as it disarms): the landing mode
             # it came down in, if the grace period saw one
-            landed_in = [m for m in map(flavour.lands_or_returns, self.ctl.failsafe_modes) if m is not None]
+            landed_in = [
+                m for m in map(flavour.lands_or_returns, self.ctx.ctl.failsafe_modes) if m is not None
+            ]
             mode = landed_in[-1] if landed_in else seen
         if mode is not None:
             return await self._leave_to_autopilot(mode)
@@ -236,39 +247,39 @@ class Recovery(Searching, SiteChoice, Following, Looking):
         """The autopilot's failsafe holds and will not give the companion its mode back: ask for the
         autopilot's land mode where the vehicle is and watch it down (``land_timeout_s``); refused
         too, the autopilot keeps the vehicle (:meth:`_leave_to_autopilot`)."""
-        self._set(State.LAND)
-        self._say(
+        self.ctx.set_state(State.LAND)
+        self.ctx.say(
             SEVERITY_CRITICAL,
             f"autopilot failsafe holds in {holding} and refuses the companion's mode ({refused}): "
             "asking it to land where it is",
         )
-        self.record.record_event(
-            "land_in_place", {"round": self.round, "holding": holding, "why": str(refused)}
+        self.ctx.record.record_event(
+            "land_in_place", {"round": self.ctx.round, "holding": holding, "why": str(refused)}
         )
         try:
-            await self.ctl.land(self.p.land_timeout_s)
+            await self.ctx.ctl.land(self.ctx.p.land_timeout_s)
         except CommandRefused as again:
             # refused too (real PX4 takes no AUTO.LAND without a position; its own blind descent is
             # what is left): the autopilot keeps the vehicle, watched down
-            self._say(4, f"land mode refused as well ({again})")
+            self.ctx.say(4, f"land mode refused as well ({again})")
             return await self._leave_to_autopilot(holding)
-        self._set(State.LANDED)
+        self.ctx.set_state(State.LANDED)
         return Outcome(
-            State.LANDED, self.round, None, f"landed where it was: the autopilot held in {holding}"
+            State.LANDED, self.ctx.round, None, f"landed where it was: the autopilot held in {holding}"
         )
 
     async def _leave_to_autopilot(self, mode: str) -> Outcome:
         """The autopilot's failsafe keeps the vehicle: the companion stops its setpoint stream, says so
         (critical) and never takes the vehicle back. A landing (or a return home, which ends in one)
         is watched to the ground for ``land_timeout_s`` so that the record ends with it."""
-        await self.ctl.release()
-        self._set(State.ABORTED)
-        self._say(SEVERITY_CRITICAL, f"autopilot failsafe: {mode}; the autopilot keeps control")
-        self.record.record_event("released", {"round": self.round, "to": mode})
-        if await self.ctl.wait_on_ground(self.p.land_timeout_s):
-            self._set(State.LANDED)
-            return Outcome(State.LANDED, self.round, None, f"the autopilot's failsafe landed it ({mode})")
-        return Outcome(State.ABORTED, self.round, None, f"the autopilot's failsafe has it ({mode})")
+        await self.ctx.ctl.release()
+        self.ctx.set_state(State.ABORTED)
+        self.ctx.say(SEVERITY_CRITICAL, f"autopilot failsafe: {mode}; the autopilot keeps control")
+        self.ctx.record.record_event("released", {"round": self.ctx.round, "to": mode})
+        if await self.ctx.ctl.wait_on_ground(self.ctx.p.land_timeout_s):
+            self.ctx.set_state(State.LANDED)
+            return Outcome(State.LANDED, self.ctx.round, None, f"the autopilot's failsafe landed it ({mode})")
+        return Outcome(State.ABORTED, self.ctx.round, None, f"the autopilot's failsafe has it ({mode})")
 
     async def _reengage(self, exc: AutopilotFailsafe) -> None:
         """Policy: the autopilot's own failsafe (e.g. a lost setpoint stream) is re-engaged from where
@@ -276,8 +287,8 @@ class Recovery(Searching, SiteChoice, Following, Looking):
         self._reengaged += 1
         if self._reengaged > MAX_REENGAGE:
             raise ControlError(f"{exc}; not re-engaging again") from exc
-        self._say(4, f"{exc}: re-engaging")
-        await self.ctl.engage()
+        self.ctx.say(4, f"{exc}: re-engaging")
+        await self.ctx.ctl.engage()
 
     async def _ride_out_link_loss(self, exc: TelemetryLost) -> Outcome | None:
         """Policy for a lost MAVLink link: keep streaming the last setpoint and wait up to
@@ -288,27 +299,29 @@ class Recovery(Searching, SiteChoice, Following, Looking):
         takeover. Then an interrupted descent goes on at the
         same site, confirmed again first; otherwise the next round starts. No telemetry within
         ``link_loss_s``: the companion stops commanding and leaves the vehicle to the autopilot."""
-        self.record.record_event("link_lost", {"round": self.round, "state": self.state.value})
-        self._say(3, f"link to the autopilot lost ({exc}): holding, waiting {self.p.link_loss_s:.0f} s")
+        self.ctx.record.record_event("link_lost", {"round": self.ctx.round, "state": self.ctx.state.value})
+        self.ctx.say(
+            3, f"link to the autopilot lost ({exc}): holding, waiting {self.ctx.p.link_loss_s:.0f} s"
+        )
         try:
-            silent_s = await self.ctl.await_link(self.p.link_loss_s)
+            silent_s = await self.ctx.ctl.await_link(self.ctx.p.link_loss_s)
         except TelemetryLost as lost:
             raise ControlError(f"{lost}: leaving the vehicle to the autopilot") from lost
         except AutopilotFailsafe as failsafe:  # heartbeats without positions: the estimator lost them
-            self._say(4, "the autopilot is heard but sends no position: its estimator has none")
+            self.ctx.say(4, "the autopilot is heard but sends no position: its estimator has none")
             return await self._on_failsafe(failsafe)
-        s = self.tm.state
-        self.record.record_event(
+        s = self.ctx.tm.state
+        self.ctx.record.record_event(
             "link_restored",
-            {"round": self.round, "silent_s": round(silent_s, 2), "custom_mode": s.custom_mode},
+            {"round": self.ctx.round, "silent_s": round(silent_s, 2), "custom_mode": s.custom_mode},
         )
-        self._say(5, f"link back after {silent_s:.1f} s")
+        self.ctx.say(5, f"link back after {silent_s:.1f} s")
         if s.on_ground:
-            self._set(State.LANDED)
-            self._say(4, "the vehicle came down while the link was lost")
-            return Outcome(State.LANDED, self.round, None, "landed by the autopilot during a link loss")
+            self.ctx.set_state(State.LANDED)
+            self.ctx.say(4, "the vehicle came down while the link was lost")
+            return Outcome(State.LANDED, self.ctx.round, None, "landed by the autopilot during a link loss")
         try:
-            self.ctl.check_interruption()
+            self.ctx.ctl.check_interruption()
         except AutopilotFailsafe as failsafe:
             return await self._on_failsafe(failsafe)
         return None
@@ -318,7 +331,7 @@ class Recovery(Searching, SiteChoice, Following, Looking):
         transfer) takes longer than the mode switch, and the vehicle holds either way."""
         look = asyncio.create_task(self._acquire(first_round=True), name="first-frame")
         try:
-            await self.ctl.engage()
+            await self.ctx.ctl.engage()
         except BaseException:
             look.cancel()
             with contextlib.suppress(asyncio.CancelledError, Exception):
@@ -341,7 +354,7 @@ class Recovery(Searching, SiteChoice, Following, Looking):
             _run_all, ([lambda: self._observe(frame)] if frame is not None else []) + later
         )
         s = round(time.monotonic() - t0, 3)
-        self.record.record_event("observed", {"round": self.round, "s": s, "jobs": len(later)})
+        self.ctx.record.record_event("observed", {"round": self.ctx.round, "s": s, "jobs": len(later)})
 
     async def _observed_or_said(self) -> None:
         """:meth:`_observed` before a landing at the best site measured (the deferred notes are the
@@ -349,8 +362,10 @@ class Recovery(Searching, SiteChoice, Following, Looking):
         try:
             await self._observed()
         except Exception as exc:
-            self.log.error("the round's deferred work failed (%r): landing on what the ledger holds", exc)
-            self.record.record_event("defect", {"round": self.round, "state": "observed", "error": repr(exc)})
+            self.ctx.log.error("the round's deferred work failed (%r): landing on what the ledger holds", exc)
+            self.ctx.record.record_event(
+                "defect", {"round": self.ctx.round, "state": "observed", "error": repr(exc)}
+            )
 
     async def _round(self) -> bool:
         await self._observed()  # a round that ended before its move leaves its frame here
@@ -358,21 +373,23 @@ class Recovery(Searching, SiteChoice, Following, Looking):
         self._new_vantage = False  # this round looks from here
         self._track = None  # a new round, a new site
         frame = await (look if look is not None else self._acquire())
-        self._set(State.SURFACE_ID)
+        self.ctx.set_state(State.SURFACE_ID)
         camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
         candidates = await asyncio.to_thread(self._surface_id, frame, camera)
         self._unobserved = frame  # the search's map of what was seen: after the first setpoint
         # a roof in view makes it a built-up area; so do roofs the LiDAR saw near a site (_built_up)
         self._roofs_in_view = any(c.elevated for c in candidates)
-        candidates = [c for c in candidates if not self._near_rejected(c)]
+        candidates = [c for c in candidates if not self.ctx.near_rejected(c)]
         if frame.image_rgb is not None:  # JPEG encoding off the event loop: the setpoint stream runs there
             # (before the ranking: a ground feed boxes the ranking's candidates on this frame)
-            await asyncio.to_thread(self.record.save_image, f"round{self.round:02d}-acquire", frame.image_rgb)
+            await asyncio.to_thread(
+                self.ctx.record.save_image, f"round{self.ctx.round:02d}-acquire", frame.image_rgb
+            )
         if not candidates or all(c.fallback for c in candidates):
             await self._observed()  # the search's next leg is planned on it
             await self._explore(blind=lidar_silent(frame.lidar_frd))
             return False
-        self._set(State.RANK)
+        self.ctx.set_state(State.RANK)
         ranking, chosen = await self._rank(candidates, frame)
         choice = candidates[chosen] if chosen is not None else None
         if frame.image_rgb is not None:  # the ledger's view of every candidate from afar
@@ -389,30 +406,30 @@ class Recovery(Searching, SiteChoice, Following, Looking):
             return False
         target = await asyncio.to_thread(self._ipm, choice, frame, camera)
         if target is None:
-            self._say(4, f"site {choice.index} cannot be placed in the world: next round")
+            self.ctx.say(4, f"site {choice.index} cannot be placed in the world: next round")
             await self._observed()  # the search's verdict before the next round reads the notes
             return False
         self._follow_from(frame, target)
-        n, e, d = self.tm.state.pos_ned_m
+        n, e, d = self.ctx.tm.state.pos_ned_m
         dist = math.hypot(target[0] - n, target[1] - e)
         bearing = compass_point(math.degrees(math.atan2(target[1] - e, target[0] - n)))
         kind = "roof" if choice.height_above_m >= 3.0 else "ground"
-        self._say(6, f"site {choice.index} {kind} {dist:.0f} m {bearing}")
-        self._say(6, ranking.rationale[:200])
-        self._set(State.MOVE)
-        self._fault.check("move", self.round)
+        self.ctx.say(6, f"site {choice.index} {kind} {dist:.0f} m {bearing}")
+        self.ctx.say(6, ranking.rationale[:200])
+        self.ctx.set_state(State.MOVE)
+        self.ctx.fault.check("move", self.ctx.round)
         observing = asyncio.create_task(self._observed(), name="observe")  # once the setpoint is out
         try:
-            await self.ctl.goto(
+            await self.ctx.ctl.goto(
                 target[0],
                 target[1],
                 d,
-                tolerance_m=self.p.arrival_tolerance_m,
-                speed_m_s=self.p.arrival_speed_m_s,
-                timeout_s=self.p.move_timeout(dist),
+                tolerance_m=self.ctx.p.arrival_tolerance_m,
+                speed_m_s=self.ctx.p.arrival_speed_m_s,
+                timeout_s=self.ctx.p.move_timeout(dist),
             )
         except TargetTimeout as exc:
-            self._say(4, f"target not reached ({exc.error_m:.1f} m off): next round")
+            self.ctx.say(4, f"target not reached ({exc.error_m:.1f} m off): next round")
             return False
         finally:
             await observing
@@ -432,22 +449,22 @@ class Recovery(Searching, SiteChoice, Following, Looking):
             decision = await self._confirm(check, frame, target, choice)
             if not decision.accept and decision.contested:
                 # a lone "no" on a clear site: ask again next round (the cascade's lone-"no" rule)
-                self._say(4, f"site {choice.index} contested: {decision.rationale[:110]}")
+                self.ctx.say(4, f"site {choice.index} contested: {decision.rationale[:110]}")
                 return False
             if not decision.accept:
-                self.rejected.append((target[0], target[1], self._rejected_radius(target, choice)))
+                self.ctx.reject(target, choice)
                 if (
-                    self.best is not None
-                    and math.dist(self.best.ned_m[:2], target[:2]) < self.p.rejected_radius_m
+                    self.ctx.best is not None
+                    and math.dist(self.ctx.best.ned_m[:2], target[:2]) < self.ctx.p.rejected_radius_m
                 ):
-                    self.best = None
-                self._say(4, f"site {choice.index} {decision.rationale[:120]}")
+                    self.ctx.best = None
+                self.ctx.say(4, f"site {choice.index} {decision.rationale[:120]}")
                 return False
-            self.best = Site(target, choice)
-            _n, _e, d = self.tm.state.pos_ned_m
+            self.ctx.best = Site(target, choice)
+            _n, _e, d = self.ctx.tm.state.pos_ned_m
             rng_m, rng_quat = frame.rangefinder_m, frame.quat_wxyz
             if not math.isfinite(rng_m):
-                rng_m, rng_quat = self.tm.state.rangefinder_m, self.tm.state.quat_wxyz
+                rng_m, rng_quat = self.ctx.tm.state.rangefinder_m, self.ctx.tm.state.quat_wxyz
             height_m = height_above_site(
                 d,
                 surface_up_m=check.surface_up_m,
@@ -456,25 +473,27 @@ class Recovery(Searching, SiteChoice, Following, Looking):
                 quat_wxyz=rng_quat,
             )
             if not math.isfinite(height_m):
-                self._say(4, "no height above the site measured: next round")
+                self.ctx.say(4, "no height above the site measured: next round")
                 return False
             settled = await self._settle(target)
             if settled != target:  # held over a drifting site: measured and confirmed again there
                 target = settled
                 self._descending = (target, choice)
                 continue
-            if height_m <= self.p.final_land_m:
+            if height_m <= self.ctx.p.final_land_m:
                 return await self._land()
-            self._set(State.DESCEND)
-            self._fault.check("descend", self.round)
+            self.ctx.set_state(State.DESCEND)
+            self.ctx.fault.check("descend", self.ctx.round)
             # an unsure judgement: half the step, so that the next look is from closer
-            step_m = self.p.descent_fraction * height_m * (0.5 if decision.unsure else 1.0)
+            step_m = self.ctx.p.descent_fraction * height_m * (0.5 if decision.unsure else 1.0)
             new_d = d + step_m
             closer = " (unsure: a closer look first)" if decision.unsure else ""
-            self._say(6, f"descending {step_m:.0f} m{closer}, {decision.rationale[:80]}")
+            self.ctx.say(6, f"descending {step_m:.0f} m{closer}, {decision.rationale[:80]}")
             try:
-                target = await self._goto_following(target, new_d, timeout_s=self.p.move_timeout_s + rng_m)
+                target = await self._goto_following(
+                    target, new_d, timeout_s=self.ctx.p.move_timeout_s + rng_m
+                )
             except TargetTimeout as exc:
-                self._say(4, f"descent target not reached ({exc.error_m:.1f} m off): next round")
+                self.ctx.say(4, f"descent target not reached ({exc.error_m:.1f} m off): next round")
                 return False
             self._descending = (target, choice)

@@ -26,13 +26,13 @@ class Searching(RecoveryBase):
     def _clock_s(self) -> float:
         """The autopilot's clock (seconds since its boot), so that a faster-than-real-time simulation
         keeps the alarm's window; the companion's monotonic clock before any telemetry."""
-        t = self.tm.state.t_boot_s
+        t = self.ctx.tm.state.t_boot_s
         return t if t > 0 else time.monotonic()
 
     def _verdict(self) -> tuple[Verdict, LedgerSite | None]:
         """The search's verdict now (:meth:`SearchPlanner.verdict`), with the site the vehicle would
         land on were it to stop (whose distance the landing's need counts)."""
-        s = self.tm.state
+        s = self.ctx.tm.state
         n, e, _ = s.pos_ned_m
         site = self._fallback_site()
         to_site = math.dist(site.ned_m[:2], (n, e)) if site is not None else 0.0
@@ -45,16 +45,18 @@ class Searching(RecoveryBase):
         refuse it close up. A roof always gets its close look. True when it did so."""
         if choice.site_ned_m is None or (choice.elevated and not choice.strip):
             return False  # from afar a marking on a roof may be a shadow or a painted helipad
-        seen = self.ledger.near((choice.site_ned_m[0], choice.site_ned_m[1]))
+        seen = self.ctx.ledger.near((choice.site_ned_m[0], choice.site_ned_m[1]))
         if seen is None or seen.hazard < Hazard.TRAFFIC or not self._verdict()[0].search:
             return False
         what = seen.hazard.name.lower()
-        self.rejected.append((seen.ned_m[0], seen.ned_m[1], self._rejected_radius(seen.ned_m, choice)))
-        self.record.record_event(
+        self.ctx.reject(seen.ned_m, choice)
+        self.ctx.record.record_event(
             "search_instead",
-            {"round": self.round, "candidate": choice.to_json(), "hazard": what, "why": seen.why},
+            {"round": self.ctx.round, "candidate": choice.to_json(), "hazard": what, "why": seen.why},
         )
-        self._say(5, f"site {choice.index} looks like {what} from afar ({seen.why[:60]}): searching instead")
+        self.ctx.say(
+            5, f"site {choice.index} looks like {what} from afar ({seen.why[:60]}): searching instead"
+        )
         await self._search_leg()
         return True
 
@@ -63,20 +65,20 @@ class Searching(RecoveryBase):
         Then the battery (what the landing needs plus a reserve) and the alarm's window may end the
         search, within the round budget too; past the budget it goes on only while nothing acceptable
         was judged close up (a roof with nothing against it)."""
-        if self.round == 0:
+        if self.ctx.round == 0:
             return True
-        if self.round >= self.budget and not self._may_extend():
+        if self.ctx.round >= self.ctx.budget and not self._may_extend():
             return False
         verdict, site = self._verdict()
         if verdict.search:
             return True
         self._ended = verdict
-        self._say(4, f"search ends: {verdict.why}")
-        self.record.record_event(
+        self.ctx.say(4, f"search ends: {verdict.why}")
+        self.ctx.record.record_event(
             "search_end",
             {
                 "note": f"search ends: {verdict.why}",
-                "round": self.round,
+                "round": self.ctx.round,
                 "reason": verdict.why,
                 "battery_pct": round(verdict.battery_pct, 1) if math.isfinite(verdict.battery_pct) else None,
                 "need_pct": round(verdict.need_pct, 1),
@@ -90,9 +92,9 @@ class Searching(RecoveryBase):
     def _may_extend(self) -> bool:
         """Past the round budget: nothing acceptable was judged close up (a roof with nothing against
         it), so the search goes on (the battery and the window bound it, :meth:`_go_on`)."""
-        if self.best is not None:
+        if self.ctx.best is not None:
             return False
-        site = self.ledger.least_bad()
+        site = self.ctx.ledger.least_bad()
         return not (site is not None and site.hazard.acceptable and site.closeup)
 
     async def _extra_round(self) -> bool:
@@ -102,11 +104,11 @@ class Searching(RecoveryBase):
         to a view not yet judged and a round there. True when it landed."""
         await self._observed()  # the last round's frame, if it ended before its move
         self.extra += 1
-        self.round += 1
+        self.ctx.round += 1
         self._descending = None
-        n, e, _ = self.tm.state.pos_ned_m
-        site = self.ledger.least_bad((n, e))
-        battery = self.tm.state.battery_pct
+        n, e, _ = self.ctx.tm.state.pos_ned_m
+        site = self.ctx.ledger.least_bad((n, e))
+        battery = self.ctx.tm.state.battery_pct
         charge = f", battery {battery:.0f} %" if math.isfinite(battery) else ""
         count = f"{self.extra}{charge}"
         look = (
@@ -116,10 +118,10 @@ class Searching(RecoveryBase):
             and not site.looked
             and site.candidate is not None
         )
-        self.record.record_event(
+        self.ctx.record.record_event(
             "extend",
             {
-                "round": self.round,
+                "round": self.ctx.round,
                 "extra": self.extra,
                 "best": None if site is None else site.to_json(),
                 "action": "closer look" if look else "look again" if self._new_vantage else "explore",
@@ -127,7 +129,7 @@ class Searching(RecoveryBase):
         )
         if look:
             assert site is not None
-            self._say(5, f"budget spent: a closer look at {site.label}, seen only from afar ({count})")
+            self.ctx.say(5, f"budget spent: a closer look at {site.label}, seen only from afar ({count})")
             site.looked = True  # once: a site the vehicle cannot reach is not tried again
             if not await self._fly_over(site, site.label, then="next round"):
                 return False  # not over it: no confirmation, no descent from elsewhere
@@ -140,9 +142,9 @@ class Searching(RecoveryBase):
         if self._new_vantage:
             # the last round ended by climbing or descending to see (out of the LiDAR's reach, or too
             # low for a wide view): look from there before flying on, or the step was for nothing
-            self._say(4, f"budget spent, {seen}: looking again from here ({count})")
+            self.ctx.say(4, f"budget spent, {seen}: looking again from here ({count})")
             return await self._round()
-        self._say(4, f"budget spent, {seen}: searching on ({count})")
+        self.ctx.say(4, f"budget spent, {seen}: searching on ({count})")
         await self._search_leg()
         return await self._round()
 
@@ -152,19 +154,19 @@ class Searching(RecoveryBase):
         recorded (``search_leg``) and shown on the ground feed. The last frame goes into the search's
         map first (:meth:`_observed`): the leg is planned on it."""
         await self._observed()
-        self._set(State.EXPLORE)
-        s = self.tm.state
+        self.ctx.set_state(State.EXPLORE)
+        s = self.ctx.tm.state
         n, e, d = s.pos_ned_m
-        leg = await asyncio.to_thread(self.search.next_leg, (n, e, d), self.ledger, s.rangefinder_m)
+        leg = await asyncio.to_thread(self.search.next_leg, (n, e, d), self.ctx.ledger, s.rangefinder_m)
         tn, te, td = leg.target_ned_m
         count = len(self.search.legs)
         note = f"search leg {count}: {leg.reason}"
-        self._say(5, note)
-        self.record.record_event(
+        self.ctx.say(5, note)
+        self.ctx.record.record_event(
             "search_leg",
             {
                 "note": note,
-                "round": self.round,
+                "round": self.ctx.round,
                 "leg": count,
                 "from_ned_m": [round(v, 1) for v in (n, e, d)],
                 "battery_pct": round(s.battery_pct, 1) if math.isfinite(s.battery_pct) else None,
@@ -174,13 +176,13 @@ class Searching(RecoveryBase):
         steps = [(n, e, td), (tn, te, td)] if td < d - 3.0 else [(tn, te, d), (tn, te, td)]
         for sn, se, sd in steps:
             with contextlib.suppress(TargetTimeout):
-                await self.ctl.goto(
+                await self.ctx.ctl.goto(
                     sn,
                     se,
                     sd,
                     tolerance_m=2.0,
                     speed_m_s=0.5,
-                    timeout_s=self.p.move_timeout(math.dist((sn, se, sd), self.tm.state.pos_ned_m)),
+                    timeout_s=self.ctx.p.move_timeout(math.dist((sn, se, sd), self.ctx.tm.state.pos_ned_m)),
                 )
         return leg
 
@@ -197,26 +199,28 @@ class Searching(RecoveryBase):
         Whenever the rangefinder puts the ground more than ``explore_max_alt_m`` below (a roof left
         behind, low ground), the step is a descent to ``explore_max_alt_m`` above it: from higher up
         the LiDAR reaches nothing flat."""
-        self._set(State.EXPLORE)
-        n, e, d = self.tm.state.pos_ned_m
-        alt = self.tm.state.rangefinder_m
-        beyond = math.isfinite(alt) and alt > self.p.explore_max_alt_m + 5.0
-        if blind and math.isfinite(alt) and alt > self.p.blind_descent_agl_m + 5.0:
-            drop = alt - self.p.blind_descent_agl_m
+        self.ctx.set_state(State.EXPLORE)
+        n, e, d = self.ctx.tm.state.pos_ned_m
+        alt = self.ctx.tm.state.rangefinder_m
+        beyond = math.isfinite(alt) and alt > self.ctx.p.explore_max_alt_m + 5.0
+        if blind and math.isfinite(alt) and alt > self.ctx.p.blind_descent_agl_m + 5.0:
+            drop = alt - self.ctx.p.blind_descent_agl_m
             target = (n, e, d + drop)
-            self._say(6, f"LiDAR sees nothing, ground {alt:.0f} m below: descending {drop:.0f} m")
+            self.ctx.say(6, f"LiDAR sees nothing, ground {alt:.0f} m below: descending {drop:.0f} m")
         elif beyond:
             # the rangefinder measured the column below clear all the way down: descend within reach
-            drop = alt - self.p.explore_max_alt_m
+            drop = alt - self.ctx.p.explore_max_alt_m
             target = (n, e, d + drop)
-            self._say(6, f"ground {alt:.0f} m below, beyond the LiDAR's reach: descending {drop:.0f} m")
-        elif math.isfinite(alt) and alt + self.p.explore_climb_m <= self.p.search_agl_m:
+            self.ctx.say(6, f"ground {alt:.0f} m below, beyond the LiDAR's reach: descending {drop:.0f} m")
+        elif math.isfinite(alt) and alt + self.ctx.p.explore_climb_m <= self.ctx.p.search_agl_m:
             # low down a climb widens the view; at the search height the LiDAR's reach would shrink
-            target = (n, e, d - self.p.explore_climb_m)
-            self._say(6, f"no flat site in view: climbing {self.p.explore_climb_m:.0f} m")
+            target = (n, e, d - self.ctx.p.explore_climb_m)
+            self.ctx.say(6, f"no flat site in view: climbing {self.ctx.p.explore_climb_m:.0f} m")
         else:
             await self._search_leg()
             return
         with contextlib.suppress(TargetTimeout):
-            await self.ctl.goto(*target, tolerance_m=1.0, speed_m_s=0.5, timeout_s=self.p.move_timeout_s)
+            await self.ctx.ctl.goto(
+                *target, tolerance_m=1.0, speed_m_s=0.5, timeout_s=self.ctx.p.move_timeout_s
+            )
         self._new_vantage = True  # the next round, within the budget or past it, looks from here

@@ -18,7 +18,7 @@ from companion.perception.surface_id import (
 )
 from companion.reasoning.base import ConfirmRequest
 from companion.reasoning.onboard import lidar_kind
-from companion.recovery.core import MAX_REJECTED_RADIUS_M, FrameUnavailable, Outcome, RecoveryBase, State
+from companion.recovery.core import FrameUnavailable, Outcome, RecoveryBase, State
 from companion.recovery.looking import UNMEASURED, height_above_surroundings
 from companion.site_ledger import Hazard, LedgerSite, hazard_of
 
@@ -27,17 +27,17 @@ class SiteChoice(RecoveryBase):
     """The least bad site and the landing (docs/recovery.md, "When it ends without an accepted site")."""
 
     async def _land(self) -> bool:
-        self._set(State.LAND)
-        self._fault.check("land", self.round)
+        self.ctx.set_state(State.LAND)
+        self.ctx.fault.check("land", self.ctx.round)
         await self._final_land()
         return True
 
     async def _final_land(self) -> None:
-        self._set(State.LAND)
-        self._say(5, "final approach: autopilot land mode")
-        await self._land_on_site(self.ctl.precision)
-        self._set(State.LANDED)
-        self._say(5, "landed")
+        self.ctx.set_state(State.LAND)
+        self.ctx.say(5, "final approach: autopilot land mode")
+        await self._land_on_site(self.ctx.ctl.precision)
+        self.ctx.set_state(State.LANDED)
+        self.ctx.say(5, "landed")
 
     async def _land_at_best(self, reason: str, *, measure_here: bool = True) -> Outcome:
         """Land at the accepted site, else at the least bad one measured (:mod:`companion.site_ledger`),
@@ -45,42 +45,47 @@ class SiteChoice(RecoveryBase):
         nothing at all was measured, and said so."""
         self._track = None  # the site it lands on may not be the one last followed
         await self._observed_or_said()  # the round's candidates noted from afar: sites to land at
-        if measure_here and self.best is None:
+        if measure_here and self.ctx.best is None:
             await self._look_around()
             await self._measure_here()
         site = self._fallback_site()
-        if site is None and not self.ledger.sites:
-            self._say(4, f"{reason} with nothing measured: landing here")
+        if site is None and not self.ctx.ledger.sites:
+            self.ctx.say(4, f"{reason} with nothing measured: landing here")
         elif site is None:
-            self._say(4, f"{reason}, only water or traffic measured elsewhere: landing here")
+            self.ctx.say(4, f"{reason}, only water or traffic measured elsewhere: landing here")
         else:
             where = "here" if site.label == "here" else f"at {site.label}"
-            self._say(
+            self.ctx.say(
                 4, f"{reason}: landing {where} ({site.hazard.name.lower().replace('_', ' ')}: {site.why})"
             )
-            self.record.record_event(
+            self.ctx.record.record_event(
                 "fallback_site",
                 {
-                    "round": self.round,
+                    "round": self.ctx.round,
                     "reason": reason,
                     "chosen": site.to_json(),
-                    "sites": [s.to_json() for s in self.ledger.sites],
+                    "sites": [s.to_json() for s in self.ctx.ledger.sites],
                 },
             )
             await self._fly_over(site, "the chosen site")
         await self._land()
-        return Outcome(State.LANDED, self.round, site.ned_m if site is not None else None, reason)
+        return Outcome(State.LANDED, self.ctx.round, site.ned_m if site is not None else None, reason)
 
     def _fallback_site(self) -> LedgerSite | None:
         """The accepted site, else the ledger's least bad, else None."""
-        if self.best is not None:
-            label = f"site {self.best.candidate.index}"
+        if self.ctx.best is not None:
+            label = f"site {self.ctx.best.candidate.index}"
             return LedgerSite(
-                self.best.ned_m, Hazard.ACCEPTED, "confirmed for descent", self.round, True, label=label
+                self.ctx.best.ned_m,
+                Hazard.ACCEPTED,
+                "confirmed for descent",
+                self.ctx.round,
+                True,
+                label=label,
             )
-        n, e, _ = self.tm.state.pos_ned_m
-        site = self.ledger.least_bad((n, e))
-        if site is not None and site.hazard > Hazard.UNKNOWN and not self.ledger.near((n, e)):
+        n, e, _ = self.ctx.tm.state.pos_ned_m
+        site = self.ctx.ledger.least_bad((n, e))
+        if site is not None and site.hazard > Hazard.UNKNOWN and not self.ctx.ledger.near((n, e)):
             return None  # only water or traffic measured, and not here: unknown beats known bad
         return site
 
@@ -88,18 +93,18 @@ class SiteChoice(RecoveryBase):
         """Fly over ``site`` at the current altitude; False (said, with what happens ``then``) when it
         was not reached in time."""
         n, e, _ = site.ned_m
-        n0, e0, d = self.tm.state.pos_ned_m
+        n0, e0, d = self.ctx.tm.state.pos_ned_m
         try:
-            await self.ctl.goto(
+            await self.ctx.ctl.goto(
                 n,
                 e,
                 d,
-                tolerance_m=self.p.arrival_tolerance_m,
-                speed_m_s=self.p.arrival_speed_m_s,
-                timeout_s=self.p.move_timeout(math.hypot(n - n0, e - e0)),
+                tolerance_m=self.ctx.p.arrival_tolerance_m,
+                speed_m_s=self.ctx.p.arrival_speed_m_s,
+                timeout_s=self.ctx.p.move_timeout(math.hypot(n - n0, e - e0)),
             )
         except TargetTimeout as exc:
-            self._say(4, f"{what} target not reached ({exc.error_m:.1f} m off): {then}")
+            self.ctx.say(4, f"{what} target not reached ({exc.error_m:.1f} m off): {then}")
             return False
         return True
 
@@ -109,7 +114,7 @@ class SiteChoice(RecoveryBase):
         among what earlier rounds measured: a search that ends after a blind first look, a battery
         at its reserve. One frame, no waiting: a missing frame skips it."""
         try:
-            frame = await self._frames()
+            frame = await self.ctx.frames()
         except FrameUnavailable:
             return
         camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
@@ -120,12 +125,12 @@ class SiteChoice(RecoveryBase):
         """Judge the spot under the vehicle (one frame, no waiting: a missing frame skips it) into the
         ledger, so that "here" competes with the sites measured before on what is there."""
         try:
-            frame = await self._frames()
+            frame = await self.ctx.frames()
         except FrameUnavailable:
             return
-        n, e, d = self.tm.state.pos_ned_m
+        n, e, d = self.ctx.tm.state.pos_ned_m
         check = await asyncio.to_thread(check_site, frame.lidar_frd, frame.pos_ned_m, frame.quat_wxyz, (n, e))
-        rng = frame.rangefinder_m if math.isfinite(frame.rangefinder_m) else self.tm.state.rangefinder_m
+        rng = frame.rangefinder_m if math.isfinite(frame.rangefinder_m) else self.ctx.tm.state.rangefinder_m
         ground_d = -check.surface_up_m if check.measured else d + rng
         if not math.isfinite(ground_d):
             return
@@ -139,9 +144,14 @@ class SiteChoice(RecoveryBase):
             strip=False,
             judged=check.measured or frame.image_rgb is not None,
         )
-        self.ledger.add(
+        self.ctx.ledger.add(
             LedgerSite(
-                target, hazard, ", ".join(kinds) or "nothing seen against it", self.round, True, label="here"
+                target,
+                hazard,
+                ", ".join(kinds) or "nothing seen against it",
+                self.ctx.round,
+                True,
+                label="here",
             )
         )
 
@@ -174,23 +184,8 @@ class SiteChoice(RecoveryBase):
                 kinds, accepted=False, street_level=not c.elevated and not c.strip, strip=c.strip
             )
             why = ", ".join(kinds) or "nothing seen against it from afar"
-            self.ledger.add(
+            self.ctx.ledger.add(
                 LedgerSite(
-                    c.site_ned_m, hazard, why, self.round, False, c.edge_distance_m, f"site {c.index}", c
+                    c.site_ned_m, hazard, why, self.ctx.round, False, c.edge_distance_m, f"site {c.index}", c
                 )
             )
-
-    def _near_rejected(self, c: Candidate) -> bool:
-        if c.site_ned_m is None:
-            return False
-        return any(math.dist(c.site_ned_m[:2], (n, e)) < r for n, e, r in self.rejected)
-
-    def _rejected_radius(self, target: tuple[float, float, float], choice: Candidate) -> float:
-        """How far a rejected site rules out candidates: ``rejected_radius_m``; for water or a traffic
-        lane, the surface's own size (half the side of a square of its area, up to
-        ``MAX_REJECTED_RADIUS_M``): another point of the same harbour or street is no better."""
-        site = self.ledger.near((target[0], target[1]))
-        radius = self.p.rejected_radius_m
-        if site is not None and site.hazard >= Hazard.TRAFFIC and math.isfinite(choice.area_m2):
-            radius = max(radius, min(MAX_REJECTED_RADIUS_M, 0.5 * math.sqrt(choice.area_m2)))
-        return radius
