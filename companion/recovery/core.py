@@ -16,16 +16,14 @@ from companion.control import (
     VehicleController,
 )
 from companion.faults import FaultHook
-from companion.guidance.frames import PinholeCamera
 from companion.perception.depth import DepthSource, LidarDepth
-from companion.perception.site_check import SiteCheck
 from companion.perception.site_track import SiteView
 from companion.perception.surface_id import (
     Candidate,
     SurfaceParams,
 )
 from companion.precision import PrecisionLanding
-from companion.reasoning.base import Decision, Ranking, Reasoner
+from companion.reasoning.base import Reasoner
 from companion.reasoning.onboard import OnboardReasoner
 from companion.recovery.search_plan import Leg, SearchLimits, SearchPlanner, Verdict
 from companion.site_ledger import Hazard, LedgerSite, SiteLedger
@@ -231,7 +229,6 @@ class RecoveryBase:
         # judge, cues or LandNet-S, as configured) when there is one
         onboard = getattr(reasoner, "onboard", None)
         self._onboard = onboard if isinstance(onboard, OnboardReasoner) else OnboardReasoner()
-        self._roofs_in_view = False  # this round's Surface ID measured a roof: a built-up area here
         # the site being followed: the last frame it was found in, and where it was then (following.py)
         self._track: tuple[SiteView, tuple[float, float, float]] | None = None
         self._first_look: asyncio.Task[Any] | None = None  # the first frame, asked for while engaging
@@ -254,15 +251,6 @@ class RecoveryBase:
     async def _confirm_and_descend(self, target: tuple[float, float, float], choice: Candidate) -> bool:
         raise NotImplementedError
 
-    async def _acquire(self, *, first_round: bool = False) -> Any:
-        raise NotImplementedError
-
-    def _surface_id(self, frame: Any, camera: PinholeCamera) -> list[Candidate]:
-        raise NotImplementedError
-
-    def _closeup(self, image: Any, frame: Any, target: tuple[float, float, float]) -> Any:
-        raise NotImplementedError
-
     async def _land(self) -> bool:
         raise NotImplementedError
 
@@ -281,28 +269,6 @@ class RecoveryBase:
     async def _fly_over(self, site: LedgerSite, what: str, then: str = "landing here") -> bool:
         raise NotImplementedError
 
-    def _judge(
-        self,
-        frame: Any,
-        check: SiteCheck,
-        target: tuple[float, float, float],
-        up_m: float | None,
-        strip: bool,
-    ) -> tuple[str, ...]:
-        raise NotImplementedError
-
-    def _built_up(self, site_ne_m: tuple[float, float]) -> bool:
-        """Policy: whether a site at street level is among buildings, where streets and plazas carry people
-        and traffic that come back (docs/recovery.md): a roof in this round's view, or roofs the LiDAR
-        measured during the recovery (the search's map) within ``BUILT_UP_RADIUS_M`` of the site. The
-        open fields past a town's last roofs are open country, judged on what is seen."""
-        if self._roofs_in_view:
-            return True
-        return bool(self.search.roof_groups(lambda c: math.dist(c, site_ne_m) < BUILT_UP_RADIUS_M))
-
-    def _note_candidates(self, candidates: list[Candidate], frame: Any, camera: PinholeCamera) -> None:
-        raise NotImplementedError
-
     async def _explore(self, blind: bool = False) -> None:
         raise NotImplementedError
 
@@ -318,25 +284,8 @@ class RecoveryBase:
     async def _extra_round(self) -> bool:
         raise NotImplementedError
 
-    def _observe(self, frame: Any) -> None:
-        raise NotImplementedError
-
     async def _observed(self) -> None:
         raise NotImplementedError
 
     async def _observed_or_said(self) -> None:
-        raise NotImplementedError
-
-    async def _rank(self, candidates: list[Candidate], frame: Any) -> tuple[Ranking, int | None]:
-        raise NotImplementedError
-
-    def _ipm(self, c: Candidate, frame: Any, camera: PinholeCamera) -> tuple[float, float, float] | None:
-        raise NotImplementedError
-
-    async def _measure_site(self, target: tuple[float, float, float]) -> tuple[Any, SiteCheck]:
-        raise NotImplementedError
-
-    async def _confirm(
-        self, check: SiteCheck, frame: Any, target: tuple[float, float, float], choice: Candidate
-    ) -> Decision:
         raise NotImplementedError

@@ -18,11 +18,13 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import functools
+import logging
 import math
 import time
 import traceback
 from collections.abc import Callable
 
+from companion.alarms import Alarm
 from companion.control import (
     MAV_STATE_CRITICAL,
     AutopilotFailsafe,
@@ -32,6 +34,7 @@ from companion.control import (
     TargetTimeout,
     TelemetryLost,
     TouchedDown,
+    VehicleController,
 )
 from companion.guidance.descent import height_above_site
 from companion.guidance.frames import PinholeCamera, compass_point
@@ -39,11 +42,23 @@ from companion.perception.site_check import check_site
 from companion.perception.surface_id import (
     Candidate,
 )
-from companion.recovery.core import MAX_REENGAGE, SEVERITY_CRITICAL, Outcome, SensorsLost, Site, State
+from companion.reasoning.base import Reasoner
+from companion.recovery.core import (
+    MAX_REENGAGE,
+    SEVERITY_CRITICAL,
+    FrameSource,
+    Outcome,
+    Record,
+    RecoveryParams,
+    SensorsLost,
+    Site,
+    State,
+)
 from companion.recovery.following import Following
-from companion.recovery.looking import Looking, lidar_silent
+from companion.recovery.looking import Looker, lidar_silent
 from companion.recovery.searching import Searching
 from companion.recovery.site_choice import SiteChoice
+from companion.telemetry import TelemetryCache
 
 TAKEOVER_TEXTS_S = 5.0  # the autopilot's texts this recent go with a takeover into the record
 
@@ -53,10 +68,36 @@ def _run_all(jobs: list[Callable[[], object]]) -> None:
         job()
 
 
-class Recovery(Searching, SiteChoice, Following, Looking):
+class Recovery(Searching, SiteChoice, Following):
     """One recovery, from the alarm to the ground (module docstring): the state machine; its parts
     (:class:`Looking`, :class:`Following`, :class:`SiteChoice`, :class:`Searching`) each hold one idea
     of it."""
+
+    def __init__(
+        self,
+        alarm: Alarm,
+        *,
+        control: VehicleController,
+        telemetry: TelemetryCache,
+        frames: FrameSource,
+        reasoner: Reasoner,
+        announce: Callable[[int, str], None],
+        params: RecoveryParams | None = None,
+        record: Record | None = None,
+        logger: logging.Logger | None = None,
+    ) -> None:
+        super().__init__(
+            alarm,
+            control=control,
+            telemetry=telemetry,
+            frames=frames,
+            reasoner=reasoner,
+            announce=announce,
+            params=params,
+            record=record,
+            logger=logger,
+        )
+        self.looker = Looker(self.ctx, reasoner=reasoner, onboard=self._onboard, plan=self.search)
 
     # ------------------------------------------------------------------ the loop
     async def run(self) -> Outcome:
@@ -329,7 +370,7 @@ class Recovery(Searching, SiteChoice, Following, Looking):
     async def _engage_and_look(self) -> None:
         """Take control and ask for the first round's frame at the same time: the frame (render,
         transfer) takes longer than the mode switch, and the vehicle holds either way."""
-        look = asyncio.create_task(self._acquire(first_round=True), name="first-frame")
+        look = asyncio.create_task(self.looker.acquire(first_round=True), name="first-frame")
         try:
             await self.ctx.ctl.engage()
         except BaseException:
@@ -372,13 +413,13 @@ class Recovery(Searching, SiteChoice, Following, Looking):
         look, self._first_look = self._first_look, None
         self._new_vantage = False  # this round looks from here
         self._track = None  # a new round, a new site
-        frame = await (look if look is not None else self._acquire())
+        frame = await (look if look is not None else self.looker.acquire())
         self.ctx.set_state(State.SURFACE_ID)
         camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
-        candidates = await asyncio.to_thread(self._surface_id, frame, camera)
+        candidates = await asyncio.to_thread(self.looker.surface_id, frame, camera)
         self._unobserved = frame  # the search's map of what was seen: after the first setpoint
         # a roof in view makes it a built-up area; so do roofs the LiDAR saw near a site (_built_up)
-        self._roofs_in_view = any(c.elevated for c in candidates)
+        self.looker.roofs_in_view = any(c.elevated for c in candidates)
         candidates = [c for c in candidates if not self.ctx.near_rejected(c)]
         if frame.image_rgb is not None:  # JPEG encoding off the event loop: the setpoint stream runs there
             # (before the ranking: a ground feed boxes the ranking's candidates on this frame)
@@ -390,10 +431,10 @@ class Recovery(Searching, SiteChoice, Following, Looking):
             await self._explore(blind=lidar_silent(frame.lidar_frd))
             return False
         self.ctx.set_state(State.RANK)
-        ranking, chosen = await self._rank(candidates, frame)
+        ranking, chosen = await self.looker.rank(candidates, frame)
         choice = candidates[chosen] if chosen is not None else None
         if frame.image_rgb is not None:  # the ledger's view of every candidate from afar
-            notes = functools.partial(self._note_candidates, candidates, frame, camera)
+            notes = functools.partial(self.looker.note_candidates, candidates, frame, camera)
             if choice is not None and choice.elevated and not choice.strip:
                 self._later.append(notes)  # a roof: nothing before its move reads the notes
             else:
@@ -404,7 +445,7 @@ class Recovery(Searching, SiteChoice, Following, Looking):
             return False
         if await self._search_instead(choice):
             return False
-        target = await asyncio.to_thread(self._ipm, choice, frame, camera)
+        target = await asyncio.to_thread(self.looker.ipm, choice, frame, camera)
         if target is None:
             self.ctx.say(4, f"site {choice.index} cannot be placed in the world: next round")
             await self._observed()  # the search's verdict before the next round reads the notes
@@ -438,7 +479,7 @@ class Recovery(Searching, SiteChoice, Following, Looking):
     async def _confirm_and_descend(self, target: tuple[float, float, float], choice: Candidate) -> bool:
         self._descending = (target, choice)  # what a link loss resumes: this site, confirmed again
         while True:
-            frame, check = await self._measure_site(target)
+            frame, check = await self.looker.measure_site(target)
             followed = await self._follow(frame, target)
             if followed != target:  # the site where the camera sees it now: measured there
                 target = followed
@@ -446,7 +487,7 @@ class Recovery(Searching, SiteChoice, Following, Looking):
                 check = await asyncio.to_thread(
                     check_site, frame.lidar_frd, frame.pos_ned_m, frame.quat_wxyz, (target[0], target[1])
                 )
-            decision = await self._confirm(check, frame, target, choice)
+            decision = await self.looker.confirm(check, frame, target, choice)
             if not decision.accept and decision.contested:
                 # a lone "no" on a clear site: ask again next round (the cascade's lone-"no" rule)
                 self.ctx.say(4, f"site {choice.index} contested: {decision.rationale[:110]}")

@@ -7,6 +7,7 @@ import asyncio
 import contextlib
 import math
 import time
+from typing import Any
 
 from companion.control import (
     TargetTimeout,
@@ -59,6 +60,14 @@ class Searching(RecoveryBase):
         )
         await self._search_leg()
         return True
+
+    def _observe(self, frame: Any) -> None:
+        """The frame into the search's map: the LiDAR's sweep, and with LandNet-S as the onboard judge
+        what the camera shows beyond it (water and traffic). A worker-thread job."""
+        self.search.observe(frame)
+        net = self._onboard.landnet
+        if net is not None and frame.image_rgb is not None:
+            self.search.observe_camera(frame, net.presence, tuple(net.classes))
 
     def _go_on(self) -> bool:
         """Policy: whether another round (or search leg and round) starts. The first look always does.

@@ -5,21 +5,17 @@ from __future__ import annotations
 
 import asyncio
 import math
-from typing import Any
 
 from companion.control import (
     TargetTimeout,
 )
 from companion.guidance.frames import PinholeCamera
-from companion.perception.site_check import SiteCheck, check_site
+from companion.perception.site_check import check_site
 from companion.perception.surface_id import (
     ROOF_HEIGHT_M,
-    Candidate,
 )
-from companion.reasoning.base import ConfirmRequest
-from companion.reasoning.onboard import lidar_kind
 from companion.recovery.core import FrameUnavailable, Outcome, RecoveryBase, State
-from companion.recovery.looking import UNMEASURED, height_above_surroundings
+from companion.recovery.looking import height_above_surroundings
 from companion.site_ledger import Hazard, LedgerSite, hazard_of
 
 
@@ -118,8 +114,8 @@ class SiteChoice(RecoveryBase):
         except FrameUnavailable:
             return
         camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
-        candidates = await asyncio.to_thread(self._surface_id, frame, camera)
-        await asyncio.to_thread(self._note_candidates, candidates, frame, camera)
+        candidates = await asyncio.to_thread(self.looker.surface_id, frame, camera)
+        await asyncio.to_thread(self.looker.note_candidates, candidates, frame, camera)
 
     async def _measure_here(self) -> None:
         """Judge the spot under the vehicle (one frame, no waiting: a missing frame skips it) into the
@@ -136,7 +132,7 @@ class SiteChoice(RecoveryBase):
             return
         target = (n, e, ground_d)
         up_m = height_above_surroundings(frame, check) if check.measured else None
-        kinds = await asyncio.to_thread(self._judge, frame, check, target, up_m, False)
+        kinds = await asyncio.to_thread(self.looker.judge, frame, check, target, up_m, False)
         hazard = hazard_of(
             kinds,
             accepted=False,
@@ -154,38 +150,3 @@ class SiteChoice(RecoveryBase):
                 label="here",
             )
         )
-
-    def _judge(
-        self,
-        frame: Any,
-        check: SiteCheck,
-        target: tuple[float, float, float],
-        up_m: float | None,
-        strip: bool,
-    ) -> tuple[str, ...]:
-        """What the onboard tier sees against a site (``Decision.hazards``), from the close-up of
-        ``frame`` around it and the LiDAR check; the LiDAR's kind alone without an image. A worker-
-        thread job."""
-        if frame.image_rgb is None:
-            return (lidar_kind(check),) if check.measured and not check.clear else ()
-        closeup = self._closeup(frame.image_rgb, frame, target)
-        request = ConfirmRequest(closeup, check if check.measured else None, site_up_m=up_m, site_strip=strip)
-        return self._onboard.confirm_sync(request).hazards
-
-    def _note_candidates(self, candidates: list[Candidate], frame: Any, camera: PinholeCamera) -> None:
-        """Every measured candidate of a round into the ledger, judged from afar: the onboard tier's
-        view of the frame around its site, as a confirmation would see it (a worker-thread job)."""
-        for c in candidates:
-            if c.fallback or c.site_ned_m is None:
-                continue
-            up_m = c.height_above_m if math.isfinite(c.height_above_m) else None
-            kinds = self._judge(frame, UNMEASURED, c.site_ned_m, up_m, c.strip)
-            hazard = hazard_of(
-                kinds, accepted=False, street_level=not c.elevated and not c.strip, strip=c.strip
-            )
-            why = ", ".join(kinds) or "nothing seen against it from afar"
-            self.ctx.ledger.add(
-                LedgerSite(
-                    c.site_ned_m, hazard, why, self.ctx.round, False, c.edge_distance_m, f"site {c.index}", c
-                )
-            )
