@@ -17,12 +17,10 @@ from companion.control import (
 )
 from companion.faults import FaultHook
 from companion.perception.depth import DepthSource, LidarDepth
-from companion.perception.site_track import SiteView
 from companion.perception.surface_id import (
     Candidate,
     SurfaceParams,
 )
-from companion.precision import PrecisionLanding
 from companion.reasoning.base import Reasoner
 from companion.reasoning.onboard import OnboardReasoner
 from companion.recovery.search_plan import Leg, SearchLimits, SearchPlanner, Verdict
@@ -229,8 +227,6 @@ class RecoveryBase:
         # judge, cues or LandNet-S, as configured) when there is one
         onboard = getattr(reasoner, "onboard", None)
         self._onboard = onboard if isinstance(onboard, OnboardReasoner) else OnboardReasoner()
-        # the site being followed: the last frame it was found in, and where it was then (following.py)
-        self._track: tuple[SiteView, tuple[float, float, float]] | None = None
         self._first_look: asyncio.Task[Any] | None = None  # the first frame, asked for while engaging
         self._unobserved: Any = None  # a round's frame not yet in the search's map (Recovery._observed)
         self._later: list[Callable[[], object]] = []  # a round's other work that waits for its setpoint
@@ -252,9 +248,6 @@ class RecoveryBase:
         raise NotImplementedError
 
     async def _land(self) -> bool:
-        raise NotImplementedError
-
-    async def _land_on_site(self, setup: PrecisionLanding | None) -> None:
         raise NotImplementedError
 
     async def _final_land(self) -> None:

@@ -31,7 +31,7 @@ from companion.flavour import Mode
 from companion.guidance.frames import PinholeCamera, quat_to_matrix
 from companion.perception.site_track import SiteView, TrackParams, TrackResult, centre_down, track_site
 from companion.precision import PrecisionLanding
-from companion.recovery.core import FrameUnavailable, RecoveryBase
+from companion.recovery.core import FrameUnavailable, RecoveryContext
 
 LAND_FEED_PERIOD_S = 0.2  # a look for the site at most five times a second (wall time: the processor's pace)
 LAND_SEND_PERIOD_S = 0.1  # LANDING_TARGET ten times a second of the autopilot's clock: ArduPilot's
@@ -209,23 +209,34 @@ def look_for_site(
     return Look(result, track, seen)
 
 
-class Following(RecoveryBase):
-    """The site kept in view from its choice to the touchdown."""
+class SiteFollower:
+    """The site kept in view from its choice to the touchdown (module docstring): its last view and
+    where it was then (``track``), the frame it was chosen in, the estimate's resets taken and its
+    drift. Only the event loop writes this state; the looks run in worker threads on a copy
+    (:func:`look_for_site`)."""
 
-    _track_params = TrackParams()
-    # the frame the site was chosen in: the widest view of it, looked in when the last frame fails
-    _anchor: tuple[SiteView, tuple[float, float, float]] | None = None
+    def __init__(self, ctx: RecoveryContext, params: TrackParams | None = None) -> None:
+        self.ctx = ctx
+        self.track_params = params or TrackParams()
+        # the site being followed: the last frame it was found in, and where it was then
+        self.track: tuple[SiteView, tuple[float, float, float]] | None = None
+        # the frame the site was chosen in: the widest view of it, looked in when the last frame fails
+        self._anchor: tuple[SiteView, tuple[float, float, float]] | None = None
+        self._resets_seen = 0  # the estimate's resets (``tm.position_resets``) the follower has taken
+        # (t_boot_s, north, east) of the recent finds: the site's drift in the estimate
+        self._site_seen: collections.deque[tuple[float, float, float]] | None = None
+        self._drift_budget_s = DRIFT_WAIT_S  # the round's time left for holding over a drifting site
+        self._reanchor = False  # the next look is against the frame the site was chosen in (after a hold)
 
-    _resets_seen = 0  # the estimate's resets (``tm.position_resets``) the tracker's state has taken
-    _site_seen: collections.deque[tuple[float, float, float]] | None = None  # (t_boot_s, north, east)
-    _drift_budget_s = DRIFT_WAIT_S  # what is left of the round's time for holding over a drifting site
-    _reanchor = False  # the next look is against the frame the site was chosen in (after a drift hold)
+    def forget(self) -> None:
+        """Nothing to follow (a new round, or a landing elsewhere): no camera view of a site."""
+        self.track = None
 
-    def _follow_from(self, frame: Any, target: tuple[float, float, float]) -> None:
+    def follow_from(self, frame: Any, target: tuple[float, float, float]) -> None:
         """The frame the site was chosen in, and where inverse perspective mapping put it."""
         view = site_view(frame)
-        self._track = (view, target) if view is not None else None
-        self._anchor = self._track
+        self.track = (view, target) if view is not None else None
+        self._anchor = self.track
         taken = _frame_time(frame)
         self._resets_seen = sum(1 for t, _ in self.ctx.tm.position_resets.resets if t <= taken)
         self._site_seen = collections.deque(maxlen=64)
@@ -241,7 +252,7 @@ class Following(RecoveryBase):
         if not new:
             return (0.0, 0.0)
         dn, de = sum(r[1][0] for r in new), sum(r[1][1] for r in new)
-        self._track = _moved(self._track, dn, de)
+        self.track = _moved(self.track, dn, de)
         self._anchor = _moved(self._anchor, dn, de)
         if self._site_seen is not None:  # a reset is not a drift
             moved = [(t, n + dn, e + de) for t, n, e in self._site_seen]
@@ -269,14 +280,14 @@ class Following(RecoveryBase):
 
         Raises:
             ValueError, cv2.error: a malformed frame (the callers say so and try the next)."""
-        if self._track is None:
+        if self.track is None:
             return None
         state = FollowState(
-            self._track, self._anchor, tuple(self._site_seen or ()),
+            self.track, self._anchor, tuple(self._site_seen or ()),
             tuple(self.ctx.tm.position_resets.resets[: self._resets_seen]),
         )  # fmt: skip
         resets_before = self._resets_seen
-        look = await asyncio.to_thread(look_for_site, frame, state, self._track_params, adopt, reanchor)
+        look = await asyncio.to_thread(look_for_site, frame, state, self.track_params, adopt, reanchor)
         if look is None:
             return None
         # resets taken while it ran: the find moves with those the frame predates (a frame taken after
@@ -286,14 +297,14 @@ class Following(RecoveryBase):
             r for t, r in self.ctx.tm.position_resets.resets[resets_before : self._resets_seen] if t > taken
         ]
         dn, de = sum(r[0] for r in new), sum(r[1] for r in new)
-        if look.track is not None and self._track is not None:
-            self._track = _moved(look.track, dn, de)
+        if look.track is not None and self.track is not None:
+            self.track = _moved(look.track, dn, de)
         if look.seen is not None and self._site_seen is not None:
             t, n, e = look.seen
             self._site_seen.append((t, n + dn, e + de))
         return look.result
 
-    async def _follow(self, frame: Any, target: tuple[float, float, float]) -> tuple[float, float, float]:
+    async def follow(self, frame: Any, target: tuple[float, float, float]) -> tuple[float, float, float]:
         """The descent's target after looking for the site in ``frame``: moved onto it when found,
         kept when not; recorded either way. After a hold over a drifting site the frame the site was
         chosen in is looked against first (:meth:`_track_once`'s ``reanchor``)."""
@@ -311,7 +322,7 @@ class Following(RecoveryBase):
             return target
         return (result.site_ned_m[0], result.site_ned_m[1], target[2])
 
-    async def _goto_following(
+    async def goto_following(
         self, target: tuple[float, float, float], down_m: float, *, timeout_s: float
     ) -> tuple[float, float, float]:
         """A descent step: to ``target``'s north and east at ``down_m``, the site followed meanwhile
@@ -345,7 +356,7 @@ class Following(RecoveryBase):
         """Twice a second: a frame, the site in it, and the step's target onto it when it moved
         (appended to ``moved``); the estimate's resets at once. Frames missing or unusable are
         skipped: the next one is tried. ``adopt``: see :meth:`_track_once`."""
-        while self._track is not None:
+        while self.track is not None:
             started = time.monotonic()
             while time.monotonic() - started < STEP_FOLLOW_PERIOD_S:
                 await asyncio.sleep(RESET_CHECK_PERIOD_S)
@@ -377,7 +388,7 @@ class Following(RecoveryBase):
     def _site_drift_m_s(self, since_s: float = -math.inf) -> float:
         return site_drift_m_s(list(self._site_seen or ()), since_s)
 
-    async def _settle(self, target: tuple[float, float, float]) -> tuple[float, float, float]:
+    async def settle(self, target: tuple[float, float, float]) -> tuple[float, float, float]:
         """Before a descent step or the final approach: while the site drifts in the estimate
         (``DRIFT_MIN_M_S``), hold over it, following it, until it stops; the autopilot holds its own
         estimate, which would carry the vehicle off the site as it drifts, and from lower down the
@@ -536,14 +547,14 @@ class Following(RecoveryBase):
             stats["sent"] += 1
             stats["last_site_ned_m"] = [round(float(v), 3) for v in site]
 
-    async def _land_on_site(self, setup: PrecisionLanding | None) -> None:
+    async def land_on_site(self, setup: PrecisionLanding | None) -> None:
         """The autopilot's land mode; with its precision landing fed from the camera when it is set up
         for one and the site is in view; recorded as ``precision_landing``."""
         if setup is None:
             why, ready = "the autopilot's parameters were not read", False
         else:
             why, ready = setup.why, setup.ready
-        if ready and self._track is None:
+        if ready and self.track is None:
             why, ready = "no camera view of the site to follow: the absolute target", False
         stats: dict[str, Any] = {
             "sent": 0,

@@ -54,7 +54,7 @@ from companion.recovery.core import (
     Site,
     State,
 )
-from companion.recovery.following import Following
+from companion.recovery.following import SiteFollower
 from companion.recovery.looking import Looker, lidar_silent
 from companion.recovery.searching import Searching
 from companion.recovery.site_choice import SiteChoice
@@ -68,7 +68,7 @@ def _run_all(jobs: list[Callable[[], object]]) -> None:
         job()
 
 
-class Recovery(Searching, SiteChoice, Following):
+class Recovery(Searching, SiteChoice):
     """One recovery, from the alarm to the ground (module docstring): the state machine; its parts
     (:class:`Looking`, :class:`Following`, :class:`SiteChoice`, :class:`Searching`) each hold one idea
     of it."""
@@ -98,6 +98,7 @@ class Recovery(Searching, SiteChoice, Following):
             logger=logger,
         )
         self.looker = Looker(self.ctx, reasoner=reasoner, onboard=self._onboard, plan=self.search)
+        self.follower = SiteFollower(self.ctx)
 
     # ------------------------------------------------------------------ the loop
     async def run(self) -> Outcome:
@@ -205,7 +206,7 @@ class Recovery(Searching, SiteChoice, Following):
         )
         await self._observed_or_said()  # the round's candidates noted from afar: sites to land at
         site = self._fallback_site()
-        self._track = None  # nothing measured anew, the camera's view of a site included
+        self.follower.forget()  # nothing measured anew, the camera's view of a site included
         try:
             try:
                 if site is not None:
@@ -412,7 +413,7 @@ class Recovery(Searching, SiteChoice, Following):
         await self._observed()  # a round that ended before its move leaves its frame here
         look, self._first_look = self._first_look, None
         self._new_vantage = False  # this round looks from here
-        self._track = None  # a new round, a new site
+        self.follower.forget()  # a new round, a new site
         frame = await (look if look is not None else self.looker.acquire())
         self.ctx.set_state(State.SURFACE_ID)
         camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
@@ -450,7 +451,7 @@ class Recovery(Searching, SiteChoice, Following):
             self.ctx.say(4, f"site {choice.index} cannot be placed in the world: next round")
             await self._observed()  # the search's verdict before the next round reads the notes
             return False
-        self._follow_from(frame, target)
+        self.follower.follow_from(frame, target)
         n, e, d = self.ctx.tm.state.pos_ned_m
         dist = math.hypot(target[0] - n, target[1] - e)
         bearing = compass_point(math.degrees(math.atan2(target[1] - e, target[0] - n)))
@@ -480,7 +481,7 @@ class Recovery(Searching, SiteChoice, Following):
         self._descending = (target, choice)  # what a link loss resumes: this site, confirmed again
         while True:
             frame, check = await self.looker.measure_site(target)
-            followed = await self._follow(frame, target)
+            followed = await self.follower.follow(frame, target)
             if followed != target:  # the site where the camera sees it now: measured there
                 target = followed
                 self._descending = (target, choice)
@@ -516,7 +517,7 @@ class Recovery(Searching, SiteChoice, Following):
             if not math.isfinite(height_m):
                 self.ctx.say(4, "no height above the site measured: next round")
                 return False
-            settled = await self._settle(target)
+            settled = await self.follower.settle(target)
             if settled != target:  # held over a drifting site: measured and confirmed again there
                 target = settled
                 self._descending = (target, choice)
@@ -531,7 +532,7 @@ class Recovery(Searching, SiteChoice, Following):
             closer = " (unsure: a closer look first)" if decision.unsure else ""
             self.ctx.say(6, f"descending {step_m:.0f} m{closer}, {decision.rationale[:80]}")
             try:
-                target = await self._goto_following(
+                target = await self.follower.goto_following(
                     target, new_d, timeout_s=self.ctx.p.move_timeout_s + rng_m
                 )
             except TargetTimeout as exc:

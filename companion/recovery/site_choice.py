@@ -31,7 +31,7 @@ class SiteChoice(RecoveryBase):
     async def _final_land(self) -> None:
         self.ctx.set_state(State.LAND)
         self.ctx.say(5, "final approach: autopilot land mode")
-        await self._land_on_site(self.ctx.ctl.precision)
+        await self.follower.land_on_site(self.ctx.ctl.precision)
         self.ctx.set_state(State.LANDED)
         self.ctx.say(5, "landed")
 
@@ -39,7 +39,7 @@ class SiteChoice(RecoveryBase):
         """Land at the accepted site, else at the least bad one measured (:mod:`companion.site_ledger`),
         judging the spot under the vehicle too when sensors allow (``measure_here``); "here" only when
         nothing at all was measured, and said so."""
-        self._track = None  # the site it lands on may not be the one last followed
+        self.follower.forget()  # the site it lands on may not be the one last followed
         await self._observed_or_said()  # the round's candidates noted from afar: sites to land at
         if measure_here and self.ctx.best is None:
             await self._look_around()
