@@ -24,7 +24,7 @@ from companion.perception.surface_id import (
 from companion.reasoning.base import Reasoner
 from companion.reasoning.onboard import OnboardReasoner
 from companion.recovery.search_plan import Leg, SearchLimits, SearchPlanner, Verdict
-from companion.site_ledger import Hazard, LedgerSite, SiteLedger
+from companion.site_ledger import Hazard, SiteLedger
 from companion.telemetry import TelemetryCache
 
 MAX_REENGAGE = 2
@@ -245,21 +245,6 @@ class RecoveryBase:
         raise NotImplementedError
 
     async def _confirm_and_descend(self, target: tuple[float, float, float], choice: Candidate) -> bool:
-        raise NotImplementedError
-
-    async def _land(self) -> bool:
-        raise NotImplementedError
-
-    async def _final_land(self) -> None:
-        raise NotImplementedError
-
-    async def _land_at_best(self, reason: str, *, measure_here: bool = True) -> Outcome:
-        raise NotImplementedError
-
-    def _fallback_site(self) -> LedgerSite | None:
-        raise NotImplementedError
-
-    async def _fly_over(self, site: LedgerSite, what: str, then: str = "landing here") -> bool:
         raise NotImplementedError
 
     async def _explore(self, blind: bool = False) -> None:

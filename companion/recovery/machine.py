@@ -55,9 +55,9 @@ from companion.recovery.core import (
     State,
 )
 from companion.recovery.following import SiteFollower
+from companion.recovery.landing import Lander
 from companion.recovery.looking import Looker, lidar_silent
 from companion.recovery.searching import Searching
-from companion.recovery.site_choice import SiteChoice
 from companion.telemetry import TelemetryCache
 
 TAKEOVER_TEXTS_S = 5.0  # the autopilot's texts this recent go with a takeover into the record
@@ -68,7 +68,7 @@ def _run_all(jobs: list[Callable[[], object]]) -> None:
         job()
 
 
-class Recovery(Searching, SiteChoice):
+class Recovery(Searching):
     """One recovery, from the alarm to the ground (module docstring): the state machine; its parts
     (:class:`Looking`, :class:`Following`, :class:`SiteChoice`, :class:`Searching`) each hold one idea
     of it."""
@@ -99,6 +99,7 @@ class Recovery(Searching, SiteChoice):
         )
         self.looker = Looker(self.ctx, reasoner=reasoner, onboard=self._onboard, plan=self.search)
         self.follower = SiteFollower(self.ctx)
+        self.lander = Lander(self.ctx, looker=self.looker, follower=self.follower)
 
     # ------------------------------------------------------------------ the loop
     async def run(self) -> Outcome:
@@ -205,13 +206,13 @@ class Recovery(Searching, SiteChoice):
             SEVERITY_CRITICAL, f"internal error, landing: {type(exc).__name__} in {where}: {exc}"[:150]
         )
         await self._observed_or_said()  # the round's candidates noted from afar: sites to land at
-        site = self._fallback_site()
+        site = self.lander.fallback_site()
         self.follower.forget()  # nothing measured anew, the camera's view of a site included
         try:
             try:
                 if site is not None:
-                    await self._fly_over(site, "best site measured")
-                await self._final_land()
+                    await self.lander.fly_over(site, "best site measured")
+                await self.lander.final_land()
             except (TouchedDown, OperatorTakeover):
                 raise
             except Exception as again:  # the landing itself failed: the autopilot's land mode, once more
@@ -219,7 +220,7 @@ class Recovery(Searching, SiteChoice):
                 self.ctx.record.record_event(
                     "defect", {"round": self.ctx.round, "state": "land", "error": repr(again)}
                 )
-                await self._final_land()
+                await self.lander.final_land()
         except TouchedDown:
             self.ctx.set_state(State.LANDED)
         except OperatorTakeover as taken:
@@ -235,6 +236,12 @@ class Recovery(Searching, SiteChoice):
         return Outcome(
             State.LANDED, self.ctx.round, site.ned_m if site is not None else None, f"defect ({text}): landed"
         )
+
+    async def _land_at_best(self, reason: str, *, measure_here: bool = True) -> Outcome:
+        """:meth:`Lander.land_at_best` once the round's deferred work is done (the candidates noted
+        from afar are sites to land at)."""
+        await self._observed_or_said()
+        return await self.lander.land_at_best(reason, measure_here=measure_here)
 
     def _failsafe_in_charge(self) -> str | None:
         """The mode of an autopilot failsafe that lands or flies home and has the vehicle now
@@ -523,7 +530,7 @@ class Recovery(Searching, SiteChoice):
                 self._descending = (target, choice)
                 continue
             if height_m <= self.ctx.p.final_land_m:
-                return await self._land()
+                return await self.lander.land()
             self.ctx.set_state(State.DESCEND)
             self.ctx.fault.check("descend", self.ctx.round)
             # an unsure judgement: half the step, so that the next look is from closer

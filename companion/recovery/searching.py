@@ -35,7 +35,7 @@ class Searching(RecoveryBase):
         land on were it to stop (whose distance the landing's need counts)."""
         s = self.ctx.tm.state
         n, e, _ = s.pos_ned_m
-        site = self._fallback_site()
+        site = self.lander.fallback_site()
         to_site = math.dist(site.ned_m[:2], (n, e)) if site is not None else 0.0
         return self.search.verdict(self._clock_s(), s.battery_pct, s.rangefinder_m, to_site), site
 
@@ -140,7 +140,7 @@ class Searching(RecoveryBase):
             assert site is not None
             self.ctx.say(5, f"budget spent: a closer look at {site.label}, seen only from afar ({count})")
             site.looked = True  # once: a site the vehicle cannot reach is not tried again
-            if not await self._fly_over(site, site.label, then="next round"):
+            if not await self.lander.fly_over(site, site.label, then="next round"):
                 return False  # not over it: no confirmation, no descent from elsewhere
             return await self._confirm_and_descend(site.ned_m, site.candidate)
         seen = (

@@ -1,5 +1,6 @@
-"""Where to land when nothing was accepted: the site ledger's least bad site (companion/site_ledger.py),
-the last look at what is in view, the spot below, and the landing itself."""
+"""The landing: on the site confirmed for descent, or, when nothing was accepted, at the site ledger's
+least bad site (companion/site_ledger.py) after a last look at what is in view and at the spot below;
+the fly-over and the final approach in the autopilot's land mode."""
 
 from __future__ import annotations
 
@@ -14,37 +15,49 @@ from companion.perception.site_check import check_site
 from companion.perception.surface_id import (
     ROOF_HEIGHT_M,
 )
-from companion.recovery.core import FrameUnavailable, Outcome, RecoveryBase, State
-from companion.recovery.looking import height_above_surroundings
+from companion.recovery.core import FrameUnavailable, Outcome, RecoveryContext, State
+from companion.recovery.following import SiteFollower
+from companion.recovery.looking import Looker, height_above_surroundings
 from companion.site_ledger import Hazard, LedgerSite, hazard_of
 
 
-class SiteChoice(RecoveryBase):
-    """The least bad site and the landing (docs/recovery.md, "When it ends without an accepted site")."""
+class Lander:
+    """The landing and the least bad site (docs/recovery.md, "When it ends without an accepted site").
 
-    async def _land(self) -> bool:
+    Args:
+        ctx: what the recovery's parts share.
+        looker: the last look at what is in view and the judgement of the spot below.
+        follower: the site followed down during the autopilot's land mode (precision landing).
+    """
+
+    def __init__(self, ctx: RecoveryContext, *, looker: Looker, follower: SiteFollower) -> None:
+        self.ctx = ctx
+        self.looker = looker
+        self.follower = follower
+
+    async def land(self) -> bool:
         self.ctx.set_state(State.LAND)
         self.ctx.fault.check("land", self.ctx.round)
-        await self._final_land()
+        await self.final_land()
         return True
 
-    async def _final_land(self) -> None:
+    async def final_land(self) -> None:
         self.ctx.set_state(State.LAND)
         self.ctx.say(5, "final approach: autopilot land mode")
         await self.follower.land_on_site(self.ctx.ctl.precision)
         self.ctx.set_state(State.LANDED)
         self.ctx.say(5, "landed")
 
-    async def _land_at_best(self, reason: str, *, measure_here: bool = True) -> Outcome:
+    async def land_at_best(self, reason: str, *, measure_here: bool = True) -> Outcome:
         """Land at the accepted site, else at the least bad one measured (:mod:`companion.site_ledger`),
         judging the spot under the vehicle too when sensors allow (``measure_here``); "here" only when
-        nothing at all was measured, and said so."""
+        nothing at all was measured, and said so. The round's deferred candidate notes are the
+        ledger's sites: the caller has them taken first (``Searcher.observed_or_said``)."""
         self.follower.forget()  # the site it lands on may not be the one last followed
-        await self._observed_or_said()  # the round's candidates noted from afar: sites to land at
         if measure_here and self.ctx.best is None:
             await self._look_around()
             await self._measure_here()
-        site = self._fallback_site()
+        site = self.fallback_site()
         if site is None and not self.ctx.ledger.sites:
             self.ctx.say(4, f"{reason} with nothing measured: landing here")
         elif site is None:
@@ -63,11 +76,11 @@ class SiteChoice(RecoveryBase):
                     "sites": [s.to_json() for s in self.ctx.ledger.sites],
                 },
             )
-            await self._fly_over(site, "the chosen site")
-        await self._land()
+            await self.fly_over(site, "the chosen site")
+        await self.land()
         return Outcome(State.LANDED, self.ctx.round, site.ned_m if site is not None else None, reason)
 
-    def _fallback_site(self) -> LedgerSite | None:
+    def fallback_site(self) -> LedgerSite | None:
         """The accepted site, else the ledger's least bad, else None."""
         if self.ctx.best is not None:
             label = f"site {self.ctx.best.candidate.index}"
@@ -85,7 +98,7 @@ class SiteChoice(RecoveryBase):
             return None  # only water or traffic measured, and not here: unknown beats known bad
         return site
 
-    async def _fly_over(self, site: LedgerSite, what: str, then: str = "landing here") -> bool:
+    async def fly_over(self, site: LedgerSite, what: str, then: str = "landing here") -> bool:
         """Fly over ``site`` at the current altitude; False (said, with what happens ``then``) when it
         was not reached in time."""
         n, e, _ = site.ned_m
