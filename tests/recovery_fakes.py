@@ -48,7 +48,7 @@ class FakeController:
 
     async def land(self, timeout_s: float, mode: Mode = Mode.LAND) -> None:
         self.lands.append(mode)
-        self.tm.state.on_ground = True
+        self.tm.state.armed = False  # down: disarmed
 
     async def engage(self) -> None:
         return None
@@ -125,6 +125,7 @@ def context(
     ``ctx.announce.said`` (a list's ``append`` of (severity, text))."""
     tm = TelemetryCache(1)
     tm.state.pos_ned_m = pos_ned_m
+    tm.state.armed = True
     tm.state.rangefinder_m = -pos_ned_m[2]
     said: list[tuple[int, str]] = []
     alarm = Alarm(ReasonCode.OTHER, criticality, "test", (0, 0), 0.0)

@@ -1,9 +1,9 @@
-"""What a recovery is made of: its states, parameters, outcome, record protocol, and the state every
-part of :class:`~companion.recovery.Recovery` shares (:class:`RecoveryBase`)."""
+"""What a recovery is made of: its states, parameters, outcome and record protocol, and the context
+the parts of :class:`~companion.recovery.Recovery` share (:class:`RecoveryContext`), given to each at
+its construction."""
 
 from __future__ import annotations
 
-import asyncio
 import enum
 import logging
 import math
@@ -12,18 +12,14 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from companion.alarms import Alarm, Criticality
-from companion.control import (
-    VehicleController,
-)
+from companion.control import VehicleController
 from companion.faults import FaultHook
 from companion.perception.depth import DepthSource, LidarDepth
 from companion.perception.surface_id import (
     Candidate,
     SurfaceParams,
 )
-from companion.reasoning.base import Reasoner
-from companion.reasoning.onboard import OnboardReasoner
-from companion.recovery.search_plan import Leg, SearchLimits, SearchPlanner, Verdict
+from companion.recovery.search_plan import SearchLimits
 from companion.site_ledger import Hazard, SiteLedger
 from companion.telemetry import TelemetryCache
 
@@ -184,86 +180,3 @@ class RecoveryContext:
         if site is not None and site.hazard >= Hazard.TRAFFIC and math.isfinite(choice.area_m2):
             radius = max(radius, min(MAX_REJECTED_RADIUS_M, 0.5 * math.sqrt(choice.area_m2)))
         self.rejected.append((target[0], target[1], radius))
-
-
-class RecoveryBase:
-    """The state one recovery keeps (one per alarm) besides its context."""
-
-    def __init__(
-        self,
-        alarm: Alarm,
-        *,
-        control: VehicleController,
-        telemetry: TelemetryCache,
-        frames: FrameSource,
-        reasoner: Reasoner,
-        announce: Callable[[int, str], None],
-        params: RecoveryParams | None = None,
-        record: Record | None = None,
-        logger: logging.Logger | None = None,
-    ) -> None:
-        self.ctx = RecoveryContext(
-            alarm,
-            control,
-            telemetry,
-            frames,
-            announce,
-            params or RecoveryParams(),
-            record or NoRecord(),
-            logger or logging.getLogger("companion.recovery"),
-            FaultHook.from_env(),
-        )
-        self.reasoner = reasoner
-        self._reengaged = 0
-        self._descending: tuple[tuple[float, float, float], Candidate] | None = None
-        self.extra = 0  # rounds flown past the budget (nothing acceptable seen)
-        # the last round ended on an exploring climb or descent: a view from here not yet looked at
-        self._new_vantage = False
-        self.search = SearchPlanner(
-            alarm.criticality, self.ctx.p.search, search_agl_m=self.ctx.p.search_agl_m, lidar_range_m=100.0
-        )
-        self._ended: Verdict | None = None  # why the search stopped, when the battery or the window did
-        # judges every measured site for the ledger, whoever decides: the cascade's own onboard tier (its
-        # judge, cues or LandNet-S, as configured) when there is one
-        onboard = getattr(reasoner, "onboard", None)
-        self._onboard = onboard if isinstance(onboard, OnboardReasoner) else OnboardReasoner()
-        self._first_look: asyncio.Task[Any] | None = None  # the first frame, asked for while engaging
-        self._unobserved: Any = None  # a round's frame not yet in the search's map (Recovery._observed)
-        self._later: list[Callable[[], object]] = []  # a round's other work that waits for its setpoint
-
-    def raise_criticality(self, criticality: Criticality) -> None:
-        """A repeated alarm can make the recovery more urgent (a shorter budget), never less."""
-        if criticality > self.ctx.criticality:
-            self.ctx.criticality = criticality
-            self.search.raise_criticality(criticality)
-            self.ctx.say(5, f"alarm raised to {criticality.name.lower()}: {self.ctx.budget} rounds")
-
-    # ------------------------------------------------------------------ what the parts provide
-    # Declared here so that each part can call the others; the parts' own definitions come first in
-    # Recovery's method resolution order (Recovery, Searching, SiteChoice, Following, Looking, RecoveryBase).
-    async def _round(self) -> bool:
-        raise NotImplementedError
-
-    async def _confirm_and_descend(self, target: tuple[float, float, float], choice: Candidate) -> bool:
-        raise NotImplementedError
-
-    async def _explore(self, blind: bool = False) -> None:
-        raise NotImplementedError
-
-    async def _search_instead(self, choice: Candidate) -> bool:
-        raise NotImplementedError
-
-    async def _search_leg(self) -> Leg:
-        raise NotImplementedError
-
-    def _go_on(self) -> bool:
-        raise NotImplementedError
-
-    async def _extra_round(self) -> bool:
-        raise NotImplementedError
-
-    async def _observed(self) -> None:
-        raise NotImplementedError
-
-    async def _observed_or_said(self) -> None:
-        raise NotImplementedError

@@ -32,6 +32,14 @@ from companion.guidance.frames import PinholeCamera, quat_to_matrix
 from companion.perception.site_track import SiteView, TrackParams, TrackResult, centre_down, track_site
 from companion.precision import PrecisionLanding
 from companion.recovery.core import FrameUnavailable, RecoveryContext
+from companion.recovery.drift import (
+    DRIFT_BLIND_S,
+    DRIFT_MIN_M_S,
+    DRIFT_WAIT_S,
+    drift_prediction,
+    site_drift_line,
+    site_drift_m_s,
+)
 
 LAND_FEED_PERIOD_S = 0.2  # a look for the site at most five times a second (wall time: the processor's pace)
 LAND_SEND_PERIOD_S = 0.1  # LANDING_TARGET ten times a second of the autopilot's clock: ArduPilot's
@@ -42,12 +50,6 @@ STEP_FOLLOW_PERIOD_S = 0.5  # during a descent step, a look for the site twice a
 STEP_FOLLOW_MIN_M = 0.3  # and the step's target moved when it is this far from where the site is seen
 RESET_CHECK_PERIOD_S = 0.1  # and for the estimate's resets ten times a second
 ADOPT_SHIFT_M = 1.0  # a look that finds the site moved this far becomes the reference all the same
-DRIFT_WINDOW_S = 12.0  # the site's drift in the estimate: a line fitted to its last seconds of frames
-DRIFT_MIN_SPAN_S = 2.5  # ... at least three frames this far apart (autopilot seconds)
-DRIFT_MIN_M_S = 0.15  # drifting faster than this: the final approach waits, following the site
-DRIFT_WAIT_S = 60.0  # a round holds for at most this long (autopilot seconds): a drift that never stops
-DRIFT_BLIND_S = 8.0  # a hold ends when no frame found the site for this long (autopilot seconds)
-DRIFT_FIT_M = 0.5  # a drift is carried forward only while the line fits the site's places this well (RMS)
 
 
 def site_view(frame: Any) -> SiteView | None:
@@ -57,67 +59,6 @@ def site_view(frame: Any) -> SiteView | None:
     camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
     view = SiteView(frame.image_rgb, camera, tuple(frame.pos_ned_m), tuple(frame.quat_wxyz))
     return dataclasses.replace(view, centre_down_m=centre_down(getattr(frame, "lidar_frd", None), view))
-
-
-@dataclasses.dataclass(frozen=True, slots=True)
-class DriftLine:
-    """A site's place in the autopilot's estimate as a line in time: at ``t_s`` (autopilot seconds)
-    it was at ``north``, ``east`` and moves ``vn``, ``ve`` m/s; ``rms_m``: how far the places it was
-    fitted to lie from it; ``newest_s``: the newest of them."""
-
-    t_s: float
-    north: float
-    east: float
-    vn: float
-    ve: float
-    rms_m: float
-    newest_s: float
-
-    @property
-    def speed_m_s(self) -> float:
-        return math.hypot(self.vn, self.ve)
-
-    def at(self, t_s: float) -> tuple[float, float]:
-        """Where the line puts the site at ``t_s``."""
-        dt = t_s - self.t_s
-        return self.north + self.vn * dt, self.east + self.ve * dt
-
-
-def site_drift_line(seen: list[tuple[float, float, float]], since_s: float = -math.inf) -> DriftLine | None:
-    """The line fitted to where frames found a site (``(t_boot_s, north, east)``, oldest first) over
-    the last ``DRIFT_WINDOW_S`` (and after ``since_s``); None with fewer than three spanning
-    ``DRIFT_MIN_SPAN_S``. A GPS that drifts moves the estimate, and the vehicle holding its target in
-    it, while the site stays put."""
-    if not seen:
-        return None
-    newest = seen[-1][0]
-    pts = np.array([p for p in seen if p[0] >= max(newest - DRIFT_WINDOW_S, since_s)])
-    if len(pts) < 3 or pts[-1, 0] - pts[0, 0] < DRIFT_MIN_SPAN_S:
-        return None
-    mean = pts.mean(axis=0)
-    t = pts[:, 0] - mean[0]
-    vn = float(np.dot(t, pts[:, 1] - mean[1]) / np.dot(t, t))
-    ve = float(np.dot(t, pts[:, 2] - mean[2]) / np.dot(t, t))
-    resid = pts[:, 1:] - mean[1:] - np.outer(t, (vn, ve))
-    rms = float(np.sqrt((resid**2).sum(axis=1).mean()))
-    return DriftLine(float(mean[0]), float(mean[1]), float(mean[2]), vn, ve, rms, float(newest))
-
-
-def site_drift_m_s(seen: list[tuple[float, float, float]], since_s: float = -math.inf) -> float:
-    """How fast a site moves in the autopilot's estimate (m/s): :func:`site_drift_line`'s speed, NaN
-    without one."""
-    line = site_drift_line(seen, since_s)
-    return line.speed_m_s if line is not None else math.nan
-
-
-def drift_prediction(line: DriftLine | None, t_s: float) -> tuple[float, float] | None:
-    """Where a steadily drifting site is at ``t_s`` in the estimate: ``line`` carried forward, at most
-    ``DRIFT_BLIND_S`` past the newest place it was fitted to. None where there is nothing to carry:
-    no line, slower than ``DRIFT_MIN_M_S`` (the site is where it was last found), or a line that fits
-    badly (a jump of the estimate is not a drift)."""
-    if line is None or not math.isfinite(t_s) or line.speed_m_s < DRIFT_MIN_M_S or line.rms_m > DRIFT_FIT_M:
-        return None
-    return line.at(min(t_s, line.newest_s + DRIFT_BLIND_S))
 
 
 def _frame_time(frame: Any) -> float:
@@ -247,7 +188,8 @@ class SiteFollower:
         """The estimate's resets not taken yet, added up (north, east): the followed site and the frames
         it is looked for in move by them into the estimate's frame now. The caller moves its target
         alike (a reset moves the vehicle's frame of reference, not the site)."""
-        resets = self.ctx.tm.position_resets.resets
+        ctx = self.ctx
+        resets = ctx.tm.position_resets.resets
         new, self._resets_seen = resets[self._resets_seen :], len(resets)
         if not new:
             return (0.0, 0.0)
@@ -260,10 +202,8 @@ class SiteFollower:
             self._site_seen.extend(moved)
         shift = [round(dn, 3), round(de, 3)]
         when = round(new[-1][0], 2)
-        self.ctx.record.record_event(
-            "estimate_reset", {"round": self.ctx.round, "t_boot_s": when, "shift_m": shift}
-        )
-        self.ctx.log.info(
+        ctx.record.record_event("estimate_reset", {"round": ctx.round, "t_boot_s": when, "shift_m": shift})
+        ctx.log.info(
             "the autopilot's position estimate jumped %.1f m (north %.1f, east %.1f): the site and the "
             "target move with it",
             math.hypot(dn, de), dn, de,
@@ -327,14 +267,15 @@ class SiteFollower:
     ) -> tuple[float, float, float]:
         """A descent step: to ``target``'s north and east at ``down_m``, the site followed meanwhile
         (module docstring). Returns the target as it ended, down at the step's start."""
+        ctx = self.ctx
         moved = [target]
         async with self._following(moved, adopt=False):
-            await self.ctx.ctl.goto(
+            await ctx.ctl.goto(
                 target[0],
                 target[1],
                 down_m,
-                tolerance_m=self.ctx.p.arrival_tolerance_m,
-                speed_m_s=self.ctx.p.arrival_speed_m_s,
+                tolerance_m=ctx.p.arrival_tolerance_m,
+                speed_m_s=ctx.p.arrival_speed_m_s,
                 timeout_s=timeout_s,
             )
         return moved[-1]
@@ -356,6 +297,7 @@ class SiteFollower:
         """Twice a second: a frame, the site in it, and the step's target onto it when it moved
         (appended to ``moved``); the estimate's resets at once. Frames missing or unusable are
         skipped: the next one is tried. ``adopt``: see :meth:`_track_once`."""
+        ctx = self.ctx
         while self.track is not None:
             started = time.monotonic()
             while time.monotonic() - started < STEP_FOLLOW_PERIOD_S:
@@ -364,12 +306,12 @@ class SiteFollower:
                 if dn or de:  # the estimate jumped: the target with it, at once
                     n, e, d = moved[-1]
                     moved.append((n + dn, e + de, d))
-                    self.ctx.ctl.retarget(n + dn, e + de)
+                    ctx.ctl.retarget(n + dn, e + de)
             try:
-                frame = await self.ctx.frames()
+                frame = await ctx.frames()
                 result = await self._track_once(frame, adopt)
             except (FrameUnavailable, ValueError, cv2.error) as exc:
-                self.ctx.log.debug("site not looked for during the step: %s", exc)
+                ctx.log.debug("site not looked for during the step: %s", exc)
                 continue
             if result is None or not result.found:
                 continue
@@ -377,10 +319,10 @@ class SiteFollower:
             if math.hypot(result.site_ned_m[0] - n, result.site_ned_m[1] - e) < STEP_FOLLOW_MIN_M:
                 continue
             moved.append((result.site_ned_m[0], result.site_ned_m[1], d))
-            self.ctx.ctl.retarget(result.site_ned_m[0], result.site_ned_m[1])
-            self.ctx.record.record_event("site_track", self._track_fields(result, "step", frame))
+            ctx.ctl.retarget(result.site_ned_m[0], result.site_ned_m[1])
+            ctx.record.record_event("site_track", self._track_fields(result, "step", frame))
             if result.reacquired:
-                self.ctx.log.info(
+                ctx.log.info(
                     "site found %.1f m from where the estimate had it: the target follows it",
                     math.hypot(result.shift_m[0], result.shift_m[1]),
                 )
@@ -394,14 +336,15 @@ class SiteFollower:
         estimate, which would carry the vehicle off the site as it drifts, and from lower down the
         site is harder to follow. A round holds ``DRIFT_WAIT_S`` in all at most, and a hold ends
         when no frame has found the site for ``DRIFT_BLIND_S``. Returns the target then."""
+        ctx = self.ctx
         drift = self._site_drift_m_s()
         if not drift >= DRIFT_MIN_M_S or self._drift_budget_s <= 0:  # NaN: too few frames to say
             return target
-        self.ctx.say(
+        ctx.say(
             5, f"the site drifts {drift:.1f} m/s in the autopilot's estimate (a GPS drifting?): "
             "holding over it until it stops",
         )  # fmt: skip
-        start = self.ctx.tm.state.t_boot_s
+        start = ctx.tm.state.t_boot_s
         moved = [target]
         why = "it stopped"
         # the looks search where the drift carries the site (:meth:`_track_once`), against the last
@@ -410,8 +353,8 @@ class SiteFollower:
         async with self._following(moved, adopt=False):
             while True:
                 await asyncio.sleep(STEP_FOLLOW_PERIOD_S)
-                self.ctx.ctl.check_interruption()
-                now = self.ctx.tm.state.t_boot_s
+                ctx.ctl.check_interruption()
+                now = ctx.tm.state.t_boot_s
                 seen = [p for p in (self._site_seen or ()) if p[0] > start]
                 if self._site_drift_m_s(since_s=start) < DRIFT_MIN_M_S:  # False while NaN
                     break
@@ -421,16 +364,16 @@ class SiteFollower:
                 if now - start >= self._drift_budget_s:
                     why = "the round's time for holding is spent"
                     break
-        waited = self.ctx.tm.state.t_boot_s - start
+        waited = ctx.tm.state.t_boot_s - start
         self._drift_budget_s -= waited
         self._reanchor = True
         still = self._site_drift_m_s(since_s=start)
-        self.ctx.record.record_event(
+        ctx.record.record_event(
             "drift_hold",
-            {"round": self.ctx.round, "drift_m_s": round(drift, 3), "waited_s": round(waited, 1), "why": why,
+            {"round": ctx.round, "drift_m_s": round(drift, 3), "waited_s": round(waited, 1), "why": why,
              "drift_after_m_s": round(still, 3) if math.isfinite(still) else None},
         )  # fmt: skip
-        self.ctx.say(5, f"held {waited:.0f} s over the site ({why}): going on")
+        ctx.say(5, f"held {waited:.0f} s over the site ({why}): going on")
         return moved[-1]
 
     def _track_fields(self, result: TrackResult, phase: str, frame: Any) -> dict[str, Any]:
@@ -523,26 +466,25 @@ class SiteFollower:
         the newest look found it (at most ``LAND_TARGET_MAX_AGE_S`` old): in the autopilot's local
         frame (PX4), else in the vehicle's body axes from where it is now (ArduPilot). The looks come
         at the processor's pace; the targets at the autopilot's, whatever the simulation's speed."""
+        ctx = self.ctx
         last = -math.inf
         while True:
             await asyncio.sleep(0.02)
-            s = self.ctx.tm.state
+            s = ctx.tm.state
             now = s.t_boot_s
             seen = stats.get("seen")
             if seen is None or now - last < LAND_SEND_PERIOD_S or now - seen[0] > LAND_TARGET_MAX_AGE_S:
                 continue
             site = seen[1]
             if local_ned:  # PX4: where the site is in its local frame
-                self.ctx.ctl.send_landing_target_local(
+                ctx.ctl.send_landing_target_local(
                     (float(site[0]), float(site[1]), float(site[2])), int(now * 1e6)
                 )
             else:  # from where the vehicle is now (it moved since the frame), in its body axes now
                 frd = quat_to_matrix(s.quat_wxyz).T @ (site - np.asarray(s.pos_ned_m))
                 if frd[2] <= 0.05:  # level with the vehicle: no line of sight to give
                     continue
-                self.ctx.ctl.send_landing_target(
-                    (float(frd[0]), float(frd[1]), float(frd[2])), int(now * 1e6)
-                )
+                ctx.ctl.send_landing_target((float(frd[0]), float(frd[1]), float(frd[2])), int(now * 1e6))
             last = now
             stats["sent"] += 1
             stats["last_site_ned_m"] = [round(float(v), 3) for v in site]
@@ -550,6 +492,7 @@ class SiteFollower:
     async def land_on_site(self, setup: PrecisionLanding | None) -> None:
         """The autopilot's land mode; with its precision landing fed from the camera when it is set up
         for one and the site is in view; recorded as ``precision_landing``."""
+        ctx = self.ctx
         if setup is None:
             why, ready = "the autopilot's parameters were not read", False
         else:
@@ -579,19 +522,19 @@ class SiteFollower:
                     why = f"no landing target within {PRECLAND_FIRST_S:g} s: the absolute target"
                     ready = False
                     feed.cancel()  # AUTO.LAND reads no target
-            await self.ctx.ctl.land(self.ctx.p.land_timeout_s, mode)
+            await ctx.ctl.land(ctx.p.land_timeout_s, mode)
         finally:
             if feed is not None:
                 feed.cancel()
                 with contextlib.suppress(asyncio.CancelledError):
                     await feed
-            self.ctx.record.record_event(
+            ctx.record.record_event(
                 "precision_landing",
                 {
-                    "round": self.ctx.round,
+                    "round": ctx.round,
                     "used": ready,
                     "why": why,
-                    "mode": self.ctx.ctl.flavour.mode_name(self.ctx.ctl.flavour.modes[mode]),
+                    "mode": ctx.ctl.flavour.mode_name(ctx.ctl.flavour.modes[mode]),
                     "targets_sent": stats["sent"],
                     "looks_found": stats["looks_found"],
                     "lost": stats["lost"],

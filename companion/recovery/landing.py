@@ -36,84 +36,89 @@ class Lander:
         self.follower = follower
 
     async def land(self) -> bool:
-        self.ctx.set_state(State.LAND)
-        self.ctx.fault.check("land", self.ctx.round)
+        ctx = self.ctx
+        ctx.set_state(State.LAND)
+        ctx.fault.check("land", ctx.round)
         await self.final_land()
         return True
 
     async def final_land(self) -> None:
-        self.ctx.set_state(State.LAND)
-        self.ctx.say(5, "final approach: autopilot land mode")
-        await self.follower.land_on_site(self.ctx.ctl.precision)
-        self.ctx.set_state(State.LANDED)
-        self.ctx.say(5, "landed")
+        ctx = self.ctx
+        ctx.set_state(State.LAND)
+        ctx.say(5, "final approach: autopilot land mode")
+        await self.follower.land_on_site(ctx.ctl.precision)
+        ctx.set_state(State.LANDED)
+        ctx.say(5, "landed")
 
     async def land_at_best(self, reason: str, *, measure_here: bool = True) -> Outcome:
         """Land at the accepted site, else at the least bad one measured (:mod:`companion.site_ledger`),
         judging the spot under the vehicle too when sensors allow (``measure_here``); "here" only when
         nothing at all was measured, and said so. The round's deferred candidate notes are the
         ledger's sites: the caller has them taken first (``Searcher.observed_or_said``)."""
+        ctx = self.ctx
         self.follower.forget()  # the site it lands on may not be the one last followed
-        if measure_here and self.ctx.best is None:
+        if measure_here and ctx.best is None:
             await self._look_around()
             await self._measure_here()
         site = self.fallback_site()
-        if site is None and not self.ctx.ledger.sites:
-            self.ctx.say(4, f"{reason} with nothing measured: landing here")
+        if site is None and not ctx.ledger.sites:
+            ctx.say(4, f"{reason} with nothing measured: landing here")
         elif site is None:
-            self.ctx.say(4, f"{reason}, only water or traffic measured elsewhere: landing here")
+            ctx.say(4, f"{reason}, only water or traffic measured elsewhere: landing here")
         else:
             where = "here" if site.label == "here" else f"at {site.label}"
-            self.ctx.say(
+            ctx.say(
                 4, f"{reason}: landing {where} ({site.hazard.name.lower().replace('_', ' ')}: {site.why})"
             )
-            self.ctx.record.record_event(
+            ctx.record.record_event(
                 "fallback_site",
                 {
-                    "round": self.ctx.round,
+                    "round": ctx.round,
                     "reason": reason,
                     "chosen": site.to_json(),
-                    "sites": [s.to_json() for s in self.ctx.ledger.sites],
+                    "sites": [s.to_json() for s in ctx.ledger.sites],
                 },
             )
             await self.fly_over(site, "the chosen site")
         await self.land()
-        return Outcome(State.LANDED, self.ctx.round, site.ned_m if site is not None else None, reason)
+        return Outcome(State.LANDED, ctx.round, site.ned_m if site is not None else None, reason)
 
     def fallback_site(self) -> LedgerSite | None:
         """The accepted site, else the ledger's least bad, else None."""
-        if self.ctx.best is not None:
-            label = f"site {self.ctx.best.candidate.index}"
+        ctx = self.ctx
+        if ctx.best is not None:
+            label = f"site {ctx.best.candidate.index}"
             return LedgerSite(
-                self.ctx.best.ned_m,
+                ctx.best.ned_m,
                 Hazard.ACCEPTED,
                 "confirmed for descent",
-                self.ctx.round,
+                ctx.round,
                 True,
                 label=label,
             )
-        n, e, _ = self.ctx.tm.state.pos_ned_m
-        site = self.ctx.ledger.least_bad((n, e))
-        if site is not None and site.hazard > Hazard.UNKNOWN and not self.ctx.ledger.near((n, e)):
+        n, e, _ = ctx.tm.state.pos_ned_m
+        site = ctx.ledger.least_bad((n, e))
+        if site is not None and site.hazard > Hazard.UNKNOWN and not ctx.ledger.near((n, e)):
             return None  # only water or traffic measured, and not here: unknown beats known bad
         return site
 
     async def fly_over(self, site: LedgerSite, what: str, then: str = "landing here") -> bool:
         """Fly over ``site`` at the current altitude; False (said, with what happens ``then``) when it
         was not reached in time."""
+        ctx = self.ctx
         n, e, _ = site.ned_m
-        n0, e0, d = self.ctx.tm.state.pos_ned_m
+        n0, e0, d = ctx.tm.state.pos_ned_m
         try:
-            await self.ctx.ctl.goto(
+            await ctx.ctl.goto(
                 n,
                 e,
                 d,
-                tolerance_m=self.ctx.p.arrival_tolerance_m,
-                speed_m_s=self.ctx.p.arrival_speed_m_s,
-                timeout_s=self.ctx.p.move_timeout(math.hypot(n - n0, e - e0)),
+                tolerance_m=ctx.p.arrival_tolerance_m,
+                speed_m_s=ctx.p.arrival_speed_m_s,
+                timeout_s=ctx.p.move_timeout(math.hypot(n - n0, e - e0)),
             )
         except TargetTimeout as exc:
-            self.ctx.say(4, f"{what} target not reached ({exc.error_m:.1f} m off): {then}")
+            ctx.say(4, f"{what} target not reached ({exc.error_m:.1f} m off): {then}")
             return False
         return True
 
@@ -133,13 +138,14 @@ class Lander:
     async def _measure_here(self) -> None:
         """Judge the spot under the vehicle (one frame, no waiting: a missing frame skips it) into the
         ledger, so that "here" competes with the sites measured before on what is there."""
+        ctx = self.ctx
         try:
-            frame = await self.ctx.frames()
+            frame = await ctx.frames()
         except FrameUnavailable:
             return
-        n, e, d = self.ctx.tm.state.pos_ned_m
+        n, e, d = ctx.tm.state.pos_ned_m
         check = await asyncio.to_thread(check_site, frame.lidar_frd, frame.pos_ned_m, frame.quat_wxyz, (n, e))
-        rng = frame.rangefinder_m if math.isfinite(frame.rangefinder_m) else self.ctx.tm.state.rangefinder_m
+        rng = frame.rangefinder_m if math.isfinite(frame.rangefinder_m) else ctx.tm.state.rangefinder_m
         ground_d = -check.surface_up_m if check.measured else d + rng
         if not math.isfinite(ground_d):
             return
@@ -153,12 +159,12 @@ class Lander:
             strip=False,
             judged=check.measured or frame.image_rgb is not None,
         )
-        self.ctx.ledger.add(
+        ctx.ledger.add(
             LedgerSite(
                 target,
                 hazard,
                 ", ".join(kinds) or "nothing seen against it",
-                self.ctx.round,
+                ctx.round,
                 True,
                 label="here",
             )

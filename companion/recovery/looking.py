@@ -90,49 +90,51 @@ class Looker:
         """A frame; while none comes, the vehicle holds on its current setpoint and the request is
         repeated every ``SENSOR_RETRY_S``, each failure recorded. Raises ``SensorsLost`` after
         ``sensor_loss_s`` without one."""
-        self.ctx.set_state(State.ACQUIRE)
-        self.ctx.fault.check("acquire", 1 if first_round else self.ctx.round)
+        ctx = self.ctx
+        ctx.set_state(State.ACQUIRE)
+        ctx.fault.check("acquire", 1 if first_round else ctx.round)
         since = time.monotonic()
         for attempt in itertools.count():
             try:
-                return await self.ctx.frames()
+                return await ctx.frames()
             except FrameUnavailable as exc:
                 waited = time.monotonic() - since
-                self.ctx.record.record_event(
-                    "sensor_fault", {"round": self.ctx.round, "error": str(exc), "waited_s": round(waited, 2)}
+                ctx.record.record_event(
+                    "sensor_fault", {"round": ctx.round, "error": str(exc), "waited_s": round(waited, 2)}
                 )
-                if waited >= self.ctx.p.sensor_loss_s:
+                if waited >= ctx.p.sensor_loss_s:
                     raise SensorsLost(f"no usable sensor frame for {waited:.0f} s ({exc})") from exc
                 if attempt == 0:
-                    self.ctx.say(4, f"no sensor frame ({exc}): holding, asking again")
+                    ctx.say(4, f"no sensor frame ({exc}): holding, asking again")
                 await asyncio.sleep(SENSOR_RETRY_S)
         raise AssertionError("unreachable")
 
     def surface_id(self, frame: Any, camera: PinholeCamera) -> list[Candidate]:
         """Candidates from the configured depth source; the quadrant fallback when it has nothing."""
-        self.ctx.fault.check("surface_id", self.ctx.round)
+        ctx = self.ctx
+        ctx.fault.check("surface_id", ctx.round)
         try:
             cands, _depth = propose(
-                self.ctx.p.depth_source,
+                ctx.p.depth_source,
                 camera,
                 image=frame.image_rgb,
                 lidar_frd=frame.lidar_frd,
                 quat_wxyz=frame.quat_wxyz,
                 pos_ned_m=frame.pos_ned_m,
                 ground_up_m=frame.pos_ned_m[2],
-                params=self.ctx.p.surface,
+                params=ctx.p.surface,
             )
         except DepthError as exc:
             net = self.onboard.landnet
             if net is None or frame.image_rgb is None or frame.lidar_frd is not None:
                 # a sweep that came empty is a gap (the next one is asked for), not a blind vehicle
-                self.ctx.log.warning("Surface ID has no depth (%s): quadrant fallback", exc)
+                ctx.log.warning("Surface ID has no depth (%s): quadrant fallback", exc)
                 return quadrant_fallback(camera)
             # no LiDAR at all (a camera alone, or a LiDAR that failed): surfaces by how they look
             # (companion.perception.appearance)
             clear = clear_cells(frame.image_rgb, net.presence, tuple(net.classes))
             cands = appearance_candidates(clear, camera.width, camera.height, max_candidates=5)
-            self.ctx.log.info(
+            ctx.log.info(
                 "Surface ID has no depth (%s): %d clear roof surface%s by their look", exc, len(cands),
                 "" if len(cands) == 1 else "s",
             )  # fmt: skip
@@ -143,7 +145,8 @@ class Looker:
         """The reasoner's order of the candidates, from their crops (the configured context variant),
         and the one the vehicle flies to: the first in that order that is not a fallback crop (a
         quadrant has no measured site). Both go to the record's ``rank`` event (``order``, ``chosen``)."""
-        self.ctx.fault.check("rank", self.ctx.round)
+        ctx = self.ctx
+        ctx.fault.check("rank", ctx.round)
         image = frame.image_rgb
         names: list[str] = []
         if image is None:
@@ -153,22 +156,22 @@ class Looker:
             request = RankRequest(
                 crops,
                 None if all(c.fallback for c in candidates) else tuple(candidates),
-                context=image if self.ctx.p.context == "full" else None,
-                critical=self.ctx.criticality == Criticality.CRITICAL,
-                cores=cores if pad_of(self.ctx.p.context) > 0 else None,
+                context=image if ctx.p.context == "full" else None,
+                critical=ctx.criticality == Criticality.CRITICAL,
+                cores=cores if pad_of(ctx.p.context) > 0 else None,
             )
             ranking = await self.reasoner.rank(request)
         chosen = chosen_position(ranking, candidates)
-        self.ctx.record.record_event(
+        ctx.record.record_event(
             "rank",
             {
-                "round": self.ctx.round,
+                "round": ctx.round,
                 "order": list(ranking.order),
                 "chosen": chosen,
                 "rationale": ranking.rationale,
                 "tier": ranking.tier,
                 "latency_s": ranking.latency_s,
-                "context": self.ctx.p.context,
+                "context": ctx.p.context,
                 "images": names,
                 "candidates": [c.to_json() for c in candidates],
                 # the candidates' frame, on the autopilot's clock: where an evaluation finds what the
@@ -183,7 +186,8 @@ class Looker:
     ) -> Decision:
         """Reasoner and geometric veto on a close-up of the site (the cascade arbitrates); the verdict
         goes to the ledger too, with what the onboard tier saw against the site whoever decided."""
-        self.ctx.fault.check("confirm", self.ctx.round)
+        ctx = self.ctx
+        ctx.fault.check("confirm", ctx.round)
         image = frame.image_rgb
         if image is None and not check.measured:
             # neither sensor judged the site: not a reason to strike it off (contested: asked again)
@@ -206,7 +210,7 @@ class Looker:
                 ConfirmRequest(
                     closeup,
                     check if check.measured else None,
-                    critical=self.ctx.criticality == Criticality.CRITICAL,
+                    critical=ctx.criticality == Criticality.CRITICAL,
                     site_ne_m=(target[0], target[1]),
                     site_up_m=choice.height_above_m if math.isfinite(choice.height_above_m) else None,
                     site_strip=choice.strip,
@@ -226,22 +230,22 @@ class Looker:
             judged=image is not None or check.measured,
         )
         why = decision.rationale[:160] if not decision.accept else "confirmed for descent"
-        self.ctx.ledger.add(
+        ctx.ledger.add(
             LedgerSite(
                 target,
                 hazard,
                 why,
-                self.ctx.round,
+                ctx.round,
                 True,
                 choice.edge_distance_m,
                 f"site {choice.index}",
                 choice,
             )
         )
-        self.ctx.record.record_event(
+        ctx.record.record_event(
             "confirm",
             {
-                "round": self.ctx.round,
+                "round": ctx.round,
                 "accept": decision.accept,
                 "unsure": decision.unsure,
                 "rationale": decision.rationale,
@@ -270,25 +274,26 @@ class Looker:
         asked for, ``SITE_RETRIES`` times at most; then the site goes to the reasoner unmeasured and is
         judged from the image, as with no LiDAR at all (a frame without one goes so at once). A gap
         never strikes a site off."""
+        ctx = self.ctx
         for attempt in range(SITE_RETRIES + 1):
             frame = await self.acquire()
-            self.ctx.set_state(State.CONFIRM)
+            ctx.set_state(State.CONFIRM)
             check = await asyncio.to_thread(
                 check_site, frame.lidar_frd, frame.pos_ned_m, frame.quat_wxyz, (target[0], target[1])
             )
             if check.measured or frame.lidar_frd is None:
                 return frame, check
-            self.ctx.record.record_event(
+            ctx.record.record_event(
                 "sensor_fault",
                 {
-                    "round": self.ctx.round,
+                    "round": ctx.round,
                     "error": f"site not measured: {check.points} LiDAR returns in the rotor disc",
                     "attempt": attempt,
                 },
             )
             if attempt < SITE_RETRIES:
                 await asyncio.sleep(SENSOR_RETRY_S)
-        self.ctx.say(4, "the LiDAR keeps missing the site: judging it from the image")
+        ctx.say(4, "the LiDAR keeps missing the site: judging it from the image")
         return frame, check
 
     def judge(
@@ -339,9 +344,10 @@ class Looker:
         self, image: Any, candidates: list[Candidate]
     ) -> tuple[tuple[Any, ...], tuple[tuple[int, int, int, int], ...], list[str]]:
         """The crops the reasoner ranks (and their cores), saved to the record: a worker-thread job."""
-        crops, cores = rank_crops(image, [c.box_px for c in candidates], self.ctx.p.context)
+        ctx = self.ctx
+        crops, cores = rank_crops(image, [c.box_px for c in candidates], ctx.p.context)
         names = [
-            self._saved_name(self.ctx.record.save_image(f"round{self.ctx.round:02d}-rank-crop{k}", c))
+            self._saved_name(ctx.record.save_image(f"round{ctx.round:02d}-rank-crop{k}", c))
             for k, c in enumerate(crops)
         ]
         return crops, cores, names
@@ -365,20 +371,19 @@ class Looker:
     def ipm(self, c: Candidate, frame: Any, camera: PinholeCamera) -> tuple[float, float, float] | None:
         """The chosen pixel -> world point through the LiDAR; the flat-ground fallback without it;
         None when neither can place it."""
-        self.ctx.fault.check("ipm", self.ctx.round)
+        ctx = self.ctx
+        ctx.fault.check("ipm", ctx.round)
         u, v = c.centre_px
         try:
             index = LidarPixelIndex(frame.lidar_frd, camera)
             p = pixel_to_ned_surface(u, v, index, frame.pos_ned_m, frame.quat_wxyz)
         except IpmError as exc:
             ground_d = frame.pos_ned_m[2] + frame.rangefinder_m
-            self.ctx.log.warning(
-                "IPM through the LiDAR failed (%s): flat ground at the rangefinder distance", exc
-            )
+            ctx.log.warning("IPM through the LiDAR failed (%s): flat ground at the rangefinder distance", exc)
             try:
                 p = pixel_to_ned_flat(u, v, camera, frame.pos_ned_m, frame.quat_wxyz, ground_d)
             except IpmError as flat:  # e.g. a rangefinder reading 0: the ray never meets that plane
-                self.ctx.log.warning("and flat ground failed too (%s): no world position", flat)
+                ctx.log.warning("and flat ground failed too (%s): no world position", flat)
                 return None
         return (float(p[0]), float(p[1]), float(p[2]))
 
