@@ -15,10 +15,7 @@ from companion.alarms import Alarm, Criticality
 from companion.control import VehicleController
 from companion.faults import FaultHook
 from companion.perception.depth import DepthSource, LidarDepth
-from companion.perception.surface_id import (
-    Candidate,
-    SurfaceParams,
-)
+from companion.perception.surface_id import Candidate, SurfaceParams
 from companion.recovery.search_plan import SearchLimits
 from companion.site_ledger import Hazard, SiteLedger
 from companion.telemetry import TelemetryCache

@@ -7,14 +7,10 @@ from __future__ import annotations
 import asyncio
 import math
 
-from companion.control import (
-    TargetTimeout,
-)
+from companion.control import TargetTimeout
 from companion.guidance.frames import PinholeCamera
 from companion.perception.site_check import check_site
-from companion.perception.surface_id import (
-    ROOF_HEIGHT_M,
-)
+from companion.perception.surface_id import ROOF_HEIGHT_M
 from companion.recovery.core import FrameUnavailable, Outcome, RecoveryContext, State
 from companion.recovery.following import SiteFollower
 from companion.recovery.looking import Looker, height_above_surroundings
@@ -36,6 +32,7 @@ class Lander:
         self.follower = follower
 
     async def land(self) -> bool:
+        """The final approach where the vehicle is (over the site); True once down."""
         ctx = self.ctx
         ctx.set_state(State.LAND)
         ctx.fault.check("land", ctx.round)
@@ -43,6 +40,7 @@ class Lander:
         return True
 
     async def final_land(self) -> None:
+        """The autopilot's land mode, with its precision landing on the followed site when it can."""
         ctx = self.ctx
         ctx.set_state(State.LAND)
         ctx.say(5, "final approach: autopilot land mode")

@@ -82,9 +82,8 @@ class Looker:
         self.reasoner = reasoner
         self.onboard = onboard
         self._plan = plan
-        self.roofs_in_view = (
-            False  # this round's Surface ID measured a roof: a built-up area here (the round sets it)
-        )
+        # this round's Surface ID measured a roof: a built-up area here (the round sets it)
+        self.roofs_in_view = False
 
     async def acquire(self, *, first_round: bool = False) -> Any:
         """A frame; while none comes, the vehicle holds on its current setpoint and the request is

@@ -44,9 +44,7 @@ from companion.faults import FaultHook
 from companion.guidance.descent import height_above_site
 from companion.guidance.frames import PinholeCamera, compass_point
 from companion.perception.site_check import check_site
-from companion.perception.surface_id import (
-    Candidate,
-)
+from companion.perception.surface_id import Candidate
 from companion.reasoning.base import Reasoner
 from companion.recovery.core import (
     MAX_REENGAGE,
