@@ -5,7 +5,6 @@ events. The telemetry is the real :class:`~companion.telemetry.TelemetryCache`."
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -13,11 +12,13 @@ import numpy as np
 
 from companion.alarms import Alarm, Criticality, ReasonCode
 from companion.flavour import PX4, Flavour, Mode
+from companion.guidance.frames import PinholeCamera
 from companion.perception.surface_id import Candidate
 from companion.precision import PrecisionLanding
 from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequest
 from companion.recovery.core import FrameUnavailable, RecoveryContext, RecoveryParams
 from companion.telemetry import TelemetryCache
+from landfall_link.sensorstream import SensorFrame
 
 
 class FakeController:
@@ -58,18 +59,34 @@ class FakeController:
 
 
 class FakeFrames:
-    """The frames it was given, one a call, the last one again and again; ``FrameUnavailable`` with
-    none. ``calls`` counts the asks."""
+    """The frames it was given, one a call, the last one again and again; ``FrameUnavailable`` the
+    first ``fails`` times, and always with none. ``calls`` counts the asks."""
 
-    def __init__(self, *frames: Any) -> None:
+    def __init__(self, *frames: Any, fails: int = 0) -> None:
         self.frames = list(frames)
+        self.fails = fails
         self.calls = 0
 
     async def __call__(self) -> Any:
         self.calls += 1
-        if not self.frames:
+        if self.fails > 0 or not self.frames:
+            self.fails -= 1
             raise FrameUnavailable("no frame in this test")
         return self.frames.pop(0) if len(self.frames) > 1 else self.frames[0]
+
+
+class Said:
+    """The announcements (STATUSTEXT), kept: ``texts`` without their severities."""
+
+    def __init__(self) -> None:
+        self.said: list[tuple[int, str]] = []
+
+    def __call__(self, severity: int, text: str) -> None:
+        self.said.append((severity, text))
+
+    @property
+    def texts(self) -> list[str]:
+        return [text for _severity, text in self.said]
 
 
 @dataclass
@@ -116,26 +133,26 @@ class KeptRecord:
 
 def context(
     *frames: Any,
+    fails: int = 0,
     pos_ned_m: tuple[float, float, float] = (0.0, 0.0, -50.0),
     criticality: Criticality = Criticality.HIGH,
     params: RecoveryParams | None = None,
 ) -> RecoveryContext:
-    """A recovery's context on fakes: a vehicle hovering at ``pos_ned_m`` (rangefinder to the ground
-    at down 0), ``frames`` to be asked for, a :class:`KeptRecord` and the announcements in
-    ``ctx.announce.said`` (a list's ``append`` of (severity, text))."""
+    """A recovery's context on fakes: a vehicle hovering at ``pos_ned_m`` (the rangefinder reads the
+    ground at down 0), ``frames`` to be asked for (:class:`FakeFrames`, failing ``fails`` times), a
+    :class:`KeptRecord` and the announcements kept (:class:`Said`)."""
     tm = TelemetryCache(1)
     tm.state.pos_ned_m = pos_ned_m
     tm.state.armed = True
     tm.state.rangefinder_m = -pos_ned_m[2]
-    said: list[tuple[int, str]] = []
     alarm = Alarm(ReasonCode.OTHER, criticality, "test", (0, 0), 0.0)
     ctl: Any = FakeController(tm)
     return RecoveryContext(
         alarm,
         ctl,
         tm,
-        FakeFrames(*frames),
-        lambda severity, text: said.append((severity, text)),
+        FakeFrames(*frames, fails=fails),
+        Said(),
         params or RecoveryParams(),
         KeptRecord(),
     )
@@ -146,31 +163,30 @@ def frame(
     image: np.ndarray | None = None,
     lidar_frd: np.ndarray | None = None,
     pos_ned_m: tuple[float, float, float] = (0.0, 0.0, -50.0),
-    rangefinder_m: float = math.nan,
-    size: tuple[int, int] = (64, 48),
-    time_boot_ms: int | None = 12_000,
-) -> Any:
-    """A sensor frame as the recovery reads one: a level camera looking down (fx = width / 2)."""
-    w, h = size
+    quat_wxyz: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0),
+    rangefinder_m: float = 50.0,
+    camera: PinholeCamera | None = None,
+    time_boot_ms: int = 12_000,
+) -> SensorFrame:
+    """A sensor frame as the sensor stream brings one (level by default, its camera looking down with
+    a 90 degree field of view, 64 x 48 pixels)."""
+    cam = camera or PinholeCamera.from_hfov(64, 48, 90.0)
     return SensorFrame(
-        image, lidar_frd, pos_ned_m, rangefinder_m, w, h, w / 2, w / 2, w / 2, h / 2, time_boot_ms
+        t_s=0.0,
+        time_boot_ms=time_boot_ms,
+        pos_ned_m=pos_ned_m,
+        quat_wxyz=quat_wxyz,
+        rangefinder_m=rangefinder_m,
+        fx=cam.fx,
+        fy=cam.fy,
+        cx=cam.cx,
+        cy=cam.cy,
+        width=cam.width,
+        height=cam.height,
+        weather="clear",
+        image_rgb=image,
+        lidar_frd=lidar_frd,
     )
-
-
-@dataclass
-class SensorFrame:
-    image_rgb: np.ndarray | None
-    lidar_frd: np.ndarray | None
-    pos_ned_m: tuple[float, float, float]
-    rangefinder_m: float
-    width: int
-    height: int
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-    time_boot_ms: int | None
-    quat_wxyz: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
 
 
 def candidate(index: int, site_ned_m: tuple[float, float, float] | None = None, **kw: Any) -> Candidate:

@@ -875,9 +875,9 @@ def test_chain_from_a_frame_to_a_confirmed_target_raises_only_typed_errors(
     image = scene_image(scene)
     lidar = scene_lidar(scene, scene_depth(scene), stride, range_m)
     down = float(quat_to_matrix(scene.quat)[2, 2])
-    frame = recovery_fakes.SensorFrame(
-        image, lidar, scene.pos, scene.alt_m / down, cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy,
-        None, scene.quat,
+    frame = recovery_fakes.frame(
+        image=image, lidar_frd=lidar, pos_ned_m=scene.pos, quat_wxyz=scene.quat,
+        rangefinder_m=scene.alt_m / down, camera=cam,
     )  # fmt: skip
     depth = LidarDepth(cell_px=scene.cell_px, range_m=range_m)
     surface = data.draw(surface_params)
@@ -915,11 +915,11 @@ def test_recovery_ipm_with_no_lidar_and_a_zero_rangefinder_places_nothing() -> N
     reads 0 (the flat-ground plane through the camera: no ray meets it). Neither way places the site:
     None, and the round moves on, instead of an IpmError escaping the round."""
     cam = PinholeCamera.from_hfov(960, 540, 90.0)
-    frame = recovery_fakes.frame(pos_ned_m=(0.0, 0.0, -50.0), rangefinder_m=0.0, size=(960, 540))
+    frame = recovery_fakes.frame(pos_ned_m=(0.0, 0.0, -50.0), rangefinder_m=0.0, camera=cam)
     looker = _looker()
     cand = Candidate(0, (470, 260, 490, 280), (480.0, 270.0))
     assert looker.ipm(cand, frame, cam) is None
-    frame.rangefinder_m = 50.0  # flat ground 50 m below: placed under the pixel
+    frame = dataclasses.replace(frame, rangefinder_m=50.0)  # flat ground 50 m below: under the pixel
     target = looker.ipm(cand, frame, cam)
     assert target is not None
     assert target[2] == pytest.approx(0.0)
