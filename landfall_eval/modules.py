@@ -69,6 +69,7 @@ from landfall_eval.surfaces import (
     best_jaccard,
     hover_pose,
     launch_frame,
+    sensor_frame,
 )
 from landfall_link.sensorstream import SensorFrame
 from simbridge.autopilot.core import Autopilot
@@ -304,33 +305,6 @@ def _looker(cascade: Cascade, context: str = "crop") -> Looker:
     return Looker(ctx, reasoner=cascade, onboard=onboard_tier(cascade), plan=SearchPlanner(Criticality.HIGH))
 
 
-def _sensor_frame(
-    world: Terrain,
-    camera: PinholeCamera,
-    pos: Vec3,
-    quat: tuple[float, float, float, float],
-    image: np.ndarray,
-    lidar: np.ndarray,
-) -> SensorFrame:
-    """What the sensor stream would bring from this pose: the image, the sweep and the rangefinder."""
-    return SensorFrame(
-        t_s=0.0,
-        time_boot_ms=0,
-        pos_ned_m=pos,
-        quat_wxyz=quat,
-        rangefinder_m=world.rangefinder_m(pos, quat),
-        fx=camera.fx,
-        fy=camera.fy,
-        cx=camera.cx,
-        cy=camera.cy,
-        width=camera.width,
-        height=camera.height,
-        weather="clear",
-        image_rgb=image,
-        lidar_frd=lidar,
-    )
-
-
 def _rank_trial(
     lf: LaunchFrame, zones: Sequence[SafeZone], cands: list[Candidate], ranking: Ranking, chosen: int | None
 ) -> RankTrial:
@@ -364,7 +338,7 @@ async def _confirm_site(
     lidar = world.lidar_sweep(pos, quat, 0.0, rng)
     cm = world.camera
     camera = PinholeCamera.from_hfov(cm.width_px, cm.height_px, cm.hfov_deg)
-    sensed = _sensor_frame(world, camera, pos, quat, frame.rgb, lidar)
+    sensed = sensor_frame(world, camera, pos, quat, frame.rgb, lidar, weather)
     check = check_site(lidar, pos, quat, site_ne)  # what the looker's measure_site checks under the site
     return await looker.confirm(check, sensed, (site_ne[0], site_ne[1], -roof_up_m), ROOF_SITE)
 
@@ -442,7 +416,7 @@ async def _iteration(
     world = sc.terrain
     assert isinstance(world, LiveWorld)  # launch_frame has checked it
     jaccard, _box = best_jaccard(lf)
-    frame = _sensor_frame(world, lf.camera, lf.pos_ned_m, lf.quat_wxyz, lf.image, lf.lidar_frd)
+    frame = sensor_frame(world, lf.camera, lf.pos_ned_m, lf.quat_wxyz, lf.image, lf.lidar_frd, weather)
     looker = _looker(cascade)
     cands = looker.surface_id(frame, lf.camera)
     ranks: dict[str, RankTrial] = {}
