@@ -2,8 +2,9 @@
 alarm to the ground (rounds, descent steps, the autopilot's failsafes, a lost link, a defect of its
 own), in :mod:`~companion.recovery.machine`. It owns four parts, each built on the one context they
 share (:class:`~companion.recovery.core.RecoveryContext`: the alarm's criticality, the state, the
-round, the accepted and rejected sites, the site ledger, the record and the announcement) and given
-the parts it calls; none reaches into another's state.
+round, the accepted and rejected sites, the site ledger, the record and the announcement) and given,
+at its construction, the parts it calls (the looker and the searcher, the search's map); none is
+another's ``self``.
 
 Its parts, as ``Recovery.<attribute>``:
 
