@@ -22,8 +22,8 @@ from companion.perception.sources import make_source
 from companion.perception.surface_id import SurfaceParams
 from companion.reasoning.tiers import BUILTIN_PROFILES, ONBOARD, build_cascade, secrets
 from companion.recovery import RecoveryParams
+from companion.recovery.search_plan import SearchLimits
 from companion.redact import redact_logs
-from companion.search import SearchLimits
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -7,8 +7,8 @@ iteration feeds all three experiments:
 1. **Surface ID**: the Jaccard index of the best candidate's box against the safe zone's
    (:func:`~landfall_eval.surfaces.best_jaccard`, LiDAR depth).
 2. **Landing distance**: the reasoner ranks the candidates (``crop`` context), the chosen candidate's
-   centre pixel goes through the LiDAR IPM as the recovery loop does it (``LidarPixelIndex`` and
-   ``pixel_to_ned_surface``), and simbridge's JSBSim F450 with its PX4-flavoured autopilot (the objects the
+   centre pixel goes through the recovery's IPM (through the LiDAR, else flat ground at the
+   rangefinder's distance), and simbridge's JSBSim F450 with its PX4-flavoured autopilot (the objects the
    ``simbridge`` process steps, here in-process, unpaced, without MAVLink) flies there at the launch
    altitude, descends over it in the recovery loop's steps (0.8 of the rangefinder distance per step,
    arrival by position and speed) and hands over to the autopilot's land mode at 5 m. The figure is
@@ -19,11 +19,14 @@ iteration feeds all three experiments:
    candidate's centre pixel truly shows a point inside a ground-truth safe zone of the scenario (the
    clear roof inset by 2 m; graded by the depth image, not by the companion's own ``site_ned_m``).
    Confirm renders a close-up frame and a LiDAR sweep 30 m above the centre of the scenario file's
-   ``clear_roof`` building and of its ``cluttered_roof`` (hover scatter seeded), cuts the close-up
-   around the site as the recovery loop does (``site_box``), runs the LiDAR site check and asks the
-   cascade; it succeeds when it accepts the clear roof and rejects the cluttered one. Confirm does not
+   ``clear_roof`` building and of its ``cluttered_roof`` (hover scatter seeded), runs the LiDAR site
+   check and has the recovery confirm the site on its close-up; it succeeds when it accepts the clear
+   roof and rejects the cluttered one. Confirm does not
    depend on the context level: it runs once per iteration and the same figures stand in every
    context's entry.
+
+Surface ID, the rank, IPM and the confirmation are the recovery's own: its looker
+(:class:`companion.recovery.looking.Looker`), on no vehicle, asked what a round asks of it.
 
 The reasoner is the flight cascade ``companion-eval rank --reasoner NAME`` builds (the config's
 profiles, deadlines and fallbacks; the onboard tier answers when the named tier cannot in time),
@@ -33,6 +36,7 @@ built afresh per iteration so the lone-"no" counts of one iteration do not carry
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import math
 import os
 import statistics
@@ -42,18 +46,22 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from pymavlink.dialects.v20 import common as mavlink2
 
+from companion.alarms import Alarm, Criticality, ReasonCode
 from companion.config import load_config
+from companion.control import VehicleController
 from companion.guidance.frames import PinholeCamera
-from companion.guidance.ipm import IpmError, LidarPixelIndex, pixel_to_ned_surface
-from companion.perception.crops import pad_of, rank_crops
-from companion.perception.depth import LidarDepth
 from companion.perception.site_check import check_site
 from companion.perception.surface_id import Candidate
-from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequest
+from companion.reasoning.base import Decision, Ranking
 from companion.reasoning.cascade import Cascade
 from companion.reasoning.tiers import build_cascade
-from companion.recovery import RecoveryParams, site_closeup
+from companion.recovery import FrameUnavailable, RecoveryParams
+from companion.recovery.core import RecoveryContext
+from companion.recovery.looking import Looker, onboard_tier
+from companion.recovery.search_plan import SearchPlanner
+from companion.telemetry import TelemetryCache
 from landfall_eval.landing import pixel_truth_ned
 from landfall_eval.study import STUDY_JACCARD, STUDY_LANDING_DISTANCE_M
 from landfall_eval.surfaces import (
@@ -61,8 +69,9 @@ from landfall_eval.surfaces import (
     best_jaccard,
     hover_pose,
     launch_frame,
-    propose_on,
+    sensor_frame,
 )
+from landfall_link.sensorstream import SensorFrame
 from simbridge.autopilot.core import Autopilot
 from simbridge.autopilot.flavours import MAV_RESULT_ACCEPTED, flavour_named
 from simbridge.control import Setpoint
@@ -275,28 +284,33 @@ class Iteration:
     landing: Landing
 
 
-def _chosen(order: Sequence[int], cands: Sequence[Candidate]) -> Candidate | None:
-    """The recovery loop's choice: the first ranked candidate that is not a fallback crop."""
-    return next((cands[k] for k in order if not cands[k].fallback), None)
+# the site a confirmation close-up is taken over: the roof as a round would confirm it, without Surface
+# ID's measurements (it is not chosen in a frame), so its height above the street is not given
+ROOF_SITE = Candidate(0, (0, 0, 1, 1), (0.5, 0.5))
+BENCH_ALARM = Alarm(ReasonCode.OTHER, Criticality.HIGH, "module bench", (0, 0), 0.0)
 
 
-async def _rank(cascade: Cascade, lf: LaunchFrame, cands: list[Candidate], context: str) -> Ranking:
-    crops, cores = rank_crops(lf.image, [c.box_px for c in cands], context)
-    request = RankRequest(
-        crops,
-        None if all(c.fallback for c in cands) else tuple(cands),
-        context=lf.image if context == "full" else None,
-        cores=cores if pad_of(context) > 0 else None,
+async def _no_frame() -> Any:
+    raise FrameUnavailable("the module bench hands the looker its frames")
+
+
+def _looker(cascade: Cascade, context: str = "crop") -> Looker:
+    """The recovery's looker for one context level of the rank, on no vehicle: a controller that sends
+    nothing, telemetry never heard, no frame source (the bench hands it each frame) and no record."""
+    tm = TelemetryCache()
+    ctl = VehicleController(tm, lambda _msg, _sys, _comp: None, mavlink2.MAVLink(None))
+    ctx = RecoveryContext(
+        BENCH_ALARM, ctl, tm, _no_frame, lambda _sev, _text: None, RecoveryParams(context=context)
     )
-    return await cascade.rank(request)
+    return Looker(ctx, reasoner=cascade, onboard=onboard_tier(cascade), plan=SearchPlanner(Criticality.HIGH))
 
 
 def _rank_trial(
-    lf: LaunchFrame, zones: Sequence[SafeZone], cands: list[Candidate], ranking: Ranking
+    lf: LaunchFrame, zones: Sequence[SafeZone], cands: list[Candidate], ranking: Ranking, chosen: int | None
 ) -> RankTrial:
-    choice = _chosen(ranking.order, cands)
-    if choice is None:
+    if chosen is None:
         return RankTrial(False, ranking.latency_s, f"seed {lf.seed}: no measured candidate ranked")
+    choice = cands[chosen]
     point = truth_point(lf, *choice.centre_px)
     if point is None:
         return RankTrial(False, ranking.latency_s, f"seed {lf.seed}: site {choice.index} shows no surface")
@@ -309,7 +323,7 @@ def _rank_trial(
 
 
 async def _confirm_site(
-    cascade: Cascade,
+    looker: Looker,
     world: LiveWorld,
     site_ne: tuple[float, float],
     roof_up_m: float,
@@ -317,31 +331,29 @@ async def _confirm_site(
     rng: np.random.Generator,
     weather: str,
 ) -> Decision:
-    """Close-up frame and LiDAR sweep 30 m above the site, cut and judged as the recovery loop does
-    (``site_closeup``: ``closeup_half_m`` around the site's pixel)."""
+    """Close-up frame and LiDAR sweep 30 m above the site, checked and confirmed by the recovery's looker
+    as a round does (the close-up: ``closeup_half_m`` around the site's pixel)."""
     pos, quat = hover_pose(rng, site_ne, -(roof_up_m + CLOSEUP_HEIGHT_M), yaw_rad)
     frame = world.camera_frame(pos, quat, 0.0, weather, rng)
     lidar = world.lidar_sweep(pos, quat, 0.0, rng)
-    check = check_site(lidar, pos, quat, site_ne)
     cm = world.camera
     camera = PinholeCamera.from_hfov(cm.width_px, cm.height_px, cm.hfov_deg)
-    site = (site_ne[0], site_ne[1], -roof_up_m)
-    closeup = site_closeup(frame.rgb, camera, pos, quat, site, RecoveryParams().closeup_half_m)
-    request = ConfirmRequest(closeup, check if check.points > 0 else None, site_ne_m=site_ne)
-    return await cascade.confirm(request)
+    sensed = sensor_frame(world, camera, pos, quat, frame.rgb, lidar, weather)
+    check = check_site(lidar, pos, quat, site_ne)  # what the looker's measure_site checks under the site
+    return await looker.confirm(check, sensed, (site_ne[0], site_ne[1], -roof_up_m), ROOF_SITE)
 
 
 async def _confirm_trial(
-    cascade: Cascade, sc: Scenario, world: LiveWorld, roofs: Roofs, seed: int, weather: str
+    looker: Looker, sc: Scenario, world: LiveWorld, roofs: Roofs, seed: int, weather: str
 ) -> ConfirmTrial:
     """Both close-ups, each with its own seeded hover scatter."""
     yaw = sc.launch_yaw_rad
     clear = await _confirm_site(
-        cascade, world, roofs.clear_ne, roofs.clear_up_m, yaw, np.random.default_rng([seed, 1]), weather
+        looker, world, roofs.clear_ne, roofs.clear_up_m, yaw, np.random.default_rng([seed, 1]), weather
     )
     cluttered_rng = np.random.default_rng([seed, 2])
     cluttered = await _confirm_site(
-        cascade, world, roofs.cluttered_ne, roofs.cluttered_up_m, yaw, cluttered_rng, weather
+        looker, world, roofs.cluttered_ne, roofs.cluttered_up_m, yaw, cluttered_rng, weather
     )
     failures = []
     if not clear.accept:
@@ -353,9 +365,10 @@ async def _confirm_trial(
 
 
 def _landing(
+    looker: Looker,
     lf: LaunchFrame,
-    cands: Sequence[Candidate],
-    order: Sequence[int],
+    frame: SensorFrame,
+    choice: Candidate | None,
     sc: Scenario,
     world: LiveWorld,
     ekf: EstimateErrorConfig | None = None,
@@ -363,7 +376,6 @@ def _landing(
     """Fly to the IPM point of the chosen candidate and land; the distance to what its pixel shows.
     With ``ekf``, the frame is placed with the autopilot's estimate (bias, noise and attitude error at
     capture) and the flight follows targets in the estimated frame while its bias drifts."""
-    choice = _chosen(order, cands)
     if choice is None:
         return Landing(None, None, f"seed {lf.seed}: no measured candidate to fly to")
     u, v = choice.centre_px
@@ -371,21 +383,18 @@ def _landing(
     if truth is None:
         return Landing(None, None, f"seed {lf.seed}: site {choice.index} shows no surface")
     estimate = EstimateError(ekf, np.random.default_rng([lf.seed, 7])) if ekf is not None else None
-    pos, quat = lf.pos_ned_m, lf.quat_wxyz
     if estimate is not None:
         pos, quat = estimate.perturb(lf.pos_ned_m, lf.quat_wxyz)
-    try:
-        ipm = pixel_to_ned_surface(u, v, LidarPixelIndex(lf.lidar_frd, lf.camera), pos, quat)
-    except IpmError as exc:
-        return Landing(None, None, f"seed {lf.seed}: IPM failed ({exc})")
+        frame = dataclasses.replace(frame, pos_ned_m=pos, quat_wxyz=quat)
+    ipm = looker.ipm(choice, frame, lf.camera)
+    if ipm is None:
+        return Landing(None, None, f"seed {lf.seed}: IPM placed nothing (neither the LiDAR nor flat ground)")
     n, e = sc.launch_ne_m
     home = (n, e, -world.height_m(n, e))
     w, x, y, z = lf.quat_wxyz
     yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
     try:
-        touchdown, _t = fly_and_land(
-            world, lf.pos_ned_m, yaw, home, (float(ipm[0]), float(ipm[1])), estimate=estimate
-        )
+        touchdown, _t = fly_and_land(world, lf.pos_ned_m, yaw, home, (ipm[0], ipm[1]), estimate=estimate)
     except FlightError as exc:
         return Landing(None, None, f"seed {lf.seed}: {exc}")
     ipm_error = math.hypot(ipm[0] - truth[0], ipm[1] - truth[1])
@@ -407,17 +416,19 @@ async def _iteration(
     world = sc.terrain
     assert isinstance(world, LiveWorld)  # launch_frame has checked it
     jaccard, _box = best_jaccard(lf)
-    cands, _depth = propose_on(lf, LidarDepth())
+    frame = sensor_frame(world, lf.camera, lf.pos_ned_m, lf.quat_wxyz, lf.image, lf.lidar_frd, weather)
+    looker = _looker(cascade)
+    cands = looker.surface_id(frame, lf.camera)
     ranks: dict[str, RankTrial] = {}
-    crop_order: Sequence[int] = ()
+    flown: Candidate | None = None
     for context in dict.fromkeys(("crop", *contexts)):  # the flight follows the crop ranking
-        ranking = await _rank(cascade, lf, cands, context)
+        ranking, chosen = await _looker(cascade, context).rank(cands, frame)
         if context == "crop":
-            crop_order = ranking.order
+            flown = cands[chosen] if chosen is not None else None
         if context in contexts:
-            ranks[context] = _rank_trial(lf, world.world.safe_zones, cands, ranking)
-    confirm = await _confirm_trial(cascade, sc, world, roofs, seed, weather)
-    return Iteration(seed, jaccard, ranks, confirm, _landing(lf, cands, crop_order, sc, world, ekf))
+            ranks[context] = _rank_trial(lf, world.world.safe_zones, cands, ranking, chosen)
+    confirm = await _confirm_trial(looker, sc, world, roofs, seed, weather)
+    return Iteration(seed, jaccard, ranks, confirm, _landing(looker, lf, frame, flown, sc, world, ekf))
 
 
 # --------------------------------------------------------------------------------------- the run

@@ -16,8 +16,10 @@ import numpy as np
 from companion.guidance.frames import PinholeCamera, quat_to_matrix
 from companion.perception.depth import ArrayDepth, DepthMap, DepthSource, LidarDepth
 from companion.perception.surface_id import Candidate, SurfaceParams, propose
+from landfall_link.sensorstream import SensorFrame
 from simbridge.geo import euler_to_quat
 from simbridge.scenarios import load_scenario
+from simbridge.terrain import Terrain
 from simbridge.world.live import LiveWorld
 from simbridge.world.world import SafeZone
 
@@ -119,6 +121,35 @@ def launch_frame(
         zone_box(z, world.height_m(*z.centre_ne), camera, pos, quat) for z in world.world.safe_zones
     )
     return LaunchFrame(scenario, seed, frame.rgb, lidar, frame.depth_m, pos, quat, camera, boxes)
+
+
+def sensor_frame(
+    world: Terrain,
+    camera: PinholeCamera,
+    pos_ned_m: tuple[float, float, float],
+    quat_wxyz: tuple[float, float, float, float],
+    image: np.ndarray,
+    lidar_frd: np.ndarray,
+    weather: str = "clear",
+) -> SensorFrame:
+    """What the sensor stream brings from this pose (the frame the companion's recovery reads): the
+    image, the LiDAR sweep and the rangefinder's reading of ``world``."""
+    return SensorFrame(
+        t_s=0.0,
+        time_boot_ms=0,
+        pos_ned_m=pos_ned_m,
+        quat_wxyz=quat_wxyz,
+        rangefinder_m=world.rangefinder_m(pos_ned_m, quat_wxyz),
+        fx=camera.fx,
+        fy=camera.fy,
+        cx=camera.cx,
+        cy=camera.cy,
+        width=camera.width,
+        height=camera.height,
+        weather=weather,
+        image_rgb=image,
+        lidar_frd=lidar_frd,
+    )
 
 
 def propose_on(

@@ -1,6 +1,7 @@
 """Properties (hypothesis) of the recovery chain from a frame to a target, stage by stage and whole:
 Surface ID -> crops per context variant -> the onboard rank -> IPM -> the confirm close-up -> the
-onboard confirm and the LiDAR site check (companion/recovery/machine.py ``_round``).
+onboard confirm and the LiDAR site check (companion/recovery/looking.py ``Looker``, as
+companion/recovery/machine.py ``_round`` calls it).
 
 Frames are synthetic and small: a camera at a random size, height and attitude over level ground,
 with flat rectangles (roofs) placed anywhere in the image, down to one pixel or one depth cell, and
@@ -12,15 +13,18 @@ the next stage: boxes inside the image and non-empty, crops non-empty, finite po
 
 from __future__ import annotations
 
+import asyncio
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from companion.alarms import Criticality
 from companion.guidance.frames import CAMERA_TO_BODY, PinholeCamera, quat_to_matrix
 from companion.guidance.ipm import (
     IpmError,
@@ -40,12 +44,16 @@ from companion.perception.crops import (
 )
 from companion.perception.depth import ArrayDepth, DepthError, DepthMap, DepthSource, LidarDepth
 from companion.perception.site_check import SiteCheck, check_site
-from companion.perception.surface_id import Candidate, SurfaceParams, propose, quadrant_fallback
+from companion.perception.surface_id import Candidate, SurfaceParams, propose
 from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequest
 from companion.reasoning.image_cues import analyse
 from companion.reasoning.onboard import ConfirmParams, OnboardReasoner
 from companion.recovery import site_closeup
+from companion.recovery.core import RecoveryParams
+from companion.recovery.looking import Looker, onboard_tier
+from companion.recovery.search_plan import SearchPlanner
 from simbridge.geo import euler_to_quat
+from tests import recovery_fakes
 
 CHAIN = settings(
     max_examples=40,
@@ -844,85 +852,74 @@ def test_check_site_sweep_of_another_shape_is_not_measured(cloud: np.ndarray) ->
 
 
 # ---------------------------------------------------------------------------------------- 6. end to end
+def _looker(reasoner: OnboardReasoner | None = None, **params: Any) -> Looker:
+    """The recovery's looker (companion/recovery/looking.py) on a fake vehicle, with these parameters."""
+    reasoner = reasoner or OnboardReasoner()
+    return Looker(
+        recovery_fakes.context(params=RecoveryParams(**params)),
+        reasoner=reasoner,
+        onboard=onboard_tier(reasoner),
+        plan=SearchPlanner(Criticality.HIGH),
+    )
+
+
 @CHAIN
 @given(st.data(), scenes(max_tilt_deg=25.0), st.floats(5.0, 250.0), st.integers(1, 6))
 def test_chain_from_a_frame_to_a_confirmed_target_raises_only_typed_errors(
     data: st.DataObject, scene: Scene, range_m: float, stride: int
 ) -> None:
+    """The recovery's looker from one frame to a confirmed target, every context variant of the
+    ranking: Surface ID (no depth: the quadrant fallback), the rank, IPM (through the LiDAR, else flat
+    ground at the rangefinder's distance), the close-up, and the confirmation with the LiDAR check."""
     cam = scene.camera
-    depth_px = scene_depth(scene)
     image = scene_image(scene)
-    lidar = scene_lidar(scene, depth_px, stride, range_m)
-    params = data.draw(surface_params)
+    lidar = scene_lidar(scene, scene_depth(scene), stride, range_m)
+    down = float(quat_to_matrix(scene.quat)[2, 2])
+    frame = recovery_fakes.frame(
+        image=image, lidar_frd=lidar, pos_ned_m=scene.pos, quat_wxyz=scene.quat,
+        rangefinder_m=scene.alt_m / down, camera=cam,
+    )  # fmt: skip
+    depth = LidarDepth(cell_px=scene.cell_px, range_m=range_m)
+    surface = data.draw(surface_params)
     reasoner = OnboardReasoner()
-    # Surface ID (recovery._surface_id): no depth -> the quadrant fallback (with no sweep at all and
-    # LandNet-S judging, surfaces by their look: tests/test_appearance.py)
-    try:
-        cands, _ = _propose(LidarDepth(cell_px=scene.cell_px, range_m=range_m), scene, image, lidar, params)
-    except DepthError:
-        cands = quadrant_fallback(cam)
-    # rank, every context variant (recovery._rank / _rank_crops)
-    chosen: Candidate | None = None
-    for context in CONTEXTS:
-        crops, cores = rank_crops(image, [c.box_px for c in cands], context)
-        request = RankRequest(
-            crops,
-            None if all(c.fallback for c in cands) else tuple(cands),
-            context=image if context == "full" else None,
-            cores=cores if pad_of(context) > 0 else None,
-        )
-        ranking = reasoner.rank_sync(request)
-        assert sorted(ranking.order) == list(range(len(cands)))
-        chosen = next((cands[k] for k in ranking.order if not cands[k].fallback), None)
-    if chosen is None:
-        return  # recovery explores
-    # IPM (recovery._ipm): through the LiDAR, else flat ground at the rangefinder's distance
-    u, v = chosen.centre_px
-    try:
-        try:
-            target = pixel_to_ned(u, v, LidarPixelIndex(lidar, cam), scene.pos, scene.quat)
-        except IpmError:
-            down = float(quat_to_matrix(scene.quat)[2, 2])
-            rangefinder_m = scene.alt_m / down
-            target = pixel_to_ned_flat(u, v, cam, scene.pos, scene.quat, scene.pos[2] + rangefinder_m)
-    except IpmError:
-        return
-    assert np.isfinite(target).all()
-    # confirm (recovery._confirm): the close-up, the onboard confirm and the LiDAR check
-    closeup = site_closeup(image, cam, scene.pos, scene.quat, tuple(target), 6.0)
-    assert closeup.size > 0
-    check = check_site(lidar, scene.pos, scene.quat, (float(target[0]), float(target[1])))
-    decision = reasoner.confirm_sync(
-        ConfirmRequest(
-            closeup,
-            check if check.measured else None,
-            site_ne_m=(float(target[0]), float(target[1])),
-            site_up_m=chosen.height_above_m if math.isfinite(chosen.height_above_m) else None,
-        )
-    )
-    assert isinstance(decision.accept, bool)
-    if check.measured and not check.clear:
-        assert not decision.accept
+
+    async def chain() -> None:
+        looker = _looker(reasoner, surface=surface, depth_source=depth)
+        cands = looker.surface_id(frame, cam)
+        chosen: Candidate | None = None
+        for context in CONTEXTS:
+            looker = _looker(reasoner, surface=surface, depth_source=depth, context=context)
+            ranking, k = await looker.rank(cands, frame)
+            assert sorted(ranking.order) == list(range(len(cands)))
+            chosen = cands[k] if k is not None else None
+            assert chosen is None or not chosen.fallback
+        if chosen is None:
+            return  # the recovery explores
+        target = looker.ipm(chosen, frame, cam)
+        if target is None:
+            return  # the round moves on
+        assert np.isfinite(target).all()
+        assert looker.closeup(image, frame, target).size > 0
+        check = check_site(lidar, scene.pos, scene.quat, (target[0], target[1]))
+        decision = await looker.confirm(check, frame, target, chosen)
+        assert isinstance(decision.accept, bool)
+        if check.measured and not check.clear:
+            assert not decision.accept
+        assert looker.ctx.ledger.near((target[0], target[1])) is not None  # judged into the ledger
+
+    asyncio.run(chain())
 
 
 def test_recovery_ipm_with_no_lidar_and_a_zero_rangefinder_places_nothing() -> None:
-    """The recovery's IPM (companion/recovery/looking.py ``Looking._ipm``): no LiDAR, and a rangefinder that
+    """The recovery's IPM (companion/recovery/looking.py ``Looker.ipm``): no LiDAR, and a rangefinder that
     reads 0 (the flat-ground plane through the camera: no ray meets it). Neither way places the site:
     None, and the round moves on, instead of an IpmError escaping the round."""
-    import logging
-    from types import SimpleNamespace
-
-    from companion.faults import FaultHook
-    from companion.recovery import Recovery
-
     cam = PinholeCamera.from_hfov(960, 540, 90.0)
-    frame = SimpleNamespace(
-        lidar_frd=None, pos_ned_m=(0.0, 0.0, -50.0), quat_wxyz=(1.0, 0.0, 0.0, 0.0), rangefinder_m=0.0
-    )
-    me = SimpleNamespace(_fault=FaultHook(), log=logging.getLogger("test"), round=1)
+    frame = recovery_fakes.frame(pos_ned_m=(0.0, 0.0, -50.0), rangefinder_m=0.0, camera=cam)
+    looker = _looker()
     cand = Candidate(0, (470, 260, 490, 280), (480.0, 270.0))
-    assert Recovery._ipm(me, cand, frame, cam) is None  # type: ignore[arg-type]
-    frame.rangefinder_m = 50.0  # flat ground 50 m below: placed under the pixel
-    target = Recovery._ipm(me, cand, frame, cam)  # type: ignore[arg-type]
+    assert looker.ipm(cand, frame, cam) is None
+    frame = dataclasses.replace(frame, rangefinder_m=50.0)  # flat ground 50 m below: under the pixel
+    target = looker.ipm(cand, frame, cam)
     assert target is not None
     assert target[2] == pytest.approx(0.0)

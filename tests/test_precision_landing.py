@@ -93,7 +93,7 @@ def test_a_site_drifting_in_the_estimate_is_measured_and_jitter_is_not_a_drift()
 
     import numpy as np
 
-    from companion.recovery.following import DRIFT_MIN_M_S, site_drift_m_s
+    from companion.recovery.drift import DRIFT_MIN_M_S, site_drift_m_s
 
     drifting = [(100.0 + 2.0 * k, 5.0 + 1.0 * k, -28.0 + 0.6 * k) for k in range(6)]  # 2 s apart
     assert site_drift_m_s(drifting) == pytest.approx(math.hypot(0.5, 0.3))
@@ -110,7 +110,7 @@ def test_a_steady_drift_is_carried_forward_and_a_jump_or_a_standstill_is_not() -
     """Where the site will be in the estimate: the drift's line carried forward (at most
     ``DRIFT_BLIND_S`` past its newest frame); nothing for a site that stays put or one whose places
     a line does not fit (a jump of the estimate the reset watch did not catch)."""
-    from companion.recovery.following import DRIFT_BLIND_S, drift_prediction, site_drift_line
+    from companion.recovery.drift import DRIFT_BLIND_S, drift_prediction, site_drift_line
 
     drifting = [(100.0 + 2.0 * k, 5.0 + 1.0 * k, -28.0 + 0.6 * k) for k in range(6)]  # 0.5, 0.3 m/s
     line = site_drift_line(drifting)

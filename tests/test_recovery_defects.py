@@ -16,11 +16,12 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import common as mavlink2
 
-from companion.perception.site_track import TrackParams, TrackResult
+from companion.perception.site_track import TrackResult
 from companion.perception.surface_id import Candidate
 from companion.recovery import following
-from companion.recovery.following import Following, FollowState, look_for_site, site_view
+from companion.recovery.following import FollowState, SiteFollower, look_for_site
 from companion.recovery.looking import chosen_position, surface_id_ranking
+from tests import recovery_fakes
 
 
 def _candidate(index: int, fallback: bool = False) -> Candidate:
@@ -69,18 +70,10 @@ class _LoopOnlyDeque(collections.deque):  # type: ignore[type-arg]
         super().append(item)
 
 
-def _follower(frame: Any) -> Any:
-    me: Any = object.__new__(Following)
-    view = site_view(frame)
-    me._track = (view, (4.0, 3.0, 0.0))
-    me._anchor = me._track
+def _follower(frame: Any) -> SiteFollower:
+    me = SiteFollower(recovery_fakes.context())
+    me.follow_from(frame, (4.0, 3.0, 0.0))
     me._site_seen = _LoopOnlyDeque(maxlen=64)
-    me._resets_seen = 0
-    me._track_params = TrackParams()
-    me.tm = types.SimpleNamespace(position_resets=types.SimpleNamespace(resets=[]))
-    me.record = types.SimpleNamespace(record_event=lambda *a: None)
-    me.log = logging.getLogger("test")
-    me.round = 1
     return me
 
 
@@ -112,7 +105,7 @@ def test_a_look_runs_on_a_copy_and_only_the_event_loop_writes_what_it_found(
         assert await asyncio.to_thread(in_look.wait, 5.0)
         assert list(me._site_seen) == []  # the loop iterates freely while the look runs
         # the estimate resets while the look runs: the loop takes it (as _catch_up does)
-        me.tm.position_resets.resets.append((reset_t_s, (2.0, -1.0)))
+        me.ctx.tm.position_resets.resets.append((reset_t_s, (2.0, -1.0)))
         me._catch_up()
         go_on.set()
         return await look
@@ -122,11 +115,12 @@ def test_a_look_runs_on_a_copy_and_only_the_event_loop_writes_what_it_found(
     assert me._site_seen.threads == [threading.main_thread()]  # appended on the event loop only
     expected = (7.0, 5.0) if moved else (5.0, 6.0)  # the find, moved by the reset taken meanwhile
     assert list(me._site_seen) == [(12.0, *expected)]
-    assert me._track[1] == (*expected, 0.0)
+    assert me.track is not None
+    assert me.track[1] == (*expected, 0.0)
     # the look itself: a pure function of its copy
-    state = FollowState(me._track, me._anchor, ((11.0, 6.0, 5.0),))
+    state = FollowState(me.track, me._anchor, ((11.0, 6.0, 5.0),))
     go_on.set()
-    look = look_for_site(frame, state, me._track_params)
+    look = look_for_site(frame, state, me.track_params)
     assert look is not None
     assert look.seen == (12.0, 5.0, 6.0)
     assert state.seen == ((11.0, 6.0, 5.0),)

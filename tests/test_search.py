@@ -1,4 +1,5 @@
-"""The search planner (companion/search.py): when searching stops, and where the next leg goes."""
+"""The search planner (companion/recovery/search_plan.py): when searching stops and where the next
+leg goes."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ import numpy as np
 import pytest
 
 from companion.alarms import Criticality
-from companion.search import CAMERA_BAD, SearchLimits, SearchPlanner
+from companion.recovery.search_plan import CAMERA_BAD, SearchLimits, SearchPlanner
 from companion.site_ledger import Hazard, LedgerSite, SiteLedger
 
 LEVEL = (1.0, 0.0, 0.0, 0.0)  # body FRD = NED: nose north, level
@@ -295,17 +296,18 @@ def test_a_street_level_site_is_among_buildings_with_a_roof_in_view_or_measured_
     """Past a town's last roofs the fields are open country (judged on what is seen), not a plaza among
     buildings (a last resort): roofs measured anywhere in the recovery no longer make everything
     built-up (city 5 launch 47 refused five open fields 260-500 m from the city's last roofs)."""
-    from types import SimpleNamespace
-
-    from companion.recovery.core import BUILT_UP_RADIUS_M, RecoveryBase
+    from companion.reasoning.onboard import OnboardReasoner
+    from companion.recovery.core import BUILT_UP_RADIUS_M
+    from companion.recovery.looking import Looker
+    from tests.recovery_fakes import FakeReasoner, context
 
     p = planner()
     pos = (0.0, 0.0, -75.0)
     p.observe(Frame(pos, sweep(pos, [(35.0, 60.0, -10.0, 20.0, 20.0)]), 75.0))  # one roof, N 35-60 m
-    recovery = SimpleNamespace(_roofs_in_view=False, search=p)
-    assert RecoveryBase._built_up(recovery, (0.0, 0.0))  # type: ignore[arg-type]
-    assert RecoveryBase._built_up(recovery, (-100.0, 0.0))  # type: ignore[arg-type]  # 135 m from it
+    looker = Looker(context(), reasoner=FakeReasoner(), onboard=OnboardReasoner(), plan=p)
+    assert looker.built_up((0.0, 0.0))
+    assert looker.built_up((-100.0, 0.0))  # 135 m from it
     far = (35.0 - BUILT_UP_RADIUS_M - 20.0, 0.0)
-    assert not RecoveryBase._built_up(recovery, far)  # type: ignore[arg-type]
-    recovery._roofs_in_view = True  # a roof in this round's view: built-up wherever the site
-    assert RecoveryBase._built_up(recovery, far)  # type: ignore[arg-type]
+    assert not looker.built_up(far)
+    looker.roofs_in_view = True  # a roof in this round's view: built-up wherever the site
+    assert looker.built_up(far)

@@ -1,9 +1,9 @@
-"""What a recovery is made of: its states, parameters, outcome, record protocol, and the state every
-part of :class:`~companion.recovery.Recovery` shares (:class:`RecoveryBase`)."""
+"""What a recovery is made of: its states, parameters, outcome and record protocol, and the context
+the parts of :class:`~companion.recovery.Recovery` share (:class:`RecoveryContext`), given to each at
+its construction."""
 
 from __future__ import annotations
 
-import asyncio
 import enum
 import logging
 import math
@@ -12,23 +12,12 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from companion.alarms import Alarm, Criticality
-from companion.control import (
-    VehicleController,
-)
+from companion.control import VehicleController
 from companion.faults import FaultHook
-from companion.guidance.frames import PinholeCamera
 from companion.perception.depth import DepthSource, LidarDepth
-from companion.perception.site_check import SiteCheck
-from companion.perception.site_track import SiteView
-from companion.perception.surface_id import (
-    Candidate,
-    SurfaceParams,
-)
-from companion.precision import PrecisionLanding
-from companion.reasoning.base import Decision, Ranking, Reasoner
-from companion.reasoning.onboard import OnboardReasoner
-from companion.search import Leg, SearchLimits, SearchPlanner, Verdict
-from companion.site_ledger import LedgerSite, SiteLedger
+from companion.perception.surface_id import Candidate, SurfaceParams
+from companion.recovery.search_plan import SearchLimits
+from companion.site_ledger import Hazard, SiteLedger
 from companion.telemetry import TelemetryCache
 
 MAX_REENGAGE = 2
@@ -128,181 +117,63 @@ class Outcome:
 FrameSource = Callable[[], Awaitable[Any]]  # -> SensorFrame-like; raises FrameUnavailable
 
 
-class RecoveryBase:
-    """The state one recovery keeps (one per alarm) and what every part of it uses: the budget, the
-    state change (recorded with where the vehicle was) and the announcement."""
+@dataclass(eq=False)
+class RecoveryContext:
+    """What the parts of one recovery share, passed to each at its construction: the vehicle's
+    controller and telemetry, the frames, the parameters, the record, the log and the announcement
+    (what it works with), and the state more than one part reads or writes (the alarm's criticality,
+    the state, the round, the accepted site, the rejected sites and the site ledger). One per alarm."""
 
-    def __init__(
-        self,
-        alarm: Alarm,
-        *,
-        control: VehicleController,
-        telemetry: TelemetryCache,
-        frames: FrameSource,
-        reasoner: Reasoner,
-        announce: Callable[[int, str], None],
-        params: RecoveryParams | None = None,
-        record: Record | None = None,
-        logger: logging.Logger | None = None,
-    ) -> None:
-        self.alarm = alarm
-        self.ctl = control
-        self.tm = telemetry
-        self._frames = frames
-        self.reasoner = reasoner
-        self._announce = announce
-        self.p = params or RecoveryParams()
-        self.record: Record = record or NoRecord()
-        self.log = logger or logging.getLogger("companion.recovery")
-        self.state = State.IDLE
-        self.criticality = alarm.criticality
-        self.round = 0
-        self.best: Site | None = None
-        self.rejected: list[tuple[float, float, float]] = []  # north, east, radius (metres)
-        self._reengaged = 0
-        self._descending: tuple[tuple[float, float, float], Candidate] | None = None
+    alarm: Alarm
+    ctl: VehicleController
+    tm: TelemetryCache
+    frames: FrameSource
+    announce: Callable[[int, str], None]
+    p: RecoveryParams = field(default_factory=RecoveryParams)
+    record: Record = field(default_factory=NoRecord)
+    log: logging.Logger = field(default_factory=lambda: logging.getLogger("companion.recovery"))
+    fault: FaultHook = field(default_factory=FaultHook)  # a test-only fault per stage (companion.faults)
+    state: State = State.IDLE
+    round: int = 0
+    best: Site | None = None  # the site confirmed for descent
+    rejected: list[tuple[float, float, float]] = field(default_factory=list)  # north, east, radius (m)
+    criticality: Criticality = field(init=False)  # the alarm's, raised by a repeated alarm
+    ledger: SiteLedger = field(init=False)  # every site measured (companion.site_ledger)
+
+    def __post_init__(self) -> None:
+        self.criticality = self.alarm.criticality
         self.ledger = SiteLedger(self.p.rejected_radius_m)
-        self.extra = 0  # rounds flown past the budget (nothing acceptable seen)
-        # the last round ended on an exploring climb or descent: a view from here not yet looked at
-        self._new_vantage = False
-        self.search = SearchPlanner(
-            alarm.criticality, self.p.search, search_agl_m=self.p.search_agl_m, lidar_range_m=100.0
-        )
-        self._ended: Verdict | None = None  # why the search stopped, when the battery or the window did
-        # judges every measured site for the ledger, whoever decides: the cascade's own onboard tier (its
-        # judge, cues or LandNet-S, as configured) when there is one
-        onboard = getattr(reasoner, "onboard", None)
-        self._onboard = onboard if isinstance(onboard, OnboardReasoner) else OnboardReasoner()
-        self._fault = FaultHook.from_env()
-        self._roofs_in_view = False  # this round's Surface ID measured a roof: a built-up area here
-        # the site being followed: the last frame it was found in, and where it was then (following.py)
-        self._track: tuple[SiteView, tuple[float, float, float]] | None = None
-        self._first_look: asyncio.Task[Any] | None = None  # the first frame, asked for while engaging
-        self._unobserved: Any = None  # a round's frame not yet in the search's map (Recovery._observed)
-        self._later: list[Callable[[], object]] = []  # a round's other work that waits for its setpoint
 
     @property
     def budget(self) -> int:
         return self.p.rounds_by_criticality[self.criticality]
 
-    def raise_criticality(self, criticality: Criticality) -> None:
-        """A repeated alarm can make the recovery more urgent (a shorter budget), never less."""
-        if criticality > self.criticality:
-            self.criticality = criticality
-            self.search.raise_criticality(criticality)
-            self._say(5, f"alarm raised to {criticality.name.lower()}: {self.budget} rounds")
-
-    def _set(self, state: State) -> None:
+    def set_state(self, state: State) -> None:
+        """The recovery's state, recorded with where the vehicle was."""
         self.state = state
         # where the vehicle was: a flight record's trajectory for a replay (the record keeps no telemetry)
         where = [round(v, 2) for v in self.tm.state.pos_ned_m]
         self.record.record_event("state", {"state": state.value, "round": self.round, "pos_ned_m": where})
 
-    def _say(self, severity: int, text: str) -> None:
+    def say(self, severity: int, text: str) -> None:
+        """Logged, and announced to the ground (STATUSTEXT)."""
         self.log.info("%s", text)
-        self._announce(severity, f"Landfall: {text}")
+        self.announce(severity, f"Landfall: {text}")
 
-    def _site_ned(self) -> tuple[float, float, float] | None:
+    def site_ned(self) -> tuple[float, float, float] | None:
         return self.best.ned_m if self.best is not None else None
 
-    # ------------------------------------------------------------------ what the parts provide
-    # Declared here so that each part can call the others; the parts' own definitions come first in
-    # Recovery's method resolution order (Recovery, Searching, SiteChoice, Following, Looking, RecoveryBase).
-    async def _round(self) -> bool:
-        raise NotImplementedError
+    def near_rejected(self, c: Candidate) -> bool:
+        if c.site_ned_m is None:
+            return False
+        return any(math.dist(c.site_ned_m[:2], (n, e)) < r for n, e, r in self.rejected)
 
-    async def _confirm_and_descend(self, target: tuple[float, float, float], choice: Candidate) -> bool:
-        raise NotImplementedError
-
-    async def _acquire(self, *, first_round: bool = False) -> Any:
-        raise NotImplementedError
-
-    def _surface_id(self, frame: Any, camera: PinholeCamera) -> list[Candidate]:
-        raise NotImplementedError
-
-    def _closeup(self, image: Any, frame: Any, target: tuple[float, float, float]) -> Any:
-        raise NotImplementedError
-
-    async def _land(self) -> bool:
-        raise NotImplementedError
-
-    async def _land_on_site(self, setup: PrecisionLanding | None) -> None:
-        raise NotImplementedError
-
-    async def _final_land(self) -> None:
-        raise NotImplementedError
-
-    async def _land_at_best(self, reason: str, *, measure_here: bool = True) -> Outcome:
-        raise NotImplementedError
-
-    def _fallback_site(self) -> LedgerSite | None:
-        raise NotImplementedError
-
-    async def _fly_over(self, site: LedgerSite, what: str, then: str = "landing here") -> bool:
-        raise NotImplementedError
-
-    def _rejected_radius(self, target: tuple[float, float, float], choice: Candidate) -> float:
-        raise NotImplementedError
-
-    def _near_rejected(self, c: Candidate) -> bool:
-        raise NotImplementedError
-
-    def _judge(
-        self,
-        frame: Any,
-        check: SiteCheck,
-        target: tuple[float, float, float],
-        up_m: float | None,
-        strip: bool,
-    ) -> tuple[str, ...]:
-        raise NotImplementedError
-
-    def _built_up(self, site_ne_m: tuple[float, float]) -> bool:
-        """Policy: whether a site at street level is among buildings, where streets and plazas carry people
-        and traffic that come back (docs/recovery.md): a roof in this round's view, or roofs the LiDAR
-        measured during the recovery (the search's map) within ``BUILT_UP_RADIUS_M`` of the site. The
-        open fields past a town's last roofs are open country, judged on what is seen."""
-        if self._roofs_in_view:
-            return True
-        return bool(self.search.roof_groups(lambda c: math.dist(c, site_ne_m) < BUILT_UP_RADIUS_M))
-
-    def _note_candidates(self, candidates: list[Candidate], frame: Any, camera: PinholeCamera) -> None:
-        raise NotImplementedError
-
-    async def _explore(self, blind: bool = False) -> None:
-        raise NotImplementedError
-
-    async def _search_instead(self, choice: Candidate) -> bool:
-        raise NotImplementedError
-
-    async def _search_leg(self) -> Leg:
-        raise NotImplementedError
-
-    def _go_on(self) -> bool:
-        raise NotImplementedError
-
-    async def _extra_round(self) -> bool:
-        raise NotImplementedError
-
-    def _observe(self, frame: Any) -> None:
-        raise NotImplementedError
-
-    async def _observed(self) -> None:
-        raise NotImplementedError
-
-    async def _observed_or_said(self) -> None:
-        raise NotImplementedError
-
-    async def _rank(self, candidates: list[Candidate], frame: Any) -> tuple[Ranking, int | None]:
-        raise NotImplementedError
-
-    def _ipm(self, c: Candidate, frame: Any, camera: PinholeCamera) -> tuple[float, float, float] | None:
-        raise NotImplementedError
-
-    async def _measure_site(self, target: tuple[float, float, float]) -> tuple[Any, SiteCheck]:
-        raise NotImplementedError
-
-    async def _confirm(
-        self, check: SiteCheck, frame: Any, target: tuple[float, float, float], choice: Candidate
-    ) -> Decision:
-        raise NotImplementedError
+    def reject(self, target: tuple[float, float, float], choice: Candidate) -> None:
+        """Rule out candidates around a rejected site: within ``rejected_radius_m``; for water or a
+        traffic lane, within the surface's own size (half the side of a square of its area, up to
+        ``MAX_REJECTED_RADIUS_M``): another point of the same harbour or street is no better."""
+        site = self.ledger.near((target[0], target[1]))
+        radius = self.p.rejected_radius_m
+        if site is not None and site.hazard >= Hazard.TRAFFIC and math.isfinite(choice.area_m2):
+            radius = max(radius, min(MAX_REJECTED_RADIUS_M, 0.5 * math.sqrt(choice.area_m2)))
+        self.rejected.append((target[0], target[1], radius))

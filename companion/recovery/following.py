@@ -31,7 +31,15 @@ from companion.flavour import Mode
 from companion.guidance.frames import PinholeCamera, quat_to_matrix
 from companion.perception.site_track import SiteView, TrackParams, TrackResult, centre_down, track_site
 from companion.precision import PrecisionLanding
-from companion.recovery.core import FrameUnavailable, RecoveryBase
+from companion.recovery.core import FrameUnavailable, RecoveryContext
+from companion.recovery.drift import (
+    DRIFT_BLIND_S,
+    DRIFT_MIN_M_S,
+    DRIFT_WAIT_S,
+    drift_prediction,
+    site_drift_line,
+    site_drift_m_s,
+)
 
 LAND_FEED_PERIOD_S = 0.2  # a look for the site at most five times a second (wall time: the processor's pace)
 LAND_SEND_PERIOD_S = 0.1  # LANDING_TARGET ten times a second of the autopilot's clock: ArduPilot's
@@ -42,12 +50,6 @@ STEP_FOLLOW_PERIOD_S = 0.5  # during a descent step, a look for the site twice a
 STEP_FOLLOW_MIN_M = 0.3  # and the step's target moved when it is this far from where the site is seen
 RESET_CHECK_PERIOD_S = 0.1  # and for the estimate's resets ten times a second
 ADOPT_SHIFT_M = 1.0  # a look that finds the site moved this far becomes the reference all the same
-DRIFT_WINDOW_S = 12.0  # the site's drift in the estimate: a line fitted to its last seconds of frames
-DRIFT_MIN_SPAN_S = 2.5  # ... at least three frames this far apart (autopilot seconds)
-DRIFT_MIN_M_S = 0.15  # drifting faster than this: the final approach waits, following the site
-DRIFT_WAIT_S = 60.0  # a round holds for at most this long (autopilot seconds): a drift that never stops
-DRIFT_BLIND_S = 8.0  # a hold ends when no frame found the site for this long (autopilot seconds)
-DRIFT_FIT_M = 0.5  # a drift is carried forward only while the line fits the site's places this well (RMS)
 
 
 def site_view(frame: Any) -> SiteView | None:
@@ -57,67 +59,6 @@ def site_view(frame: Any) -> SiteView | None:
     camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
     view = SiteView(frame.image_rgb, camera, tuple(frame.pos_ned_m), tuple(frame.quat_wxyz))
     return dataclasses.replace(view, centre_down_m=centre_down(getattr(frame, "lidar_frd", None), view))
-
-
-@dataclasses.dataclass(frozen=True, slots=True)
-class DriftLine:
-    """A site's place in the autopilot's estimate as a line in time: at ``t_s`` (autopilot seconds)
-    it was at ``north``, ``east`` and moves ``vn``, ``ve`` m/s; ``rms_m``: how far the places it was
-    fitted to lie from it; ``newest_s``: the newest of them."""
-
-    t_s: float
-    north: float
-    east: float
-    vn: float
-    ve: float
-    rms_m: float
-    newest_s: float
-
-    @property
-    def speed_m_s(self) -> float:
-        return math.hypot(self.vn, self.ve)
-
-    def at(self, t_s: float) -> tuple[float, float]:
-        """Where the line puts the site at ``t_s``."""
-        dt = t_s - self.t_s
-        return self.north + self.vn * dt, self.east + self.ve * dt
-
-
-def site_drift_line(seen: list[tuple[float, float, float]], since_s: float = -math.inf) -> DriftLine | None:
-    """The line fitted to where frames found a site (``(t_boot_s, north, east)``, oldest first) over
-    the last ``DRIFT_WINDOW_S`` (and after ``since_s``); None with fewer than three spanning
-    ``DRIFT_MIN_SPAN_S``. A GPS that drifts moves the estimate, and the vehicle holding its target in
-    it, while the site stays put."""
-    if not seen:
-        return None
-    newest = seen[-1][0]
-    pts = np.array([p for p in seen if p[0] >= max(newest - DRIFT_WINDOW_S, since_s)])
-    if len(pts) < 3 or pts[-1, 0] - pts[0, 0] < DRIFT_MIN_SPAN_S:
-        return None
-    mean = pts.mean(axis=0)
-    t = pts[:, 0] - mean[0]
-    vn = float(np.dot(t, pts[:, 1] - mean[1]) / np.dot(t, t))
-    ve = float(np.dot(t, pts[:, 2] - mean[2]) / np.dot(t, t))
-    resid = pts[:, 1:] - mean[1:] - np.outer(t, (vn, ve))
-    rms = float(np.sqrt((resid**2).sum(axis=1).mean()))
-    return DriftLine(float(mean[0]), float(mean[1]), float(mean[2]), vn, ve, rms, float(newest))
-
-
-def site_drift_m_s(seen: list[tuple[float, float, float]], since_s: float = -math.inf) -> float:
-    """How fast a site moves in the autopilot's estimate (m/s): :func:`site_drift_line`'s speed, NaN
-    without one."""
-    line = site_drift_line(seen, since_s)
-    return line.speed_m_s if line is not None else math.nan
-
-
-def drift_prediction(line: DriftLine | None, t_s: float) -> tuple[float, float] | None:
-    """Where a steadily drifting site is at ``t_s`` in the estimate: ``line`` carried forward, at most
-    ``DRIFT_BLIND_S`` past the newest place it was fitted to. None where there is nothing to carry:
-    no line, slower than ``DRIFT_MIN_M_S`` (the site is where it was last found), or a line that fits
-    badly (a jump of the estimate is not a drift)."""
-    if line is None or not math.isfinite(t_s) or line.speed_m_s < DRIFT_MIN_M_S or line.rms_m > DRIFT_FIT_M:
-        return None
-    return line.at(min(t_s, line.newest_s + DRIFT_BLIND_S))
 
 
 def _frame_time(frame: Any) -> float:
@@ -209,25 +150,36 @@ def look_for_site(
     return Look(result, track, seen)
 
 
-class Following(RecoveryBase):
-    """The site kept in view from its choice to the touchdown."""
+class SiteFollower:
+    """The site kept in view from its choice to the touchdown (module docstring): its last view and
+    where it was then (``track``), the frame it was chosen in, the estimate's resets taken and its
+    drift. Only the event loop writes this state; the looks run in worker threads on a copy
+    (:func:`look_for_site`)."""
 
-    _track_params = TrackParams()
-    # the frame the site was chosen in: the widest view of it, looked in when the last frame fails
-    _anchor: tuple[SiteView, tuple[float, float, float]] | None = None
+    def __init__(self, ctx: RecoveryContext, params: TrackParams | None = None) -> None:
+        self.ctx = ctx
+        self.track_params = params or TrackParams()
+        # the site being followed: the last frame it was found in, and where it was then
+        self.track: tuple[SiteView, tuple[float, float, float]] | None = None
+        # the frame the site was chosen in: the widest view of it, looked in when the last frame fails
+        self._anchor: tuple[SiteView, tuple[float, float, float]] | None = None
+        self._resets_seen = 0  # the estimate's resets (``tm.position_resets``) the follower has taken
+        # (t_boot_s, north, east) of the recent finds: the site's drift in the estimate
+        self._site_seen: collections.deque[tuple[float, float, float]] | None = None
+        self._drift_budget_s = DRIFT_WAIT_S  # the round's time left for holding over a drifting site
+        self._reanchor = False  # the next look is against the frame the site was chosen in (after a hold)
 
-    _resets_seen = 0  # the estimate's resets (``tm.position_resets``) the tracker's state has taken
-    _site_seen: collections.deque[tuple[float, float, float]] | None = None  # (t_boot_s, north, east)
-    _drift_budget_s = DRIFT_WAIT_S  # what is left of the round's time for holding over a drifting site
-    _reanchor = False  # the next look is against the frame the site was chosen in (after a drift hold)
+    def forget(self) -> None:
+        """Nothing to follow (a new round, or a landing elsewhere): no camera view of a site."""
+        self.track = None
 
-    def _follow_from(self, frame: Any, target: tuple[float, float, float]) -> None:
+    def follow_from(self, frame: Any, target: tuple[float, float, float]) -> None:
         """The frame the site was chosen in, and where inverse perspective mapping put it."""
         view = site_view(frame)
-        self._track = (view, target) if view is not None else None
-        self._anchor = self._track
+        self.track = (view, target) if view is not None else None
+        self._anchor = self.track
         taken = _frame_time(frame)
-        self._resets_seen = sum(1 for t, _ in self.tm.position_resets.resets if t <= taken)
+        self._resets_seen = sum(1 for t, _ in self.ctx.tm.position_resets.resets if t <= taken)
         self._site_seen = collections.deque(maxlen=64)
         self._drift_budget_s = DRIFT_WAIT_S
         self._reanchor = False
@@ -236,12 +188,13 @@ class Following(RecoveryBase):
         """The estimate's resets not taken yet, added up (north, east): the followed site and the frames
         it is looked for in move by them into the estimate's frame now. The caller moves its target
         alike (a reset moves the vehicle's frame of reference, not the site)."""
-        resets = self.tm.position_resets.resets
+        ctx = self.ctx
+        resets = ctx.tm.position_resets.resets
         new, self._resets_seen = resets[self._resets_seen :], len(resets)
         if not new:
             return (0.0, 0.0)
         dn, de = sum(r[1][0] for r in new), sum(r[1][1] for r in new)
-        self._track = _moved(self._track, dn, de)
+        self.track = _moved(self.track, dn, de)
         self._anchor = _moved(self._anchor, dn, de)
         if self._site_seen is not None:  # a reset is not a drift
             moved = [(t, n + dn, e + de) for t, n, e in self._site_seen]
@@ -249,8 +202,8 @@ class Following(RecoveryBase):
             self._site_seen.extend(moved)
         shift = [round(dn, 3), round(de, 3)]
         when = round(new[-1][0], 2)
-        self.record.record_event("estimate_reset", {"round": self.round, "t_boot_s": when, "shift_m": shift})
-        self.log.info(
+        ctx.record.record_event("estimate_reset", {"round": ctx.round, "t_boot_s": when, "shift_m": shift})
+        ctx.log.info(
             "the autopilot's position estimate jumped %.1f m (north %.1f, east %.1f): the site and the "
             "target move with it",
             math.hypot(dn, de), dn, de,
@@ -267,29 +220,31 @@ class Following(RecoveryBase):
 
         Raises:
             ValueError, cv2.error: a malformed frame (the callers say so and try the next)."""
-        if self._track is None:
+        if self.track is None:
             return None
         state = FollowState(
-            self._track, self._anchor, tuple(self._site_seen or ()),
-            tuple(self.tm.position_resets.resets[: self._resets_seen]),
+            self.track, self._anchor, tuple(self._site_seen or ()),
+            tuple(self.ctx.tm.position_resets.resets[: self._resets_seen]),
         )  # fmt: skip
         resets_before = self._resets_seen
-        look = await asyncio.to_thread(look_for_site, frame, state, self._track_params, adopt, reanchor)
+        look = await asyncio.to_thread(look_for_site, frame, state, self.track_params, adopt, reanchor)
         if look is None:
             return None
         # resets taken while it ran: the find moves with those the frame predates (a frame taken after
         # a reset is already in the estimate's new frame)
         taken = _frame_time(frame)
-        new = [r for t, r in self.tm.position_resets.resets[resets_before : self._resets_seen] if t > taken]
+        new = [
+            r for t, r in self.ctx.tm.position_resets.resets[resets_before : self._resets_seen] if t > taken
+        ]
         dn, de = sum(r[0] for r in new), sum(r[1] for r in new)
-        if look.track is not None and self._track is not None:
-            self._track = _moved(look.track, dn, de)
+        if look.track is not None and self.track is not None:
+            self.track = _moved(look.track, dn, de)
         if look.seen is not None and self._site_seen is not None:
             t, n, e = look.seen
             self._site_seen.append((t, n + dn, e + de))
         return look.result
 
-    async def _follow(self, frame: Any, target: tuple[float, float, float]) -> tuple[float, float, float]:
+    async def follow(self, frame: Any, target: tuple[float, float, float]) -> tuple[float, float, float]:
         """The descent's target after looking for the site in ``frame``: moved onto it when found,
         kept when not; recorded either way. After a hold over a drifting site the frame the site was
         chosen in is looked against first (:meth:`_track_once`'s ``reanchor``)."""
@@ -299,27 +254,28 @@ class Following(RecoveryBase):
         result = await self._track_once(frame, True, reanchor)
         if result is None:
             return target
-        self.record.record_event(
+        self.ctx.record.record_event(
             "site_track", self._track_fields(result, "reanchor" if reanchor else "descent", frame)
         )
         if not result.found:
-            self.log.info("site not found in the frame (%s): keeping the target", result.reason)
+            self.ctx.log.info("site not found in the frame (%s): keeping the target", result.reason)
             return target
         return (result.site_ned_m[0], result.site_ned_m[1], target[2])
 
-    async def _goto_following(
+    async def goto_following(
         self, target: tuple[float, float, float], down_m: float, *, timeout_s: float
     ) -> tuple[float, float, float]:
         """A descent step: to ``target``'s north and east at ``down_m``, the site followed meanwhile
         (module docstring). Returns the target as it ended, down at the step's start."""
+        ctx = self.ctx
         moved = [target]
         async with self._following(moved, adopt=False):
-            await self.ctl.goto(
+            await ctx.ctl.goto(
                 target[0],
                 target[1],
                 down_m,
-                tolerance_m=self.p.arrival_tolerance_m,
-                speed_m_s=self.p.arrival_speed_m_s,
+                tolerance_m=ctx.p.arrival_tolerance_m,
+                speed_m_s=ctx.p.arrival_speed_m_s,
                 timeout_s=timeout_s,
             )
         return moved[-1]
@@ -341,7 +297,8 @@ class Following(RecoveryBase):
         """Twice a second: a frame, the site in it, and the step's target onto it when it moved
         (appended to ``moved``); the estimate's resets at once. Frames missing or unusable are
         skipped: the next one is tried. ``adopt``: see :meth:`_track_once`."""
-        while self._track is not None:
+        ctx = self.ctx
+        while self.track is not None:
             started = time.monotonic()
             while time.monotonic() - started < STEP_FOLLOW_PERIOD_S:
                 await asyncio.sleep(RESET_CHECK_PERIOD_S)
@@ -349,12 +306,12 @@ class Following(RecoveryBase):
                 if dn or de:  # the estimate jumped: the target with it, at once
                     n, e, d = moved[-1]
                     moved.append((n + dn, e + de, d))
-                    self.ctl.retarget(n + dn, e + de)
+                    ctx.ctl.retarget(n + dn, e + de)
             try:
-                frame = await self._frames()
+                frame = await ctx.frames()
                 result = await self._track_once(frame, adopt)
             except (FrameUnavailable, ValueError, cv2.error) as exc:
-                self.log.debug("site not looked for during the step: %s", exc)
+                ctx.log.debug("site not looked for during the step: %s", exc)
                 continue
             if result is None or not result.found:
                 continue
@@ -362,10 +319,10 @@ class Following(RecoveryBase):
             if math.hypot(result.site_ned_m[0] - n, result.site_ned_m[1] - e) < STEP_FOLLOW_MIN_M:
                 continue
             moved.append((result.site_ned_m[0], result.site_ned_m[1], d))
-            self.ctl.retarget(result.site_ned_m[0], result.site_ned_m[1])
-            self.record.record_event("site_track", self._track_fields(result, "step", frame))
+            ctx.ctl.retarget(result.site_ned_m[0], result.site_ned_m[1])
+            ctx.record.record_event("site_track", self._track_fields(result, "step", frame))
             if result.reacquired:
-                self.log.info(
+                ctx.log.info(
                     "site found %.1f m from where the estimate had it: the target follows it",
                     math.hypot(result.shift_m[0], result.shift_m[1]),
                 )
@@ -373,20 +330,21 @@ class Following(RecoveryBase):
     def _site_drift_m_s(self, since_s: float = -math.inf) -> float:
         return site_drift_m_s(list(self._site_seen or ()), since_s)
 
-    async def _settle(self, target: tuple[float, float, float]) -> tuple[float, float, float]:
+    async def settle(self, target: tuple[float, float, float]) -> tuple[float, float, float]:
         """Before a descent step or the final approach: while the site drifts in the estimate
         (``DRIFT_MIN_M_S``), hold over it, following it, until it stops; the autopilot holds its own
         estimate, which would carry the vehicle off the site as it drifts, and from lower down the
         site is harder to follow. A round holds ``DRIFT_WAIT_S`` in all at most, and a hold ends
         when no frame has found the site for ``DRIFT_BLIND_S``. Returns the target then."""
+        ctx = self.ctx
         drift = self._site_drift_m_s()
         if not drift >= DRIFT_MIN_M_S or self._drift_budget_s <= 0:  # NaN: too few frames to say
             return target
-        self._say(
+        ctx.say(
             5, f"the site drifts {drift:.1f} m/s in the autopilot's estimate (a GPS drifting?): "
             "holding over it until it stops",
         )  # fmt: skip
-        start = self.tm.state.t_boot_s
+        start = ctx.tm.state.t_boot_s
         moved = [target]
         why = "it stopped"
         # the looks search where the drift carries the site (:meth:`_track_once`), against the last
@@ -395,8 +353,8 @@ class Following(RecoveryBase):
         async with self._following(moved, adopt=False):
             while True:
                 await asyncio.sleep(STEP_FOLLOW_PERIOD_S)
-                self.ctl.check_interruption()
-                now = self.tm.state.t_boot_s
+                ctx.ctl.check_interruption()
+                now = ctx.tm.state.t_boot_s
                 seen = [p for p in (self._site_seen or ()) if p[0] > start]
                 if self._site_drift_m_s(since_s=start) < DRIFT_MIN_M_S:  # False while NaN
                     break
@@ -406,16 +364,16 @@ class Following(RecoveryBase):
                 if now - start >= self._drift_budget_s:
                     why = "the round's time for holding is spent"
                     break
-        waited = self.tm.state.t_boot_s - start
+        waited = ctx.tm.state.t_boot_s - start
         self._drift_budget_s -= waited
         self._reanchor = True
         still = self._site_drift_m_s(since_s=start)
-        self.record.record_event(
+        ctx.record.record_event(
             "drift_hold",
-            {"round": self.round, "drift_m_s": round(drift, 3), "waited_s": round(waited, 1), "why": why,
+            {"round": ctx.round, "drift_m_s": round(drift, 3), "waited_s": round(waited, 1), "why": why,
              "drift_after_m_s": round(still, 3) if math.isfinite(still) else None},
         )  # fmt: skip
-        self._say(5, f"held {waited:.0f} s over the site ({why}): going on")
+        ctx.say(5, f"held {waited:.0f} s over the site ({why}): going on")
         return moved[-1]
 
     def _track_fields(self, result: TrackResult, phase: str, frame: Any) -> dict[str, Any]:
@@ -423,7 +381,7 @@ class Following(RecoveryBase):
             return round(v, 3) if math.isfinite(v) else None
 
         return {
-            "round": self.round,
+            "round": self.ctx.round,
             "phase": phase,
             "t_boot_s": r(_frame_time(frame)),
             "found": result.found,
@@ -441,7 +399,7 @@ class Following(RecoveryBase):
         ``PRECLAND_FIRST_S``; True if one went out."""
         deadline = time.monotonic() + PRECLAND_FIRST_S
         while stats["sent"] == 0:
-            self.ctl.check_interruption()
+            self.ctx.ctl.check_interruption()
             if time.monotonic() > deadline:
                 return False
             await asyncio.sleep(0.05)
@@ -462,12 +420,12 @@ class Following(RecoveryBase):
                 if reason and reason != last_reason:
                     stats["lost"].append(
                         {
-                            "t_boot_s": round(self.tm.state.t_boot_s, 2),
+                            "t_boot_s": round(self.ctx.tm.state.t_boot_s, 2),
                             "why": reason,
                             "score": round(score, 3) if math.isfinite(score) else None,
                         }
                     )
-                    self.log.info("precision landing: the site not found (%s)", reason)
+                    self.ctx.log.info("precision landing: the site not found (%s)", reason)
                 last_reason = reason
                 await asyncio.sleep(max(0.0, LAND_FEED_PERIOD_S - (time.monotonic() - started)))
         finally:
@@ -480,7 +438,7 @@ class Following(RecoveryBase):
         and the site in the estimate; ``("", score)``), or why not and the match's score (NaN when no
         match was tried). ``local_ned`` (PX4): the looks are not chained into references."""
         try:
-            frame = await self._frames()
+            frame = await self.ctx.frames()
         except FrameUnavailable as exc:
             return f"no frame: {exc}", math.nan
         dn, de = self._catch_up()
@@ -497,7 +455,7 @@ class Following(RecoveryBase):
             return result.reason, result.score
         taken = _frame_time(frame)
         stats["seen"] = (
-            taken if math.isfinite(taken) else self.tm.state.t_boot_s,
+            taken if math.isfinite(taken) else self.ctx.tm.state.t_boot_s,
             np.asarray(result.site_ned_m),
         )
         stats["looks_found"] += 1
@@ -508,36 +466,38 @@ class Following(RecoveryBase):
         the newest look found it (at most ``LAND_TARGET_MAX_AGE_S`` old): in the autopilot's local
         frame (PX4), else in the vehicle's body axes from where it is now (ArduPilot). The looks come
         at the processor's pace; the targets at the autopilot's, whatever the simulation's speed."""
+        ctx = self.ctx
         last = -math.inf
         while True:
             await asyncio.sleep(0.02)
-            s = self.tm.state
+            s = ctx.tm.state
             now = s.t_boot_s
             seen = stats.get("seen")
             if seen is None or now - last < LAND_SEND_PERIOD_S or now - seen[0] > LAND_TARGET_MAX_AGE_S:
                 continue
             site = seen[1]
             if local_ned:  # PX4: where the site is in its local frame
-                self.ctl.send_landing_target_local(
+                ctx.ctl.send_landing_target_local(
                     (float(site[0]), float(site[1]), float(site[2])), int(now * 1e6)
                 )
             else:  # from where the vehicle is now (it moved since the frame), in its body axes now
                 frd = quat_to_matrix(s.quat_wxyz).T @ (site - np.asarray(s.pos_ned_m))
                 if frd[2] <= 0.05:  # level with the vehicle: no line of sight to give
                     continue
-                self.ctl.send_landing_target((float(frd[0]), float(frd[1]), float(frd[2])), int(now * 1e6))
+                ctx.ctl.send_landing_target((float(frd[0]), float(frd[1]), float(frd[2])), int(now * 1e6))
             last = now
             stats["sent"] += 1
             stats["last_site_ned_m"] = [round(float(v), 3) for v in site]
 
-    async def _land_on_site(self, setup: PrecisionLanding | None) -> None:
+    async def land_on_site(self, setup: PrecisionLanding | None) -> None:
         """The autopilot's land mode; with its precision landing fed from the camera when it is set up
         for one and the site is in view; recorded as ``precision_landing``."""
+        ctx = self.ctx
         if setup is None:
             why, ready = "the autopilot's parameters were not read", False
         else:
             why, ready = setup.why, setup.ready
-        if ready and self._track is None:
+        if ready and self.track is None:
             why, ready = "no camera view of the site to follow: the absolute target", False
         stats: dict[str, Any] = {
             "sent": 0,
@@ -562,19 +522,19 @@ class Following(RecoveryBase):
                     why = f"no landing target within {PRECLAND_FIRST_S:g} s: the absolute target"
                     ready = False
                     feed.cancel()  # AUTO.LAND reads no target
-            await self.ctl.land(self.p.land_timeout_s, mode)
+            await ctx.ctl.land(ctx.p.land_timeout_s, mode)
         finally:
             if feed is not None:
                 feed.cancel()
                 with contextlib.suppress(asyncio.CancelledError):
                     await feed
-            self.record.record_event(
+            ctx.record.record_event(
                 "precision_landing",
                 {
-                    "round": self.round,
+                    "round": ctx.round,
                     "used": ready,
                     "why": why,
-                    "mode": self.ctl.flavour.mode_name(self.ctl.flavour.modes[mode]),
+                    "mode": ctx.ctl.flavour.mode_name(ctx.ctl.flavour.modes[mode]),
                     "targets_sent": stats["sent"],
                     "looks_found": stats["looks_found"],
                     "lost": stats["lost"],

@@ -24,16 +24,18 @@ from companion.perception.surface_id import (
     propose,
     quadrant_fallback,
 )
-from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequest
-from companion.reasoning.onboard import lidar_kind
+from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequest, Reasoner
+from companion.reasoning.onboard import OnboardReasoner, lidar_kind
 from companion.recovery.core import (
+    BUILT_UP_RADIUS_M,
     SENSOR_RETRY_S,
     SITE_RETRIES,
     FrameUnavailable,
-    RecoveryBase,
+    RecoveryContext,
     SensorsLost,
     State,
 )
+from companion.recovery.search_plan import SearchPlanner
 from companion.site_ledger import LedgerSite, hazard_of
 
 
@@ -55,75 +57,95 @@ def chosen_position(ranking: Ranking, candidates: Sequence[Candidate]) -> int | 
     return next((k for k in ranking.order if 0 <= k < len(candidates) and not candidates[k].fallback), None)
 
 
-class Looking(RecoveryBase):
-    """Acquire, Surface ID, rank, confirm, the site check and IPM (DESIGN.md section 2, steps 1-5)."""
+def onboard_tier(reasoner: Reasoner) -> OnboardReasoner:
+    """The onboard tier that judges every measured site for the ledger, whoever decides: the cascade's
+    own (its judge, cues or LandNet-S, as configured) when there is one, else a default one."""
+    onboard = getattr(reasoner, "onboard", None)
+    return onboard if isinstance(onboard, OnboardReasoner) else OnboardReasoner()
 
-    async def _acquire(self, *, first_round: bool = False) -> Any:
+
+class Looker:
+    """Acquire, Surface ID, rank, confirm, the site check and IPM (DESIGN.md section 2, steps 1-5),
+    and the onboard tier's view of every site for the ledger.
+
+    Args:
+        ctx: what the recovery's parts share.
+        reasoner: ranks the candidates and confirms a site.
+        onboard: judges every measured site for the ledger (:func:`onboard_tier`).
+        plan: the search's map, whose roofs make a site's surroundings built-up (:meth:`built_up`).
+    """
+
+    def __init__(
+        self, ctx: RecoveryContext, *, reasoner: Reasoner, onboard: OnboardReasoner, plan: SearchPlanner
+    ) -> None:
+        self.ctx = ctx
+        self.reasoner = reasoner
+        self.onboard = onboard
+        self._plan = plan
+        # this round's Surface ID measured a roof: a built-up area here (the round sets it)
+        self.roofs_in_view = False
+
+    async def acquire(self, *, first_round: bool = False) -> Any:
         """A frame; while none comes, the vehicle holds on its current setpoint and the request is
         repeated every ``SENSOR_RETRY_S``, each failure recorded. Raises ``SensorsLost`` after
         ``sensor_loss_s`` without one."""
-        self._set(State.ACQUIRE)
-        self._fault.check("acquire", 1 if first_round else self.round)
+        ctx = self.ctx
+        ctx.set_state(State.ACQUIRE)
+        ctx.fault.check("acquire", 1 if first_round else ctx.round)
         since = time.monotonic()
         for attempt in itertools.count():
             try:
-                return await self._frames()
+                return await ctx.frames()
             except FrameUnavailable as exc:
                 waited = time.monotonic() - since
-                self.record.record_event(
-                    "sensor_fault", {"round": self.round, "error": str(exc), "waited_s": round(waited, 2)}
+                ctx.record.record_event(
+                    "sensor_fault", {"round": ctx.round, "error": str(exc), "waited_s": round(waited, 2)}
                 )
-                if waited >= self.p.sensor_loss_s:
+                if waited >= ctx.p.sensor_loss_s:
                     raise SensorsLost(f"no usable sensor frame for {waited:.0f} s ({exc})") from exc
                 if attempt == 0:
-                    self._say(4, f"no sensor frame ({exc}): holding, asking again")
+                    ctx.say(4, f"no sensor frame ({exc}): holding, asking again")
                 await asyncio.sleep(SENSOR_RETRY_S)
         raise AssertionError("unreachable")
 
-    def _observe(self, frame: Any) -> None:
-        """The frame into the search's map: the LiDAR's sweep, and with LandNet-S as the onboard judge
-        what the camera shows beyond it (water and traffic). A worker-thread job."""
-        self.search.observe(frame)
-        net = self._onboard.landnet
-        if net is not None and frame.image_rgb is not None:
-            self.search.observe_camera(frame, net.presence, tuple(net.classes))
-
-    def _surface_id(self, frame: Any, camera: PinholeCamera) -> list[Candidate]:
+    def surface_id(self, frame: Any, camera: PinholeCamera) -> list[Candidate]:
         """Candidates from the configured depth source; the quadrant fallback when it has nothing."""
-        self._fault.check("surface_id", self.round)
+        ctx = self.ctx
+        ctx.fault.check("surface_id", ctx.round)
         try:
             cands, _depth = propose(
-                self.p.depth_source,
+                ctx.p.depth_source,
                 camera,
                 image=frame.image_rgb,
                 lidar_frd=frame.lidar_frd,
                 quat_wxyz=frame.quat_wxyz,
                 pos_ned_m=frame.pos_ned_m,
                 ground_up_m=frame.pos_ned_m[2],
-                params=self.p.surface,
+                params=ctx.p.surface,
             )
         except DepthError as exc:
-            net = self._onboard.landnet
+            net = self.onboard.landnet
             if net is None or frame.image_rgb is None or frame.lidar_frd is not None:
                 # a sweep that came empty is a gap (the next one is asked for), not a blind vehicle
-                self.log.warning("Surface ID has no depth (%s): quadrant fallback", exc)
+                ctx.log.warning("Surface ID has no depth (%s): quadrant fallback", exc)
                 return quadrant_fallback(camera)
             # no LiDAR at all (a camera alone, or a LiDAR that failed): surfaces by how they look
             # (companion.perception.appearance)
             clear = clear_cells(frame.image_rgb, net.presence, tuple(net.classes))
             cands = appearance_candidates(clear, camera.width, camera.height, max_candidates=5)
-            self.log.info(
+            ctx.log.info(
                 "Surface ID has no depth (%s): %d clear roof surface%s by their look", exc, len(cands),
                 "" if len(cands) == 1 else "s",
             )  # fmt: skip
             return cands or quadrant_fallback(camera)
         return cands
 
-    async def _rank(self, candidates: list[Candidate], frame: Any) -> tuple[Ranking, int | None]:
+    async def rank(self, candidates: list[Candidate], frame: Any) -> tuple[Ranking, int | None]:
         """The reasoner's order of the candidates, from their crops (the configured context variant),
         and the one the vehicle flies to: the first in that order that is not a fallback crop (a
         quadrant has no measured site). Both go to the record's ``rank`` event (``order``, ``chosen``)."""
-        self._fault.check("rank", self.round)
+        ctx = self.ctx
+        ctx.fault.check("rank", ctx.round)
         image = frame.image_rgb
         names: list[str] = []
         if image is None:
@@ -133,22 +155,22 @@ class Looking(RecoveryBase):
             request = RankRequest(
                 crops,
                 None if all(c.fallback for c in candidates) else tuple(candidates),
-                context=image if self.p.context == "full" else None,
-                critical=self.criticality == Criticality.CRITICAL,
-                cores=cores if pad_of(self.p.context) > 0 else None,
+                context=image if ctx.p.context == "full" else None,
+                critical=ctx.criticality == Criticality.CRITICAL,
+                cores=cores if pad_of(ctx.p.context) > 0 else None,
             )
             ranking = await self.reasoner.rank(request)
         chosen = chosen_position(ranking, candidates)
-        self.record.record_event(
+        ctx.record.record_event(
             "rank",
             {
-                "round": self.round,
+                "round": ctx.round,
                 "order": list(ranking.order),
                 "chosen": chosen,
                 "rationale": ranking.rationale,
                 "tier": ranking.tier,
                 "latency_s": ranking.latency_s,
-                "context": self.p.context,
+                "context": ctx.p.context,
                 "images": names,
                 "candidates": [c.to_json() for c in candidates],
                 # the candidates' frame, on the autopilot's clock: where an evaluation finds what the
@@ -158,12 +180,13 @@ class Looking(RecoveryBase):
         )
         return ranking, chosen
 
-    async def _confirm(
+    async def confirm(
         self, check: SiteCheck, frame: Any, target: tuple[float, float, float], choice: Candidate
     ) -> Decision:
         """Reasoner and geometric veto on a close-up of the site (the cascade arbitrates); the verdict
         goes to the ledger too, with what the onboard tier saw against the site whoever decided."""
-        self._fault.check("confirm", self.round)
+        ctx = self.ctx
+        ctx.fault.check("confirm", ctx.round)
         image = frame.image_rgb
         if image is None and not check.measured:
             # neither sensor judged the site: not a reason to strike it off (contested: asked again)
@@ -186,18 +209,18 @@ class Looking(RecoveryBase):
                 ConfirmRequest(
                     closeup,
                     check if check.measured else None,
-                    critical=self.criticality == Criticality.CRITICAL,
+                    critical=ctx.criticality == Criticality.CRITICAL,
                     site_ne_m=(target[0], target[1]),
                     site_up_m=choice.height_above_m if math.isfinite(choice.height_above_m) else None,
                     site_strip=choice.strip,
-                    built_up=self._built_up((target[0], target[1])),
+                    built_up=self.built_up((target[0], target[1])),
                 )
             )
         up_m = choice.height_above_m if math.isfinite(choice.height_above_m) else None
-        if decision.tier == self._onboard.name or image is None:
+        if decision.tier == self.onboard.name or image is None:
             kinds = decision.hazards or ((lidar_kind(check),) if check.measured and not check.clear else ())
         else:  # a remote tier decided: the ledger still wants the onboard tier's view of the site
-            kinds = await asyncio.to_thread(self._judge, frame, check, target, up_m, choice.strip)
+            kinds = await asyncio.to_thread(self.judge, frame, check, target, up_m, choice.strip)
         hazard = hazard_of(
             kinds,
             accepted=decision.accept,
@@ -206,15 +229,22 @@ class Looking(RecoveryBase):
             judged=image is not None or check.measured,
         )
         why = decision.rationale[:160] if not decision.accept else "confirmed for descent"
-        self.ledger.add(
+        ctx.ledger.add(
             LedgerSite(
-                target, hazard, why, self.round, True, choice.edge_distance_m, f"site {choice.index}", choice
+                target,
+                hazard,
+                why,
+                ctx.round,
+                True,
+                choice.edge_distance_m,
+                f"site {choice.index}",
+                choice,
             )
         )
-        self.record.record_event(
+        ctx.record.record_event(
             "confirm",
             {
-                "round": self.round,
+                "round": ctx.round,
                 "accept": decision.accept,
                 "unsure": decision.unsure,
                 "rationale": decision.rationale,
@@ -235,7 +265,7 @@ class Looking(RecoveryBase):
         )
         return decision
 
-    async def _measure_site(self, target: tuple[float, float, float]) -> tuple[Any, SiteCheck]:
+    async def measure_site(self, target: tuple[float, float, float]) -> tuple[Any, SiteCheck]:
         """A frame and the LiDAR check of the site under it.
 
         Policy: a sweep that misses the site (empty, or too few returns in the rotor disc: a partial
@@ -243,67 +273,116 @@ class Looking(RecoveryBase):
         asked for, ``SITE_RETRIES`` times at most; then the site goes to the reasoner unmeasured and is
         judged from the image, as with no LiDAR at all (a frame without one goes so at once). A gap
         never strikes a site off."""
+        ctx = self.ctx
         for attempt in range(SITE_RETRIES + 1):
-            frame = await self._acquire()
-            self._set(State.CONFIRM)
+            frame = await self.acquire()
+            ctx.set_state(State.CONFIRM)
             check = await asyncio.to_thread(
                 check_site, frame.lidar_frd, frame.pos_ned_m, frame.quat_wxyz, (target[0], target[1])
             )
             if check.measured or frame.lidar_frd is None:
                 return frame, check
-            self.record.record_event(
+            ctx.record.record_event(
                 "sensor_fault",
                 {
-                    "round": self.round,
+                    "round": ctx.round,
                     "error": f"site not measured: {check.points} LiDAR returns in the rotor disc",
                     "attempt": attempt,
                 },
             )
             if attempt < SITE_RETRIES:
                 await asyncio.sleep(SENSOR_RETRY_S)
-        self._say(4, "the LiDAR keeps missing the site: judging it from the image")
+        ctx.say(4, "the LiDAR keeps missing the site: judging it from the image")
         return frame, check
+
+    def judge(
+        self,
+        frame: Any,
+        check: SiteCheck,
+        target: tuple[float, float, float],
+        up_m: float | None,
+        strip: bool,
+    ) -> tuple[str, ...]:
+        """What the onboard tier sees against a site (``Decision.hazards``), from the close-up of
+        ``frame`` around it and the LiDAR check; the LiDAR's kind alone without an image. A worker-
+        thread job."""
+        if frame.image_rgb is None:
+            return (lidar_kind(check),) if check.measured and not check.clear else ()
+        closeup = self.closeup(frame.image_rgb, frame, target)
+        request = ConfirmRequest(closeup, check if check.measured else None, site_up_m=up_m, site_strip=strip)
+        return self.onboard.confirm_sync(request).hazards
+
+    def note_candidates(self, candidates: list[Candidate], frame: Any, camera: PinholeCamera) -> None:
+        """Every measured candidate of a round into the ledger, judged from afar: the onboard tier's
+        view of the frame around its site, as a confirmation would see it (a worker-thread job)."""
+        for c in candidates:
+            if c.fallback or c.site_ned_m is None:
+                continue
+            up_m = c.height_above_m if math.isfinite(c.height_above_m) else None
+            kinds = self.judge(frame, UNMEASURED, c.site_ned_m, up_m, c.strip)
+            hazard = hazard_of(
+                kinds, accepted=False, street_level=not c.elevated and not c.strip, strip=c.strip
+            )
+            why = ", ".join(kinds) or "nothing seen against it from afar"
+            self.ctx.ledger.add(
+                LedgerSite(
+                    c.site_ned_m, hazard, why, self.ctx.round, False, c.edge_distance_m, f"site {c.index}", c
+                )
+            )
+
+    def built_up(self, site_ne_m: tuple[float, float]) -> bool:
+        """Policy: whether a site at street level is among buildings, where streets and plazas carry people
+        and traffic that come back (docs/recovery.md): a roof in this round's view, or roofs the LiDAR
+        measured during the recovery (the search's map) within ``BUILT_UP_RADIUS_M`` of the site. The
+        open fields past a town's last roofs are open country, judged on what is seen."""
+        if self.roofs_in_view:
+            return True
+        return bool(self._plan.roof_groups(lambda c: math.dist(c, site_ne_m) < BUILT_UP_RADIUS_M))
 
     def _rank_crops(
         self, image: Any, candidates: list[Candidate]
     ) -> tuple[tuple[Any, ...], tuple[tuple[int, int, int, int], ...], list[str]]:
         """The crops the reasoner ranks (and their cores), saved to the record: a worker-thread job."""
-        crops, cores = rank_crops(image, [c.box_px for c in candidates], self.p.context)
+        ctx = self.ctx
+        crops, cores = rank_crops(image, [c.box_px for c in candidates], ctx.p.context)
         names = [
-            self._saved_name(self.record.save_image(f"round{self.round:02d}-rank-crop{k}", c))
+            self._saved_name(ctx.record.save_image(f"round{ctx.round:02d}-rank-crop{k}", c))
             for k, c in enumerate(crops)
         ]
         return crops, cores, names
 
     def _closeup_saved(self, image: Any, frame: Any, target: tuple[float, float, float]) -> tuple[Any, str]:
-        closeup = self._closeup(image, frame, target)
-        return closeup, self._saved_name(self.record.save_image(f"round{self.round:02d}-confirm", closeup))
+        closeup = self.closeup(image, frame, target)
+        return closeup, self._saved_name(
+            self.ctx.record.save_image(f"round{self.ctx.round:02d}-confirm", closeup)
+        )
 
     @staticmethod
     def _saved_name(path: Any) -> str:
         return str(getattr(path, "name", path)) if path is not None else ""
 
-    def _closeup(self, image: Any, frame: Any, target: tuple[float, float, float]) -> Any:
+    def closeup(self, image: Any, frame: Any, target: tuple[float, float, float]) -> Any:
         camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
-        return site_closeup(image, camera, frame.pos_ned_m, frame.quat_wxyz, target, self.p.closeup_half_m)
+        return site_closeup(
+            image, camera, frame.pos_ned_m, frame.quat_wxyz, target, self.ctx.p.closeup_half_m
+        )
 
-    def _ipm(self, c: Candidate, frame: Any, camera: PinholeCamera) -> tuple[float, float, float] | None:
+    def ipm(self, c: Candidate, frame: Any, camera: PinholeCamera) -> tuple[float, float, float] | None:
         """The chosen pixel -> world point through the LiDAR; the flat-ground fallback without it;
         None when neither can place it."""
-        self._fault.check("ipm", self.round)
+        ctx = self.ctx
+        ctx.fault.check("ipm", ctx.round)
         u, v = c.centre_px
         try:
             index = LidarPixelIndex(frame.lidar_frd, camera)
             p = pixel_to_ned_surface(u, v, index, frame.pos_ned_m, frame.quat_wxyz)
         except IpmError as exc:
             ground_d = frame.pos_ned_m[2] + frame.rangefinder_m
-            self.log.warning(
-                "IPM through the LiDAR failed (%s): flat ground at the rangefinder distance", exc
-            )
+            ctx.log.warning("IPM through the LiDAR failed (%s): flat ground at the rangefinder distance", exc)
             try:
                 p = pixel_to_ned_flat(u, v, camera, frame.pos_ned_m, frame.quat_wxyz, ground_d)
             except IpmError as flat:  # e.g. a rangefinder reading 0: the ray never meets that plane
-                self.log.warning("and flat ground failed too (%s): no world position", flat)
+                ctx.log.warning("and flat ground failed too (%s): no world position", flat)
                 return None
         return (float(p[0]), float(p[1]), float(p[2]))
 

@@ -4,13 +4,16 @@ One :class:`Recovery` per alarm. Its state is explicit (:class:`State`); every d
 (STATUSTEXT), recorded, and taken from telemetry, never from sleeps. A round that finds nothing
 explores (climbs, or flies a search leg); a target never reached or a site rejected at confirmation
 ends the round. When the round budget runs out with nothing acceptable seen, the vehicle searches on,
-leg by leg (:mod:`companion.search`), while the battery holds more than the landing needs plus a
-reserve and the alarm's window allows; then it lands at the least bad site it measured
+leg by leg (:mod:`companion.recovery.search_plan`), while the battery holds more than the landing
+needs plus a reserve and the alarm's window allows; then it lands at the least bad site it measured
 (:mod:`companion.site_ledger`), never "here" blindly. The battery and the window also end the rounds
 within the budget: a battery at its reserve lands at the least bad site after the first look. A
 defect of the companion's own (any unexpected exception) never leaves the vehicle without a
 commander: it is announced, recorded with its traceback, and the vehicle lands
 (:meth:`Recovery._fail_safe`).
+
+The machine decides; its parts (:mod:`companion.recovery` lists them) look, follow the site, land and
+search, each on the context they share.
 """
 
 from __future__ import annotations
@@ -18,11 +21,14 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import functools
+import logging
 import math
 import time
 import traceback
 from collections.abc import Callable
+from typing import Any
 
+from companion.alarms import Alarm, Criticality
 from companion.control import (
     MAV_STATE_CRITICAL,
     AutopilotFailsafe,
@@ -32,51 +38,112 @@ from companion.control import (
     TargetTimeout,
     TelemetryLost,
     TouchedDown,
+    VehicleController,
 )
+from companion.faults import FaultHook
 from companion.guidance.descent import height_above_site
 from companion.guidance.frames import PinholeCamera, compass_point
 from companion.perception.site_check import check_site
-from companion.perception.surface_id import (
-    Candidate,
+from companion.perception.surface_id import Candidate
+from companion.reasoning.base import Reasoner
+from companion.recovery.core import (
+    MAX_REENGAGE,
+    SEVERITY_CRITICAL,
+    FrameSource,
+    NoRecord,
+    Outcome,
+    Record,
+    RecoveryContext,
+    RecoveryParams,
+    SensorsLost,
+    Site,
+    State,
 )
-from companion.recovery.core import MAX_REENGAGE, SEVERITY_CRITICAL, Outcome, SensorsLost, Site, State
-from companion.recovery.following import Following
-from companion.recovery.looking import Looking, lidar_silent
-from companion.recovery.searching import Searching
-from companion.recovery.site_choice import SiteChoice
+from companion.recovery.following import SiteFollower
+from companion.recovery.landing import Lander
+from companion.recovery.looking import Looker, lidar_silent, onboard_tier
+from companion.recovery.search_plan import SearchPlanner
+from companion.recovery.searching import Searcher
+from companion.telemetry import TelemetryCache
 
 TAKEOVER_TEXTS_S = 5.0  # the autopilot's texts this recent go with a takeover into the record
 
 
-def _run_all(jobs: list[Callable[[], object]]) -> None:
-    for job in jobs:
-        job()
+class Recovery:
+    """One recovery, from the alarm to the ground (module docstring): the state machine. It owns its
+    parts, each built on the context they share (:class:`RecoveryContext`) and given the parts it
+    calls: ``looker`` (:class:`Looker`), ``follower`` (:class:`SiteFollower`), ``lander``
+    (:class:`Lander`) and ``searcher`` (:class:`Searcher`)."""
 
+    def __init__(
+        self,
+        alarm: Alarm,
+        *,
+        control: VehicleController,
+        telemetry: TelemetryCache,
+        frames: FrameSource,
+        reasoner: Reasoner,
+        announce: Callable[[int, str], None],
+        params: RecoveryParams | None = None,
+        record: Record | None = None,
+        logger: logging.Logger | None = None,
+    ) -> None:
+        self.ctx = ctx = RecoveryContext(
+            alarm,
+            control,
+            telemetry,
+            frames,
+            announce,
+            params or RecoveryParams(),
+            record or NoRecord(),
+            logger or logging.getLogger("companion.recovery"),
+            FaultHook.from_env(),
+        )
+        p = ctx.p
+        plan = SearchPlanner(alarm.criticality, p.search, search_agl_m=p.search_agl_m, lidar_range_m=100.0)
+        onboard = onboard_tier(reasoner)
+        self.looker = Looker(ctx, reasoner=reasoner, onboard=onboard, plan=plan)
+        self.follower = SiteFollower(ctx)
+        self.lander = Lander(ctx, looker=self.looker, follower=self.follower)
+        self.searcher = Searcher(ctx, plan=plan, lander=self.lander, onboard=onboard)
+        self._reengaged = 0  # re-engagements after the autopilot's own failsafe (MAX_REENGAGE)
+        # the site a descent is on, confirmed again first when a lost link comes back
+        self._descending: tuple[tuple[float, float, float], Candidate] | None = None
+        self.extra = 0  # rounds flown past the budget (nothing acceptable seen)
+        # the last round ended on an exploring climb or descent: a view from here not yet looked at
+        self._new_vantage = False
+        self._first_look: asyncio.Task[Any] | None = None  # the first frame, asked for while engaging
 
-class Recovery(Searching, SiteChoice, Following, Looking):
-    """One recovery, from the alarm to the ground (module docstring): the state machine; its parts
-    (:class:`Looking`, :class:`Following`, :class:`SiteChoice`, :class:`Searching`) each hold one idea
-    of it."""
+    def raise_criticality(self, criticality: Criticality) -> None:
+        """A repeated alarm can make the recovery more urgent (a shorter budget), never less."""
+        ctx = self.ctx
+        if criticality > ctx.criticality:
+            ctx.criticality = criticality
+            self.searcher.raise_criticality(criticality)
+            ctx.say(5, f"alarm raised to {criticality.name.lower()}: {ctx.budget} rounds")
 
     # ------------------------------------------------------------------ the loop
     async def run(self) -> Outcome:
-        self._say(5, f"alarm '{self.alarm.reason}' ({self.criticality.name.lower()}), {self.budget} rounds")
-        self.search.start(self._clock_s(), self.tm.state.battery_pct)
+        ctx = self.ctx
+        ctx.say(5, f"alarm '{ctx.alarm.reason}' ({ctx.criticality.name.lower()}), {ctx.budget} rounds")
+        self.searcher.start()
         try:
             held = self._failsafe_in_charge()
             if held is not None:  # an alarm after the autopilot's own failsafe took the vehicle
-                self.record.record_event("autopilot_failsafe", {"round": 0, "state": "idle", "mode": held})
+                self.ctx.record.record_event(
+                    "autopilot_failsafe", {"round": 0, "state": "idle", "mode": held}
+                )
                 return await self._leave_to_autopilot(held)
             await self._engage_and_look()
             resume: tuple[tuple[float, float, float], Candidate] | None = None
-            while resume is not None or self._go_on():
+            while resume is not None or self.searcher.go_on():
                 try:
                     if resume is not None:  # the link came back mid-descent: same site, confirm first
                         landed = await self._confirm_and_descend(*resume)
-                    elif self.round >= self.budget:
+                    elif self.ctx.round >= self.ctx.budget:
                         landed = await self._extra_round()
                     else:
-                        self.round += 1
+                        self.ctx.round += 1
                         self._descending = None
                         landed = await self._round()
                     resume = None
@@ -95,37 +162,39 @@ class Recovery(Searching, SiteChoice, Following, Looking):
                 except SensorsLost as exc:
                     # policy: no sensors, no new site; the alarm still stands, so come down: at the
                     # best site measured so far (flown to on the autopilot's position hold), else here
-                    self._say(3, f"{exc}: landing without them")
+                    self.ctx.say(3, f"{exc}: landing without them")
                     return await self._land_at_best("sensors lost", measure_here=False)
                 if landed:
-                    return Outcome(State.LANDED, self.round, self._site_ned(), "landed")
-            if self._ended is not None:
-                return await self._land_at_best(f"search ended ({self._ended.why})")
+                    return Outcome(State.LANDED, self.ctx.round, self.ctx.site_ned(), "landed")
+            if self.searcher.ended is not None:
+                return await self._land_at_best(f"search ended ({self.searcher.ended.why})")
             return await self._land_at_best("round budget spent")
         except TouchedDown as exc:
             # the surface came sooner than measured: the vehicle is down, and says so
-            self._set(State.LANDED)
-            self._say(4, f"touched down before the final approach: {exc}")
-            await self.ctl.release()
-            return Outcome(State.LANDED, self.round, self._site_ned(), "touched down during a descent step")
+            self.ctx.set_state(State.LANDED)
+            self.ctx.say(4, f"touched down before the final approach: {exc}")
+            await self.ctx.ctl.release()
+            return Outcome(
+                State.LANDED, self.ctx.round, self.ctx.site_ned(), "touched down during a descent step"
+            )
         except OperatorTakeover as exc:
-            self._set(State.ABORTED)
-            self._say(4, "operator took over: stopped commanding")
-            await self.ctl.release()
+            self.ctx.set_state(State.ABORTED)
+            self.ctx.say(4, "operator took over: stopped commanding")
+            await self.ctx.ctl.release()
             # what the autopilot said just before may be the real cause: ArduCopter's fence breach
             # switches to LAND or RTL without the critical status of its other failsafes
-            said = [text for t, _, text in self.tm.texts if time.monotonic() - t < TAKEOVER_TEXTS_S]
+            said = [text for t, _, text in self.ctx.tm.texts if time.monotonic() - t < TAKEOVER_TEXTS_S]
             said = [t for t in said if not t.startswith("Landfall:")]
-            self.record.record_event(
-                "takeover", {"round": self.round, "mode": str(exc), "autopilot_said": said}
+            self.ctx.record.record_event(
+                "takeover", {"round": self.ctx.round, "mode": str(exc), "autopilot_said": said}
             )
             why = f"{exc} (the autopilot said: {'; '.join(said)})" if said else str(exc)
-            return Outcome(State.ABORTED, self.round, None, why)
+            return Outcome(State.ABORTED, self.ctx.round, None, why)
         except ControlError as exc:
-            self._set(State.ABORTED)
-            self._say(2, f"aborted: {exc}")
-            await self.ctl.release()
-            return Outcome(State.ABORTED, self.round, None, str(exc))
+            self.ctx.set_state(State.ABORTED)
+            self.ctx.say(2, f"aborted: {exc}")
+            await self.ctx.ctl.release()
+            return Outcome(State.ABORTED, self.ctx.round, None, str(exc))
         except Exception as exc:  # a defect of the companion's own: never leave the vehicle uncommanded
             return await self._fail_safe(exc)
         finally:
@@ -141,59 +210,64 @@ class Recovery(Searching, SiteChoice, Following, Looking):
         measured (accepted, else the ledger's least bad; nothing is measured anew), else with the
         autopilot's land mode where the vehicle is. Should that landing fail too, land mode once more,
         then the vehicle is left to the autopilot."""
-        where = self.state.value
+        ctx = self.ctx
+        where = ctx.state.value
         text = f"{type(exc).__name__}: {exc}"
-        self.log.error("defect in the recovery (%s): %s", where, text, exc_info=exc)
-        self.record.record_event(
+        ctx.log.error("defect in the recovery (%s): %s", where, text, exc_info=exc)
+        ctx.record.record_event(
             "defect",
             {
-                "round": self.round,
+                "round": ctx.round,
                 "state": where,
                 "error": text,
                 "traceback": "".join(traceback.format_exception(exc)),
             },
         )
         # a STATUSTEXT holds 50 characters: what happened and what the vehicle does come first
-        self._say(SEVERITY_CRITICAL, f"internal error, landing: {type(exc).__name__} in {where}: {exc}"[:150])
-        await self._observed_or_said()  # the round's candidates noted from afar: sites to land at
-        site = self._fallback_site()
-        self._track = None  # nothing measured anew, the camera's view of a site included
+        ctx.say(SEVERITY_CRITICAL, f"internal error, landing: {type(exc).__name__} in {where}: {exc}"[:150])
+        await self.searcher.observed_or_said()  # the round's candidates noted from afar: sites to land at
+        site = self.lander.fallback_site()
+        self.follower.forget()  # nothing measured anew, the camera's view of a site included
         try:
             try:
                 if site is not None:
-                    await self._fly_over(site, "best site measured")
-                await self._final_land()
+                    await self.lander.fly_over(site, "best site measured")
+                await self.lander.final_land()
             except (TouchedDown, OperatorTakeover):
                 raise
             except Exception as again:  # the landing itself failed: the autopilot's land mode, once more
-                self.log.error("fail-safe landing failed (%r): autopilot land mode", again)
-                self.record.record_event(
-                    "defect", {"round": self.round, "state": "land", "error": repr(again)}
-                )
-                await self._final_land()
+                ctx.log.error("fail-safe landing failed (%r): autopilot land mode", again)
+                ctx.record.record_event("defect", {"round": ctx.round, "state": "land", "error": repr(again)})
+                await self.lander.final_land()
         except TouchedDown:
-            self._set(State.LANDED)
+            ctx.set_state(State.LANDED)
         except OperatorTakeover as taken:
-            self._set(State.ABORTED)
-            await self.ctl.release()
-            return Outcome(State.ABORTED, self.round, None, f"defect ({text}), then {taken}")
+            ctx.set_state(State.ABORTED)
+            await ctx.ctl.release()
+            return Outcome(State.ABORTED, ctx.round, None, f"defect ({text}), then {taken}")
         except Exception as last:
-            self._set(State.ABORTED)
-            self._say(SEVERITY_CRITICAL, "fail-safe landing failed: the autopilot has the vehicle")
+            ctx.set_state(State.ABORTED)
+            ctx.say(SEVERITY_CRITICAL, "fail-safe landing failed: the autopilot has the vehicle")
             with contextlib.suppress(Exception):
-                await self.ctl.release()
-            return Outcome(State.ABORTED, self.round, None, f"defect ({text}); landing failed ({last!r})")
+                await ctx.ctl.release()
+            return Outcome(State.ABORTED, ctx.round, None, f"defect ({text}); landing failed ({last!r})")
         return Outcome(
-            State.LANDED, self.round, site.ned_m if site is not None else None, f"defect ({text}): landed"
+            State.LANDED, ctx.round, site.ned_m if site is not None else None, f"defect ({text}): landed"
         )
+
+    async def _land_at_best(self, reason: str, *, measure_here: bool = True) -> Outcome:
+        """:meth:`Lander.land_at_best` once the round's deferred work is done (the candidates noted
+        from afar are sites to land at)."""
+        await self.searcher.observed_or_said()
+        return await self.lander.land_at_best(reason, measure_here=measure_here)
 
     def _failsafe_in_charge(self) -> str | None:
         """The mode of an autopilot failsafe that lands or flies home and has the vehicle now
         (system status critical): the companion does not take the vehicle from it."""
-        s = self.tm.state
+        s = self.ctx.tm.state
         if s.system_status != MAV_STATE_CRITICAL:
             return None
-        return self.ctl.flavour.lands_or_returns(s.custom_mode)
+        return self.ctx.ctl.flavour.lands_or_returns(s.custom_mode)
 
     async def _on_failsafe(self, exc: AutopilotFailsafe) -> Outcome | None:
         """Policy for the autopilot leaving the companion's mode in a failsafe of its own. A failsafe
@@ -205,21 +279,22 @@ class Recovery(Searching, SiteChoice, Following, Looking):
         or flies home (a battery, GPS, geofence or link failsafe), or already down: the autopilot keeps
         the vehicle (:meth:`_leave_to_autopilot`). Still holding (PX4's POSCTL or AUTO.LOITER,
         ArduPilot's LOITER or BRAKE): re-engaged from where it is (:meth:`_reengage`)."""
-        flavour = self.ctl.flavour
+        ctx = self.ctx
+        flavour = ctx.ctl.flavour
         seen = flavour.mode_name(exc.custom_mode)
-        fields = {"round": self.round, "state": self.state.value, "mode": seen}
-        self.record.record_event("autopilot_failsafe", fields)
-        self._say(4, f"autopilot failsafe: {seen}; waiting {self.p.failsafe_grace_s:g} s for it to clear")
-        if await self.ctl.ride_out_failsafe(self.p.failsafe_grace_s):
-            self.record.record_event("autopilot_failsafe_cleared", fields)
-            self._say(5, f"the autopilot's failsafe cleared ({seen} -> back to the companion): going on")
+        fields = {"round": ctx.round, "state": ctx.state.value, "mode": seen}
+        ctx.record.record_event("autopilot_failsafe", fields)
+        ctx.say(4, f"autopilot failsafe: {seen}; waiting {ctx.p.failsafe_grace_s:g} s for it to clear")
+        if await ctx.ctl.ride_out_failsafe(ctx.p.failsafe_grace_s):
+            ctx.record.record_event("autopilot_failsafe_cleared", fields)
+            ctx.say(5, f"the autopilot's failsafe cleared ({seen} -> back to the companion): going on")
             return None
-        now = self.tm.state
+        now = ctx.tm.state
         mode = flavour.lands_or_returns(now.custom_mode)
         if now.on_ground and mode is None:
             # down already (an autopilot may leave its landing mode as it disarms): the landing mode
             # it came down in, if the grace period saw one
-            landed_in = [m for m in map(flavour.lands_or_returns, self.ctl.failsafe_modes) if m is not None]
+            landed_in = [m for m in map(flavour.lands_or_returns, ctx.ctl.failsafe_modes) if m is not None]
             mode = landed_in[-1] if landed_in else seen
         if mode is not None:
             return await self._leave_to_autopilot(mode)
@@ -236,39 +311,39 @@ class Recovery(Searching, SiteChoice, Following, Looking):
         """The autopilot's failsafe holds and will not give the companion its mode back: ask for the
         autopilot's land mode where the vehicle is and watch it down (``land_timeout_s``); refused
         too, the autopilot keeps the vehicle (:meth:`_leave_to_autopilot`)."""
-        self._set(State.LAND)
-        self._say(
+        ctx = self.ctx
+        ctx.set_state(State.LAND)
+        ctx.say(
             SEVERITY_CRITICAL,
             f"autopilot failsafe holds in {holding} and refuses the companion's mode ({refused}): "
             "asking it to land where it is",
         )
-        self.record.record_event(
-            "land_in_place", {"round": self.round, "holding": holding, "why": str(refused)}
+        ctx.record.record_event(
+            "land_in_place", {"round": ctx.round, "holding": holding, "why": str(refused)}
         )
         try:
-            await self.ctl.land(self.p.land_timeout_s)
+            await ctx.ctl.land(ctx.p.land_timeout_s)
         except CommandRefused as again:
             # refused too (real PX4 takes no AUTO.LAND without a position; its own blind descent is
             # what is left): the autopilot keeps the vehicle, watched down
-            self._say(4, f"land mode refused as well ({again})")
+            ctx.say(4, f"land mode refused as well ({again})")
             return await self._leave_to_autopilot(holding)
-        self._set(State.LANDED)
-        return Outcome(
-            State.LANDED, self.round, None, f"landed where it was: the autopilot held in {holding}"
-        )
+        ctx.set_state(State.LANDED)
+        return Outcome(State.LANDED, ctx.round, None, f"landed where it was: the autopilot held in {holding}")
 
     async def _leave_to_autopilot(self, mode: str) -> Outcome:
         """The autopilot's failsafe keeps the vehicle: the companion stops its setpoint stream, says so
         (critical) and never takes the vehicle back. A landing (or a return home, which ends in one)
         is watched to the ground for ``land_timeout_s`` so that the record ends with it."""
-        await self.ctl.release()
-        self._set(State.ABORTED)
-        self._say(SEVERITY_CRITICAL, f"autopilot failsafe: {mode}; the autopilot keeps control")
-        self.record.record_event("released", {"round": self.round, "to": mode})
-        if await self.ctl.wait_on_ground(self.p.land_timeout_s):
-            self._set(State.LANDED)
-            return Outcome(State.LANDED, self.round, None, f"the autopilot's failsafe landed it ({mode})")
-        return Outcome(State.ABORTED, self.round, None, f"the autopilot's failsafe has it ({mode})")
+        ctx = self.ctx
+        await ctx.ctl.release()
+        ctx.set_state(State.ABORTED)
+        ctx.say(SEVERITY_CRITICAL, f"autopilot failsafe: {mode}; the autopilot keeps control")
+        ctx.record.record_event("released", {"round": ctx.round, "to": mode})
+        if await ctx.ctl.wait_on_ground(ctx.p.land_timeout_s):
+            ctx.set_state(State.LANDED)
+            return Outcome(State.LANDED, ctx.round, None, f"the autopilot's failsafe landed it ({mode})")
+        return Outcome(State.ABORTED, ctx.round, None, f"the autopilot's failsafe has it ({mode})")
 
     async def _reengage(self, exc: AutopilotFailsafe) -> None:
         """Policy: the autopilot's own failsafe (e.g. a lost setpoint stream) is re-engaged from where
@@ -276,8 +351,8 @@ class Recovery(Searching, SiteChoice, Following, Looking):
         self._reengaged += 1
         if self._reengaged > MAX_REENGAGE:
             raise ControlError(f"{exc}; not re-engaging again") from exc
-        self._say(4, f"{exc}: re-engaging")
-        await self.ctl.engage()
+        self.ctx.say(4, f"{exc}: re-engaging")
+        await self.ctx.ctl.engage()
 
     async def _ride_out_link_loss(self, exc: TelemetryLost) -> Outcome | None:
         """Policy for a lost MAVLink link: keep streaming the last setpoint and wait up to
@@ -288,27 +363,28 @@ class Recovery(Searching, SiteChoice, Following, Looking):
         takeover. Then an interrupted descent goes on at the
         same site, confirmed again first; otherwise the next round starts. No telemetry within
         ``link_loss_s``: the companion stops commanding and leaves the vehicle to the autopilot."""
-        self.record.record_event("link_lost", {"round": self.round, "state": self.state.value})
-        self._say(3, f"link to the autopilot lost ({exc}): holding, waiting {self.p.link_loss_s:.0f} s")
+        ctx = self.ctx
+        ctx.record.record_event("link_lost", {"round": ctx.round, "state": ctx.state.value})
+        ctx.say(3, f"link to the autopilot lost ({exc}): holding, waiting {ctx.p.link_loss_s:.0f} s")
         try:
-            silent_s = await self.ctl.await_link(self.p.link_loss_s)
+            silent_s = await ctx.ctl.await_link(ctx.p.link_loss_s)
         except TelemetryLost as lost:
             raise ControlError(f"{lost}: leaving the vehicle to the autopilot") from lost
         except AutopilotFailsafe as failsafe:  # heartbeats without positions: the estimator lost them
-            self._say(4, "the autopilot is heard but sends no position: its estimator has none")
+            ctx.say(4, "the autopilot is heard but sends no position: its estimator has none")
             return await self._on_failsafe(failsafe)
-        s = self.tm.state
-        self.record.record_event(
+        s = ctx.tm.state
+        ctx.record.record_event(
             "link_restored",
-            {"round": self.round, "silent_s": round(silent_s, 2), "custom_mode": s.custom_mode},
+            {"round": ctx.round, "silent_s": round(silent_s, 2), "custom_mode": s.custom_mode},
         )
-        self._say(5, f"link back after {silent_s:.1f} s")
+        ctx.say(5, f"link back after {silent_s:.1f} s")
         if s.on_ground:
-            self._set(State.LANDED)
-            self._say(4, "the vehicle came down while the link was lost")
-            return Outcome(State.LANDED, self.round, None, "landed by the autopilot during a link loss")
+            ctx.set_state(State.LANDED)
+            ctx.say(4, "the vehicle came down while the link was lost")
+            return Outcome(State.LANDED, ctx.round, None, "landed by the autopilot during a link loss")
         try:
-            self.ctl.check_interruption()
+            ctx.ctl.check_interruption()
         except AutopilotFailsafe as failsafe:
             return await self._on_failsafe(failsafe)
         return None
@@ -316,9 +392,9 @@ class Recovery(Searching, SiteChoice, Following, Looking):
     async def _engage_and_look(self) -> None:
         """Take control and ask for the first round's frame at the same time: the frame (render,
         transfer) takes longer than the mode switch, and the vehicle holds either way."""
-        look = asyncio.create_task(self._acquire(first_round=True), name="first-frame")
+        look = asyncio.create_task(self.looker.acquire(first_round=True), name="first-frame")
         try:
-            await self.ctl.engage()
+            await self.ctx.ctl.engage()
         except BaseException:
             look.cancel()
             with contextlib.suppress(asyncio.CancelledError, Exception):
@@ -326,128 +402,156 @@ class Recovery(Searching, SiteChoice, Following, Looking):
             raise
         self._first_look = look
 
-    async def _observed(self) -> None:
-        """The last round's frame into the search's map (:meth:`_observe`), and the round's other
-        deferred work (``_later``: the candidates' notes when the site chosen is a roof), once, in a
-        worker thread. A round defers them: choosing and flying toward this round's site needs none
-        of them, a search leg needs the map, so they run while the vehicle moves, or before a search
-        leg or the next round, whichever comes first."""
-        frame, self._unobserved = self._unobserved, None
-        later, self._later = self._later, []
-        if frame is None and not later:
-            return
-        t0 = time.monotonic()
-        await asyncio.to_thread(
-            _run_all, ([lambda: self._observe(frame)] if frame is not None else []) + later
+    async def _extra_round(self) -> bool:
+        """A round past the budget: a closer look at the best roof seen only from afar (nothing seen
+        against it: flown to and confirmed as any round would), or, with none, a round from here when
+        the last round ended by climbing or descending to see (:meth:`Searcher.explore`), else a step
+        outward to a view not yet judged and a round there. True when it landed."""
+        ctx = self.ctx
+        await self.searcher.observed()  # the last round's frame, if it ended before its move
+        self.extra += 1
+        ctx.round += 1
+        self._descending = None
+        n, e, _ = ctx.tm.state.pos_ned_m
+        site = ctx.ledger.least_bad((n, e))
+        battery = ctx.tm.state.battery_pct
+        charge = f", battery {battery:.0f} %" if math.isfinite(battery) else ""
+        count = f"{self.extra}{charge}"
+        look = (
+            site is not None
+            and site.hazard.acceptable
+            and not site.closeup
+            and not site.looked
+            and site.candidate is not None
         )
-        s = round(time.monotonic() - t0, 3)
-        self.record.record_event("observed", {"round": self.round, "s": s, "jobs": len(later)})
-
-    async def _observed_or_said(self) -> None:
-        """:meth:`_observed` before a landing at the best site measured (the deferred notes are the
-        ledger's sites); a failure of its own is logged and recorded, never in the landing's way."""
-        try:
-            await self._observed()
-        except Exception as exc:
-            self.log.error("the round's deferred work failed (%r): landing on what the ledger holds", exc)
-            self.record.record_event("defect", {"round": self.round, "state": "observed", "error": repr(exc)})
+        ctx.record.record_event(
+            "extend",
+            {
+                "round": ctx.round,
+                "extra": self.extra,
+                "best": None if site is None else site.to_json(),
+                "action": "closer look" if look else "look again" if self._new_vantage else "explore",
+            },
+        )
+        if look:
+            assert site is not None
+            ctx.say(5, f"budget spent: a closer look at {site.label}, seen only from afar ({count})")
+            site.looked = True  # once: a site the vehicle cannot reach is not tried again
+            if not await self.lander.fly_over(site, site.label, then="next round"):
+                return False  # not over it: no confirmation, no descent from elsewhere
+            return await self._confirm_and_descend(site.ned_m, site.candidate)
+        seen = (
+            "nothing measured"
+            if site is None
+            else f"the best seen is {site.hazard.name.lower().replace('_', ' ')}"
+        )
+        if self._new_vantage:
+            # the last round ended by climbing or descending to see (out of the LiDAR's reach, or too
+            # low for a wide view): look from there before flying on, or the step was for nothing
+            ctx.say(4, f"budget spent, {seen}: looking again from here ({count})")
+            return await self._round()
+        ctx.say(4, f"budget spent, {seen}: searching on ({count})")
+        await self.searcher.leg()
+        return await self._round()
 
     async def _round(self) -> bool:
-        await self._observed()  # a round that ended before its move leaves its frame here
+        ctx = self.ctx
+        await self.searcher.observed()  # a round that ended before its move leaves its frame here
         look, self._first_look = self._first_look, None
         self._new_vantage = False  # this round looks from here
-        self._track = None  # a new round, a new site
-        frame = await (look if look is not None else self._acquire())
-        self._set(State.SURFACE_ID)
+        self.follower.forget()  # a new round, a new site
+        frame = await (look if look is not None else self.looker.acquire())
+        ctx.set_state(State.SURFACE_ID)
         camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
-        candidates = await asyncio.to_thread(self._surface_id, frame, camera)
-        self._unobserved = frame  # the search's map of what was seen: after the first setpoint
-        # a roof in view makes it a built-up area; so do roofs the LiDAR saw near a site (_built_up)
-        self._roofs_in_view = any(c.elevated for c in candidates)
-        candidates = [c for c in candidates if not self._near_rejected(c)]
+        candidates = await asyncio.to_thread(self.looker.surface_id, frame, camera)
+        self.searcher.observe_later(frame)  # the search's map of what was seen: after the first setpoint
+        # a roof in view makes it a built-up area; so do roofs the LiDAR saw near a site (Looker.built_up)
+        self.looker.roofs_in_view = any(c.elevated for c in candidates)
+        candidates = [c for c in candidates if not ctx.near_rejected(c)]
         if frame.image_rgb is not None:  # JPEG encoding off the event loop: the setpoint stream runs there
             # (before the ranking: a ground feed boxes the ranking's candidates on this frame)
-            await asyncio.to_thread(self.record.save_image, f"round{self.round:02d}-acquire", frame.image_rgb)
+            await asyncio.to_thread(ctx.record.save_image, f"round{ctx.round:02d}-acquire", frame.image_rgb)
         if not candidates or all(c.fallback for c in candidates):
-            await self._observed()  # the search's next leg is planned on it
-            await self._explore(blind=lidar_silent(frame.lidar_frd))
+            await self.searcher.observed()  # the search's next leg is planned on it
+            self._new_vantage = await self.searcher.explore(blind=lidar_silent(frame.lidar_frd))
             return False
-        self._set(State.RANK)
-        ranking, chosen = await self._rank(candidates, frame)
+        ctx.set_state(State.RANK)
+        ranking, chosen = await self.looker.rank(candidates, frame)
         choice = candidates[chosen] if chosen is not None else None
         if frame.image_rgb is not None:  # the ledger's view of every candidate from afar
-            notes = functools.partial(self._note_candidates, candidates, frame, camera)
+            notes = functools.partial(self.looker.note_candidates, candidates, frame, camera)
             if choice is not None and choice.elevated and not choice.strip:
-                self._later.append(notes)  # a roof: nothing before its move reads the notes
+                self.searcher.later(notes)  # a roof: nothing before its move reads the notes
             else:
                 await asyncio.to_thread(notes)  # whether to search instead reads them
         if choice is None:
-            await self._observed()  # the search's next leg is planned on it
-            await self._explore()
+            await self.searcher.observed()  # the search's next leg is planned on it
+            self._new_vantage = await self.searcher.explore()
             return False
-        if await self._search_instead(choice):
+        if await self.searcher.search_instead(choice):
             return False
-        target = await asyncio.to_thread(self._ipm, choice, frame, camera)
+        target = await asyncio.to_thread(self.looker.ipm, choice, frame, camera)
         if target is None:
-            self._say(4, f"site {choice.index} cannot be placed in the world: next round")
-            await self._observed()  # the search's verdict before the next round reads the notes
+            ctx.say(4, f"site {choice.index} cannot be placed in the world: next round")
+            await self.searcher.observed()  # the search's verdict before the next round reads the notes
             return False
-        self._follow_from(frame, target)
-        n, e, d = self.tm.state.pos_ned_m
+        self.follower.follow_from(frame, target)
+        n, e, d = ctx.tm.state.pos_ned_m
         dist = math.hypot(target[0] - n, target[1] - e)
         bearing = compass_point(math.degrees(math.atan2(target[1] - e, target[0] - n)))
         kind = "roof" if choice.height_above_m >= 3.0 else "ground"
-        self._say(6, f"site {choice.index} {kind} {dist:.0f} m {bearing}")
-        self._say(6, ranking.rationale[:200])
-        self._set(State.MOVE)
-        self._fault.check("move", self.round)
-        observing = asyncio.create_task(self._observed(), name="observe")  # once the setpoint is out
+        ctx.say(6, f"site {choice.index} {kind} {dist:.0f} m {bearing}")
+        ctx.say(6, ranking.rationale[:200])
+        ctx.set_state(State.MOVE)
+        ctx.fault.check("move", ctx.round)
+        observing = asyncio.create_task(self.searcher.observed(), name="observe")  # once the setpoint is out
         try:
-            await self.ctl.goto(
+            await ctx.ctl.goto(
                 target[0],
                 target[1],
                 d,
-                tolerance_m=self.p.arrival_tolerance_m,
-                speed_m_s=self.p.arrival_speed_m_s,
-                timeout_s=self.p.move_timeout(dist),
+                tolerance_m=ctx.p.arrival_tolerance_m,
+                speed_m_s=ctx.p.arrival_speed_m_s,
+                timeout_s=ctx.p.move_timeout(dist),
             )
         except TargetTimeout as exc:
-            self._say(4, f"target not reached ({exc.error_m:.1f} m off): next round")
+            ctx.say(4, f"target not reached ({exc.error_m:.1f} m off): next round")
             return False
         finally:
             await observing
         return await self._confirm_and_descend(target, choice)
 
     async def _confirm_and_descend(self, target: tuple[float, float, float], choice: Candidate) -> bool:
+        ctx = self.ctx
         self._descending = (target, choice)  # what a link loss resumes: this site, confirmed again
         while True:
-            frame, check = await self._measure_site(target)
-            followed = await self._follow(frame, target)
+            frame, check = await self.looker.measure_site(target)
+            followed = await self.follower.follow(frame, target)
             if followed != target:  # the site where the camera sees it now: measured there
                 target = followed
                 self._descending = (target, choice)
                 check = await asyncio.to_thread(
                     check_site, frame.lidar_frd, frame.pos_ned_m, frame.quat_wxyz, (target[0], target[1])
                 )
-            decision = await self._confirm(check, frame, target, choice)
+            decision = await self.looker.confirm(check, frame, target, choice)
             if not decision.accept and decision.contested:
                 # a lone "no" on a clear site: ask again next round (the cascade's lone-"no" rule)
-                self._say(4, f"site {choice.index} contested: {decision.rationale[:110]}")
+                ctx.say(4, f"site {choice.index} contested: {decision.rationale[:110]}")
                 return False
             if not decision.accept:
-                self.rejected.append((target[0], target[1], self._rejected_radius(target, choice)))
+                ctx.reject(target, choice)
                 if (
-                    self.best is not None
-                    and math.dist(self.best.ned_m[:2], target[:2]) < self.p.rejected_radius_m
+                    ctx.best is not None
+                    and math.dist(ctx.best.ned_m[:2], target[:2]) < ctx.p.rejected_radius_m
                 ):
-                    self.best = None
-                self._say(4, f"site {choice.index} {decision.rationale[:120]}")
+                    ctx.best = None
+                ctx.say(4, f"site {choice.index} {decision.rationale[:120]}")
                 return False
-            self.best = Site(target, choice)
-            _n, _e, d = self.tm.state.pos_ned_m
+            ctx.best = Site(target, choice)
+            _n, _e, d = ctx.tm.state.pos_ned_m
             rng_m, rng_quat = frame.rangefinder_m, frame.quat_wxyz
             if not math.isfinite(rng_m):
-                rng_m, rng_quat = self.tm.state.rangefinder_m, self.tm.state.quat_wxyz
+                rng_m, rng_quat = ctx.tm.state.rangefinder_m, ctx.tm.state.quat_wxyz
             height_m = height_above_site(
                 d,
                 surface_up_m=check.surface_up_m,
@@ -456,25 +560,27 @@ class Recovery(Searching, SiteChoice, Following, Looking):
                 quat_wxyz=rng_quat,
             )
             if not math.isfinite(height_m):
-                self._say(4, "no height above the site measured: next round")
+                ctx.say(4, "no height above the site measured: next round")
                 return False
-            settled = await self._settle(target)
+            settled = await self.follower.settle(target)
             if settled != target:  # held over a drifting site: measured and confirmed again there
                 target = settled
                 self._descending = (target, choice)
                 continue
-            if height_m <= self.p.final_land_m:
-                return await self._land()
-            self._set(State.DESCEND)
-            self._fault.check("descend", self.round)
+            if height_m <= ctx.p.final_land_m:
+                return await self.lander.land()
+            ctx.set_state(State.DESCEND)
+            ctx.fault.check("descend", ctx.round)
             # an unsure judgement: half the step, so that the next look is from closer
-            step_m = self.p.descent_fraction * height_m * (0.5 if decision.unsure else 1.0)
+            step_m = ctx.p.descent_fraction * height_m * (0.5 if decision.unsure else 1.0)
             new_d = d + step_m
             closer = " (unsure: a closer look first)" if decision.unsure else ""
-            self._say(6, f"descending {step_m:.0f} m{closer}, {decision.rationale[:80]}")
+            ctx.say(6, f"descending {step_m:.0f} m{closer}, {decision.rationale[:80]}")
             try:
-                target = await self._goto_following(target, new_d, timeout_s=self.p.move_timeout_s + rng_m)
+                target = await self.follower.goto_following(
+                    target, new_d, timeout_s=ctx.p.move_timeout_s + rng_m
+                )
             except TargetTimeout as exc:
-                self._say(4, f"descent target not reached ({exc.error_m:.1f} m off): next round")
+                ctx.say(4, f"descent target not reached ({exc.error_m:.1f} m off): next round")
                 return False
             self._descending = (target, choice)

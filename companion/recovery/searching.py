@@ -1,5 +1,6 @@
 """When nothing in view will do: whether the search goes on (the battery, the alarm's window, the
-budget) and its legs (companion/search.py plans them; docs/recovery.md, "The search")."""
+budget), its legs and the exploring step (companion/recovery/search_plan.py plans them;
+docs/recovery.md, "The search"), and the search's map fed with what the rounds saw."""
 
 from __future__ import annotations
 
@@ -7,81 +8,159 @@ import asyncio
 import contextlib
 import math
 import time
+from collections.abc import Callable
+from typing import Any
 
-from companion.control import (
-    TargetTimeout,
-)
-from companion.perception.surface_id import (
-    Candidate,
-)
-from companion.recovery.core import RecoveryBase, State
-from companion.search import Leg, Verdict
+from companion.alarms import Criticality
+from companion.control import TargetTimeout
+from companion.perception.surface_id import Candidate
+from companion.reasoning.onboard import OnboardReasoner
+from companion.recovery.core import RecoveryContext, State
+from companion.recovery.landing import Lander
+from companion.recovery.search_plan import Leg, SearchPlanner, Verdict
 from companion.site_ledger import Hazard, LedgerSite
 
 
-class Searching(RecoveryBase):
-    """The search's limits and legs, the extra rounds past the budget and the exploring step."""
+def _run_all(jobs: list[Callable[[], object]]) -> None:
+    for job in jobs:
+        job()
+
+
+class Searcher:
+    """The search's limits, legs and map (:class:`SearchPlanner`), the exploring step, and the round's
+    work deferred until the vehicle moves (:meth:`observed`).
+
+    Args:
+        ctx: what the recovery's parts share.
+        plan: the search planner (its map is also the looker's, for a site's surroundings).
+        lander: the site the vehicle would land on were the search to stop (:meth:`Lander.fallback_site`).
+        onboard: the onboard tier, whose LandNet-S (when it judges) reads the camera into the map.
+    """
+
+    def __init__(
+        self, ctx: RecoveryContext, *, plan: SearchPlanner, lander: Lander, onboard: OnboardReasoner
+    ) -> None:
+        self.ctx = ctx
+        self.plan = plan
+        self.lander = lander
+        self.onboard = onboard
+        self.ended: Verdict | None = None  # why the search stopped, when the battery or the window did
+        self._unobserved: Any = None  # a round's frame not yet in the search's map (:meth:`observed`)
+        self._later: list[Callable[[], object]] = []  # a round's other work that waits for its setpoint
+
+    def start(self) -> None:
+        """The alarm came now, with the battery's charge now."""
+        self.plan.start(self._clock_s(), self.ctx.tm.state.battery_pct)
+
+    def raise_criticality(self, criticality: Criticality) -> None:
+        self.plan.raise_criticality(criticality)
+
+    # ------------------------------------------------------------------ the round's deferred work
+    def observe_later(self, frame: Any) -> None:
+        """``frame`` goes into the search's map with the round's other deferred work (:meth:`observed`)."""
+        self._unobserved = frame
+
+    def later(self, job: Callable[[], object]) -> None:
+        """``job`` (a worker-thread job) runs with the round's deferred work (:meth:`observed`)."""
+        self._later.append(job)
+
+    async def observed(self) -> None:
+        """The last round's frame into the search's map (:meth:`_observe`), and the round's other
+        deferred work (:meth:`later`: the candidates' notes when the site chosen is a roof), once, in a
+        worker thread. A round defers them: choosing and flying toward this round's site needs none
+        of them, a search leg needs the map, so they run while the vehicle moves, or before a search
+        leg or the next round, whichever comes first."""
+        frame, self._unobserved = self._unobserved, None
+        later, self._later = self._later, []
+        if frame is None and not later:
+            return
+        t0 = time.monotonic()
+        await asyncio.to_thread(
+            _run_all, ([lambda: self._observe(frame)] if frame is not None else []) + later
+        )
+        s = round(time.monotonic() - t0, 3)
+        self.ctx.record.record_event("observed", {"round": self.ctx.round, "s": s, "jobs": len(later)})
+
+    async def observed_or_said(self) -> None:
+        """:meth:`observed` before a landing at the best site measured (the deferred notes are the
+        ledger's sites); a failure of its own is logged and recorded, never in the landing's way."""
+        ctx = self.ctx
+        try:
+            await self.observed()
+        except Exception as exc:
+            ctx.log.error("the round's deferred work failed (%r): landing on what the ledger holds", exc)
+            ctx.record.record_event("defect", {"round": ctx.round, "state": "observed", "error": repr(exc)})
+
+    def _observe(self, frame: Any) -> None:
+        """The frame into the search's map: the LiDAR's sweep, and with LandNet-S as the onboard judge
+        what the camera shows beyond it (water and traffic). A worker-thread job."""
+        self.plan.observe(frame)
+        net = self.onboard.landnet
+        if net is not None and frame.image_rgb is not None:
+            self.plan.observe_camera(frame, net.presence, tuple(net.classes))
 
     # ------------------------------------------------------------------ when nothing was accepted
     def _clock_s(self) -> float:
         """The autopilot's clock (seconds since its boot), so that a faster-than-real-time simulation
         keeps the alarm's window; the companion's monotonic clock before any telemetry."""
-        t = self.tm.state.t_boot_s
+        t = self.ctx.tm.state.t_boot_s
         return t if t > 0 else time.monotonic()
 
     def _verdict(self) -> tuple[Verdict, LedgerSite | None]:
         """The search's verdict now (:meth:`SearchPlanner.verdict`), with the site the vehicle would
         land on were it to stop (whose distance the landing's need counts)."""
-        s = self.tm.state
+        s = self.ctx.tm.state
         n, e, _ = s.pos_ned_m
-        site = self._fallback_site()
+        site = self.lander.fallback_site()
         to_site = math.dist(site.ned_m[:2], (n, e)) if site is not None else 0.0
-        return self.search.verdict(self._clock_s(), s.battery_pct, s.rangefinder_m, to_site), site
+        return self.plan.verdict(self._clock_s(), s.battery_pct, s.rangefinder_m, to_site), site
 
-    async def _search_instead(self, choice: Candidate) -> bool:
+    async def search_instead(self, choice: Candidate) -> bool:
         """Policy: the best candidate in view, at street level or on an elevated strip, already looks
         like water or traffic from afar (the ledger's judgement of its rank crop): while the search
         may go on, it is struck off and a search leg flies instead of a round spent flying there to
         refuse it close up. A roof always gets its close look. True when it did so."""
+        ctx = self.ctx
         if choice.site_ned_m is None or (choice.elevated and not choice.strip):
             return False  # from afar a marking on a roof may be a shadow or a painted helipad
-        seen = self.ledger.near((choice.site_ned_m[0], choice.site_ned_m[1]))
+        seen = ctx.ledger.near((choice.site_ned_m[0], choice.site_ned_m[1]))
         if seen is None or seen.hazard < Hazard.TRAFFIC or not self._verdict()[0].search:
             return False
         what = seen.hazard.name.lower()
-        self.rejected.append((seen.ned_m[0], seen.ned_m[1], self._rejected_radius(seen.ned_m, choice)))
-        self.record.record_event(
+        ctx.reject(seen.ned_m, choice)
+        ctx.record.record_event(
             "search_instead",
-            {"round": self.round, "candidate": choice.to_json(), "hazard": what, "why": seen.why},
+            {"round": ctx.round, "candidate": choice.to_json(), "hazard": what, "why": seen.why},
         )
-        self._say(5, f"site {choice.index} looks like {what} from afar ({seen.why[:60]}): searching instead")
-        await self._search_leg()
+        ctx.say(5, f"site {choice.index} looks like {what} from afar ({seen.why[:60]}): searching instead")
+        await self.leg()
         return True
 
-    def _go_on(self) -> bool:
+    def go_on(self) -> bool:
         """Policy: whether another round (or search leg and round) starts. The first look always does.
         Then the battery (what the landing needs plus a reserve) and the alarm's window may end the
         search, within the round budget too; past the budget it goes on only while nothing acceptable
         was judged close up (a roof with nothing against it)."""
-        if self.round == 0:
+        ctx = self.ctx
+        if ctx.round == 0:
             return True
-        if self.round >= self.budget and not self._may_extend():
+        if ctx.round >= ctx.budget and not self._may_extend():
             return False
         verdict, site = self._verdict()
         if verdict.search:
             return True
-        self._ended = verdict
-        self._say(4, f"search ends: {verdict.why}")
-        self.record.record_event(
+        self.ended = verdict
+        ctx.say(4, f"search ends: {verdict.why}")
+        ctx.record.record_event(
             "search_end",
             {
                 "note": f"search ends: {verdict.why}",
-                "round": self.round,
+                "round": ctx.round,
                 "reason": verdict.why,
                 "battery_pct": round(verdict.battery_pct, 1) if math.isfinite(verdict.battery_pct) else None,
                 "need_pct": round(verdict.need_pct, 1),
                 "elapsed_s": round(verdict.elapsed_s, 1),
-                "legs": len(self.search.legs),
+                "legs": len(self.plan.legs),
                 "best": None if site is None else site.to_json(),
             },
         )
@@ -90,81 +169,31 @@ class Searching(RecoveryBase):
     def _may_extend(self) -> bool:
         """Past the round budget: nothing acceptable was judged close up (a roof with nothing against
         it), so the search goes on (the battery and the window bound it, :meth:`_go_on`)."""
-        if self.best is not None:
+        if self.ctx.best is not None:
             return False
-        site = self.ledger.least_bad()
+        site = self.ctx.ledger.least_bad()
         return not (site is not None and site.hazard.acceptable and site.closeup)
 
-    async def _extra_round(self) -> bool:
-        """A round past the budget: a closer look at the best roof seen only from afar (nothing seen
-        against it: flown to and confirmed as any round would), or, with none, a round from here when
-        the last round ended by climbing or descending to see (:meth:`_explore`), else a step outward
-        to a view not yet judged and a round there. True when it landed."""
-        await self._observed()  # the last round's frame, if it ended before its move
-        self.extra += 1
-        self.round += 1
-        self._descending = None
-        n, e, _ = self.tm.state.pos_ned_m
-        site = self.ledger.least_bad((n, e))
-        battery = self.tm.state.battery_pct
-        charge = f", battery {battery:.0f} %" if math.isfinite(battery) else ""
-        count = f"{self.extra}{charge}"
-        look = (
-            site is not None
-            and site.hazard.acceptable
-            and not site.closeup
-            and not site.looked
-            and site.candidate is not None
-        )
-        self.record.record_event(
-            "extend",
-            {
-                "round": self.round,
-                "extra": self.extra,
-                "best": None if site is None else site.to_json(),
-                "action": "closer look" if look else "look again" if self._new_vantage else "explore",
-            },
-        )
-        if look:
-            assert site is not None
-            self._say(5, f"budget spent: a closer look at {site.label}, seen only from afar ({count})")
-            site.looked = True  # once: a site the vehicle cannot reach is not tried again
-            if not await self._fly_over(site, site.label, then="next round"):
-                return False  # not over it: no confirmation, no descent from elsewhere
-            return await self._confirm_and_descend(site.ned_m, site.candidate)
-        seen = (
-            "nothing measured"
-            if site is None
-            else f"the best seen is {site.hazard.name.lower().replace('_', ' ')}"
-        )
-        if self._new_vantage:
-            # the last round ended by climbing or descending to see (out of the LiDAR's reach, or too
-            # low for a wide view): look from there before flying on, or the step was for nothing
-            self._say(4, f"budget spent, {seen}: looking again from here ({count})")
-            return await self._round()
-        self._say(4, f"budget spent, {seen}: searching on ({count})")
-        await self._search_leg()
-        return await self._round()
-
-    async def _search_leg(self) -> Leg:
+    async def leg(self) -> Leg:
         """Fly the planner's next leg (:meth:`SearchPlanner.next_leg`): climb first when the leg goes
         higher, descend last when it goes lower, so the level part flies at the safer height. Said,
         recorded (``search_leg``) and shown on the ground feed. The last frame goes into the search's
         map first (:meth:`_observed`): the leg is planned on it."""
-        await self._observed()
-        self._set(State.EXPLORE)
-        s = self.tm.state
+        ctx = self.ctx
+        await self.observed()
+        ctx.set_state(State.EXPLORE)
+        s = ctx.tm.state
         n, e, d = s.pos_ned_m
-        leg = await asyncio.to_thread(self.search.next_leg, (n, e, d), self.ledger, s.rangefinder_m)
+        leg = await asyncio.to_thread(self.plan.next_leg, (n, e, d), ctx.ledger, s.rangefinder_m)
         tn, te, td = leg.target_ned_m
-        count = len(self.search.legs)
+        count = len(self.plan.legs)
         note = f"search leg {count}: {leg.reason}"
-        self._say(5, note)
-        self.record.record_event(
+        ctx.say(5, note)
+        ctx.record.record_event(
             "search_leg",
             {
                 "note": note,
-                "round": self.round,
+                "round": ctx.round,
                 "leg": count,
                 "from_ned_m": [round(v, 1) for v in (n, e, d)],
                 "battery_pct": round(s.battery_pct, 1) if math.isfinite(s.battery_pct) else None,
@@ -174,17 +203,17 @@ class Searching(RecoveryBase):
         steps = [(n, e, td), (tn, te, td)] if td < d - 3.0 else [(tn, te, d), (tn, te, td)]
         for sn, se, sd in steps:
             with contextlib.suppress(TargetTimeout):
-                await self.ctl.goto(
+                await ctx.ctl.goto(
                     sn,
                     se,
                     sd,
                     tolerance_m=2.0,
                     speed_m_s=0.5,
-                    timeout_s=self.p.move_timeout(math.dist((sn, se, sd), self.tm.state.pos_ned_m)),
+                    timeout_s=ctx.p.move_timeout(math.dist((sn, se, sd), ctx.tm.state.pos_ned_m)),
                 )
         return leg
 
-    async def _explore(self, blind: bool = False) -> None:
+    async def explore(self, blind: bool = False) -> bool:
         """Nothing survived screening: climb for a wider view, else fly a search leg
         (:meth:`_search_leg`) to roofs the LiDAR saw or to ground not yet seen.
 
@@ -196,27 +225,32 @@ class Searching(RecoveryBase):
 
         Whenever the rangefinder puts the ground more than ``explore_max_alt_m`` below (a roof left
         behind, low ground), the step is a descent to ``explore_max_alt_m`` above it: from higher up
-        the LiDAR reaches nothing flat."""
-        self._set(State.EXPLORE)
-        n, e, d = self.tm.state.pos_ned_m
-        alt = self.tm.state.rangefinder_m
-        beyond = math.isfinite(alt) and alt > self.p.explore_max_alt_m + 5.0
-        if blind and math.isfinite(alt) and alt > self.p.blind_descent_agl_m + 5.0:
-            drop = alt - self.p.blind_descent_agl_m
+        the LiDAR reaches nothing flat.
+
+        Returns:
+            True when the step climbed or descended (a view from here not yet looked at), False when it
+            flew a search leg."""
+        ctx = self.ctx
+        ctx.set_state(State.EXPLORE)
+        n, e, d = ctx.tm.state.pos_ned_m
+        alt = ctx.tm.state.rangefinder_m
+        beyond = math.isfinite(alt) and alt > ctx.p.explore_max_alt_m + 5.0
+        if blind and math.isfinite(alt) and alt > ctx.p.blind_descent_agl_m + 5.0:
+            drop = alt - ctx.p.blind_descent_agl_m
             target = (n, e, d + drop)
-            self._say(6, f"LiDAR sees nothing, ground {alt:.0f} m below: descending {drop:.0f} m")
+            ctx.say(6, f"LiDAR sees nothing, ground {alt:.0f} m below: descending {drop:.0f} m")
         elif beyond:
             # the rangefinder measured the column below clear all the way down: descend within reach
-            drop = alt - self.p.explore_max_alt_m
+            drop = alt - ctx.p.explore_max_alt_m
             target = (n, e, d + drop)
-            self._say(6, f"ground {alt:.0f} m below, beyond the LiDAR's reach: descending {drop:.0f} m")
-        elif math.isfinite(alt) and alt + self.p.explore_climb_m <= self.p.search_agl_m:
+            ctx.say(6, f"ground {alt:.0f} m below, beyond the LiDAR's reach: descending {drop:.0f} m")
+        elif math.isfinite(alt) and alt + ctx.p.explore_climb_m <= ctx.p.search_agl_m:
             # low down a climb widens the view; at the search height the LiDAR's reach would shrink
-            target = (n, e, d - self.p.explore_climb_m)
-            self._say(6, f"no flat site in view: climbing {self.p.explore_climb_m:.0f} m")
+            target = (n, e, d - ctx.p.explore_climb_m)
+            ctx.say(6, f"no flat site in view: climbing {ctx.p.explore_climb_m:.0f} m")
         else:
-            await self._search_leg()
-            return
+            await self.leg()
+            return False
         with contextlib.suppress(TargetTimeout):
-            await self.ctl.goto(*target, tolerance_m=1.0, speed_m_s=0.5, timeout_s=self.p.move_timeout_s)
-        self._new_vantage = True  # the next round, within the budget or past it, looks from here
+            await ctx.ctl.goto(*target, tolerance_m=1.0, speed_m_s=0.5, timeout_s=ctx.p.move_timeout_s)
+        return True  # the next round, within the budget or past it, looks from here

@@ -1,0 +1,169 @@
+"""The landing: on the site confirmed for descent, or, when nothing was accepted, at the site ledger's
+least bad site (companion/site_ledger.py) after a last look at what is in view and at the spot below;
+the fly-over and the final approach in the autopilot's land mode."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+
+from companion.control import TargetTimeout
+from companion.guidance.frames import PinholeCamera
+from companion.perception.site_check import check_site
+from companion.perception.surface_id import ROOF_HEIGHT_M
+from companion.recovery.core import FrameUnavailable, Outcome, RecoveryContext, State
+from companion.recovery.following import SiteFollower
+from companion.recovery.looking import Looker, height_above_surroundings
+from companion.site_ledger import Hazard, LedgerSite, hazard_of
+
+
+class Lander:
+    """The landing and the least bad site (docs/recovery.md, "When it ends without an accepted site").
+
+    Args:
+        ctx: what the recovery's parts share.
+        looker: the last look at what is in view and the judgement of the spot below.
+        follower: the site followed down during the autopilot's land mode (precision landing).
+    """
+
+    def __init__(self, ctx: RecoveryContext, *, looker: Looker, follower: SiteFollower) -> None:
+        self.ctx = ctx
+        self.looker = looker
+        self.follower = follower
+
+    async def land(self) -> bool:
+        """The final approach where the vehicle is (over the site); True once down."""
+        ctx = self.ctx
+        ctx.set_state(State.LAND)
+        ctx.fault.check("land", ctx.round)
+        await self.final_land()
+        return True
+
+    async def final_land(self) -> None:
+        """The autopilot's land mode, with its precision landing on the followed site when it can."""
+        ctx = self.ctx
+        ctx.set_state(State.LAND)
+        ctx.say(5, "final approach: autopilot land mode")
+        await self.follower.land_on_site(ctx.ctl.precision)
+        ctx.set_state(State.LANDED)
+        ctx.say(5, "landed")
+
+    async def land_at_best(self, reason: str, *, measure_here: bool = True) -> Outcome:
+        """Land at the accepted site, else at the least bad one measured (:mod:`companion.site_ledger`),
+        judging the spot under the vehicle too when sensors allow (``measure_here``); "here" only when
+        nothing at all was measured, and said so. The round's deferred candidate notes are the
+        ledger's sites: the caller has them taken first (``Searcher.observed_or_said``)."""
+        ctx = self.ctx
+        self.follower.forget()  # the site it lands on may not be the one last followed
+        if measure_here and ctx.best is None:
+            await self._look_around()
+            await self._measure_here()
+        site = self.fallback_site()
+        if site is None and not ctx.ledger.sites:
+            ctx.say(4, f"{reason} with nothing measured: landing here")
+        elif site is None:
+            ctx.say(4, f"{reason}, only water or traffic measured elsewhere: landing here")
+        else:
+            where = "here" if site.label == "here" else f"at {site.label}"
+            ctx.say(
+                4, f"{reason}: landing {where} ({site.hazard.name.lower().replace('_', ' ')}: {site.why})"
+            )
+            ctx.record.record_event(
+                "fallback_site",
+                {
+                    "round": ctx.round,
+                    "reason": reason,
+                    "chosen": site.to_json(),
+                    "sites": [s.to_json() for s in ctx.ledger.sites],
+                },
+            )
+            await self.fly_over(site, "the chosen site")
+        await self.land()
+        return Outcome(State.LANDED, ctx.round, site.ned_m if site is not None else None, reason)
+
+    def fallback_site(self) -> LedgerSite | None:
+        """The accepted site, else the ledger's least bad, else None."""
+        ctx = self.ctx
+        if ctx.best is not None:
+            label = f"site {ctx.best.candidate.index}"
+            return LedgerSite(
+                ctx.best.ned_m,
+                Hazard.ACCEPTED,
+                "confirmed for descent",
+                ctx.round,
+                True,
+                label=label,
+            )
+        n, e, _ = ctx.tm.state.pos_ned_m
+        site = ctx.ledger.least_bad((n, e))
+        if site is not None and site.hazard > Hazard.UNKNOWN and not ctx.ledger.near((n, e)):
+            return None  # only water or traffic measured, and not here: unknown beats known bad
+        return site
+
+    async def fly_over(self, site: LedgerSite, what: str, then: str = "landing here") -> bool:
+        """Fly over ``site`` at the current altitude; False (said, with what happens ``then``) when it
+        was not reached in time."""
+        ctx = self.ctx
+        n, e, _ = site.ned_m
+        n0, e0, d = ctx.tm.state.pos_ned_m
+        try:
+            await ctx.ctl.goto(
+                n,
+                e,
+                d,
+                tolerance_m=ctx.p.arrival_tolerance_m,
+                speed_m_s=ctx.p.arrival_speed_m_s,
+                timeout_s=ctx.p.move_timeout(math.hypot(n - n0, e - e0)),
+            )
+        except TargetTimeout as exc:
+            ctx.say(4, f"{what} target not reached ({exc.error_m:.1f} m off): {then}")
+            return False
+        return True
+
+    async def _look_around(self) -> None:
+        """One look at what is in view now (Surface ID's candidates, judged from afar into the
+        ledger), so that the least bad site is chosen among what can be reached at once, not only
+        among what earlier rounds measured: a search that ends after a blind first look, a battery
+        at its reserve. One frame, no waiting: a missing frame skips it."""
+        try:
+            frame = await self.ctx.frames()
+        except FrameUnavailable:
+            return
+        camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
+        candidates = await asyncio.to_thread(self.looker.surface_id, frame, camera)
+        await asyncio.to_thread(self.looker.note_candidates, candidates, frame, camera)
+
+    async def _measure_here(self) -> None:
+        """Judge the spot under the vehicle (one frame, no waiting: a missing frame skips it) into the
+        ledger, so that "here" competes with the sites measured before on what is there."""
+        ctx = self.ctx
+        try:
+            frame = await ctx.frames()
+        except FrameUnavailable:
+            return
+        n, e, d = ctx.tm.state.pos_ned_m
+        check = await asyncio.to_thread(check_site, frame.lidar_frd, frame.pos_ned_m, frame.quat_wxyz, (n, e))
+        rng = frame.rangefinder_m if math.isfinite(frame.rangefinder_m) else ctx.tm.state.rangefinder_m
+        ground_d = -check.surface_up_m if check.measured else d + rng
+        if not math.isfinite(ground_d):
+            return
+        target = (n, e, ground_d)
+        up_m = height_above_surroundings(frame, check) if check.measured else None
+        kinds = await asyncio.to_thread(self.looker.judge, frame, check, target, up_m, False)
+        hazard = hazard_of(
+            kinds,
+            accepted=False,
+            street_level=up_m is None or up_m < ROOF_HEIGHT_M,
+            strip=False,
+            judged=check.measured or frame.image_rgb is not None,
+        )
+        ctx.ledger.add(
+            LedgerSite(
+                target,
+                hazard,
+                ", ".join(kinds) or "nothing seen against it",
+                ctx.round,
+                True,
+                label="here",
+            )
+        )

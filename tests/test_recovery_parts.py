@@ -1,0 +1,250 @@
+"""Each part of the recovery built alone on fakes at its boundary (tests/recovery_fakes.py), one
+behaviour each: the context the parts share, the looker, the site follower, the lander, the searcher;
+then the machine that owns them, and the package docstring's list of them against what it owns."""
+
+from __future__ import annotations
+
+import asyncio
+import re
+import threading
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+import companion.recovery
+from companion.alarms import Criticality
+from companion.flavour import Mode
+from companion.reasoning.onboard import OnboardReasoner
+from companion.recovery import Outcome, Recovery, RecoveryParams, State
+from companion.recovery import looking as looking_module
+from companion.recovery.core import RecoveryContext, Site
+from companion.recovery.following import SiteFollower
+from companion.recovery.landing import Lander
+from companion.recovery.looking import UNMEASURED, Looker
+from companion.recovery.search_plan import SearchPlanner
+from companion.recovery.searching import Searcher
+from companion.site_ledger import Hazard, LedgerSite
+from tests.recovery_fakes import FakeController, FakeReasoner, KeptRecord, Said, candidate, context, frame
+
+
+def _record(ctx: RecoveryContext) -> KeptRecord:
+    assert isinstance(ctx.record, KeptRecord)
+    return ctx.record
+
+
+def _ctl(ctx: RecoveryContext) -> FakeController:
+    assert isinstance(ctx.ctl, FakeController)
+    return ctx.ctl
+
+
+def _said(ctx: RecoveryContext) -> list[str]:
+    assert isinstance(ctx.announce, Said)
+    return ctx.announce.texts
+
+
+def _looker(ctx: RecoveryContext, reasoner: FakeReasoner | None = None) -> Looker:
+    return Looker(
+        ctx,
+        reasoner=reasoner or FakeReasoner(),
+        onboard=OnboardReasoner(),
+        plan=SearchPlanner(Criticality.HIGH),
+    )
+
+
+def _parts(ctx: RecoveryContext) -> tuple[Looker, SiteFollower, Lander, Searcher]:
+    plan = SearchPlanner(ctx.criticality)
+    looker = Looker(ctx, reasoner=FakeReasoner(), onboard=OnboardReasoner(), plan=plan)
+    follower = SiteFollower(ctx)
+    lander = Lander(ctx, looker=looker, follower=follower)
+    return looker, follower, lander, Searcher(ctx, plan=plan, lander=lander, onboard=OnboardReasoner())
+
+
+# ---------------------------------------------------------------- the context
+def test_context_reject_rules_out_water_by_its_size_and_records_states_with_the_round() -> None:
+    """A site confirmed as water rules out candidates as far as half the side of its surface (20 m x
+    20 m: 10 m), not only ``rejected_radius_m`` (4 m); each state change is recorded with the round and
+    where the vehicle was."""
+    ctx = context(pos_ned_m=(1.0, 2.0, -40.0))
+    ctx.ledger.add(LedgerSite((10.0, 0.0, 0.0), Hazard.WATER, "water", 1, True))
+    ctx.reject((10.0, 0.0, 0.0), candidate(0, (10.0, 0.0, 0.0), area_m2=400.0))
+    assert ctx.rejected == [(10.0, 0.0, 10.0)]
+    assert ctx.near_rejected(candidate(1, (18.0, 0.0, 0.0)))
+    assert not ctx.near_rejected(candidate(2, (21.0, 0.0, 0.0)))
+    ctx.round = 3
+    ctx.set_state(State.RANK)
+    assert ctx.state is State.RANK
+    assert _record(ctx).of("state") == [{"state": "rank", "round": 3, "pos_ned_m": [1.0, 2.0, -40.0]}]
+
+
+# ---------------------------------------------------------------- the looker
+def test_looker_acquire_holds_through_a_missing_frame_and_records_it(monkeypatch: pytest.MonkeyPatch) -> None:
+    """No frame the first time: recorded as a sensor fault, said once, asked again."""
+    monkeypatch.setattr(looking_module, "SENSOR_RETRY_S", 0.01)
+    got = frame()
+    ctx = context(got, fails=1)
+    assert asyncio.run(_looker(ctx).acquire()) is got
+    assert [e["error"] for e in _record(ctx).of("sensor_fault")] == ["no frame in this test"]
+    assert _said(ctx) == ["Landfall: no sensor frame (no frame in this test): holding, asking again"]
+    assert ctx.state is State.ACQUIRE
+
+
+def test_looker_rank_without_an_image_flies_to_the_first_measured_candidate() -> None:
+    """Without a camera image the order is Surface ID's; a fallback crop is never flown to."""
+    ctx = context()
+    cands = [candidate(0, fallback=True), candidate(1, (5.0, 0.0, 0.0)), candidate(2, (9.0, 0.0, 0.0))]
+    ranking, chosen = asyncio.run(_looker(ctx).rank(cands, frame()))
+    assert (ranking.tier, chosen) == ("surface-id", 1)
+    assert [(e["order"], e["chosen"]) for e in _record(ctx).of("rank")] == [([0, 1, 2], 1)]
+
+
+def test_looker_confirm_with_neither_sensor_is_contested_and_ledgered_as_unknown() -> None:
+    """No image and a LiDAR that missed the site: not judged (contested, asked again), never struck off;
+    the ledger keeps it as unknown."""
+    ctx = context()
+    reasoner = FakeReasoner()
+    site = (3.0, 4.0, 0.0)
+    decision = asyncio.run(_looker(ctx, reasoner).confirm(UNMEASURED, frame(), site, candidate(7, site)))
+    assert (decision.accept, decision.contested) == (False, True)
+    assert reasoner.confirms == []  # nothing to show the reasoner
+    kept = ctx.ledger.near((3.0, 4.0))
+    assert kept is not None
+    assert (kept.hazard, kept.label, kept.closeup) == (Hazard.UNKNOWN, "site 7", True)
+
+
+# ---------------------------------------------------------------- the site follower
+def test_follower_moves_the_target_with_an_estimate_reset_and_records_it() -> None:
+    """The autopilot's estimate jumps 3 m north and 1 m west after the site was chosen: the descent's
+    target moves with it (the site did not), even with no camera view to look in."""
+    ctx = context()
+    follower = SiteFollower(ctx)
+    seen = frame(image=np.zeros((48, 64, 3), np.uint8), time_boot_ms=10_000)
+    follower.follow_from(seen, (4.0, 3.0, 0.0))
+    ctx.tm.position_resets.resets.append((11.0, (3.0, -1.0)))
+    target = asyncio.run(follower.follow(frame(image=None, time_boot_ms=12_000), (4.0, 3.0, 0.0)))
+    assert target == (7.0, 2.0, 0.0)
+    assert follower.track is not None
+    assert follower.track[1] == (7.0, 2.0, 0.0)
+    assert _record(ctx).of("estimate_reset") == [{"round": 0, "t_boot_s": 11.0, "shift_m": [3.0, -1.0]}]
+
+
+def test_follower_forgotten_lands_on_the_absolute_target_in_land_mode() -> None:
+    ctx = context()
+    follower = SiteFollower(ctx)
+    follower.follow_from(frame(image=np.zeros((48, 64, 3), np.uint8)), (1.0, 1.0, 0.0))
+    follower.forget()
+    asyncio.run(follower.land_on_site(None))
+    assert _ctl(ctx).lands == [Mode.LAND]
+    (event,) = _record(ctx).of("precision_landing")
+    assert (event["used"], event["targets_sent"]) == (False, 0)
+
+
+# ---------------------------------------------------------------- the lander
+def test_lander_flies_to_the_least_bad_site_when_nothing_was_accepted() -> None:
+    """Water 10 m away and an unknown roof 30 m away: it lands on the roof, says why, records the
+    choice among every site measured."""
+    ctx = context(pos_ned_m=(0.0, 0.0, -50.0))
+    ctx.ledger.add(LedgerSite((10.0, 0.0, 0.0), Hazard.WATER, "water", 1, True, label="site 0"))
+    ctx.ledger.add(LedgerSite((0.0, 30.0, -12.0), Hazard.UNKNOWN, "not judged", 2, False, label="site 1"))
+    lander = _parts(ctx)[2]
+    outcome = asyncio.run(lander.land_at_best("round budget spent", measure_here=False))
+    assert outcome == Outcome(State.LANDED, 0, (0.0, 30.0, -12.0), "round budget spent")
+    assert _ctl(ctx).gotos == [(0.0, 30.0, -50.0)]
+    (event,) = _record(ctx).of("fallback_site")
+    assert (event["chosen"]["label"], len(event["sites"])) == ("site 1", 2)
+    assert "Landfall: round budget spent: landing at site 1 (unknown: not judged)" in _said(ctx)
+    assert ctx.state is State.LANDED
+
+
+def test_lander_fallback_is_the_accepted_site_before_any_ledger_site() -> None:
+    ctx = context()
+    ctx.ledger.add(LedgerSite((0.0, 5.0, 0.0), Hazard.DOUBTED, "a bit rough", 1, True))
+    ctx.best = Site((8.0, 8.0, -3.0), candidate(4, (8.0, 8.0, -3.0)))
+    site = _parts(ctx)[2].fallback_site()
+    assert site is not None
+    assert (site.ned_m, site.hazard, site.label) == ((8.0, 8.0, -3.0), Hazard.ACCEPTED, "site 4")
+
+
+# ---------------------------------------------------------------- the searcher
+def test_searcher_ends_the_search_at_the_battery_reserve_and_says_why() -> None:
+    ctx = context()
+    ctx.tm.state.battery_pct = 26.0  # the reserve is 25 %, and the landing needs more than 1 %
+    searcher = _parts(ctx)[3]
+    searcher.start()
+    ctx.round = 1
+    assert not searcher.go_on()
+    assert searcher.ended is not None
+    assert searcher.ended.why.startswith("battery 26 %")
+    assert [e["reason"] for e in _record(ctx).of("search_end")] == [searcher.ended.why]
+
+
+def test_searcher_runs_the_deferred_work_once_in_one_worker_with_the_maps_frame() -> None:
+    """A round's frame for the map and its deferred notes run together, once, in one worker thread."""
+    ctx = context()
+    searcher = _parts(ctx)[3]
+    threads: list[Any] = []
+    searcher.observe_later(frame(lidar_frd=np.zeros((0, 4), np.float32)))
+    for _ in range(2):
+        searcher.later(lambda: threads.append(threading.current_thread()))
+
+    async def twice() -> None:
+        await searcher.observed()
+        await searcher.observed()  # nothing left: no second run, no second event
+
+    asyncio.run(twice())
+    assert len(threads) == 2
+    assert threads[0] is threads[1]
+    assert [e["jobs"] for e in _record(ctx).of("observed")] == [2]
+
+
+def test_searcher_explore_low_down_climbs_for_a_wider_view() -> None:
+    """30 m above the ground, well below the search height (75 m): a 15 m climb, a new vantage."""
+    ctx = context(pos_ned_m=(0.0, 0.0, -30.0))
+    assert asyncio.run(_parts(ctx)[3].explore()) is True
+    assert _ctl(ctx).gotos == [(0.0, 0.0, -45.0)]
+    assert ctx.state is State.EXPLORE
+
+
+# ---------------------------------------------------------------- the machine and its parts
+def _recovery(ctx: RecoveryContext) -> Recovery:
+    return Recovery(
+        ctx.alarm,
+        control=ctx.ctl,
+        telemetry=ctx.tm,
+        frames=ctx.frames,
+        reasoner=FakeReasoner(),
+        announce=ctx.announce,
+        params=ctx.p,
+        record=ctx.record,
+    )
+
+
+def test_recovery_without_any_frame_lands_where_it_is_and_says_so() -> None:
+    """The sensors give nothing for ``sensor_loss_s``: nothing measured, so it lands here, said."""
+    ctx = context(params=RecoveryParams(sensor_loss_s=0.0))
+    rec = _recovery(ctx)
+    outcome = asyncio.run(rec.run())
+    assert outcome == Outcome(State.LANDED, 1, None, "sensors lost")
+    assert _ctl(ctx).lands == [Mode.LAND]
+    assert "Landfall: sensors lost with nothing measured: landing here" in _said(ctx)
+    assert rec.ctx.state is State.LANDED
+    assert _record(ctx).of("state")[-1]["state"] == "landed"
+
+
+def test_recovery_parts_share_its_context_and_the_package_docstring_lists_them() -> None:
+    """The parts ``companion.recovery``'s docstring names (``- ``attr``: :class:`~module.Class```) are
+    the parts a Recovery owns, each of that class, all on the one context; and every module it names
+    exists, and every module of the package is named."""
+    rec = _recovery(context())
+    owned = {name: f"{type(v).__module__}.{type(v).__qualname__}" for name, v in vars(rec).items()
+             if getattr(v, "ctx", None) is rec.ctx}  # fmt: skip
+    doc = companion.recovery.__doc__ or ""
+    listed = dict(re.findall(r"^- ``(\w+)``: :class:`~([\w.]+)`", doc, re.MULTILINE))
+    assert listed == owned
+    assert set(owned) == {"looker", "follower", "lander", "searcher"}
+    named = set(re.findall(r":(?:mod|class):`~(companion\.recovery\.\w+)", doc))
+    package = Path(companion.recovery.__file__).parent
+    assert named == {f"companion.recovery.{p.stem}" for p in package.glob("*.py") if p.stem != "__init__"}
+    for part in owned:  # the machine's class docstring names the same parts
+        assert f"``{part}``" in (Recovery.__doc__ or "")
