@@ -28,7 +28,7 @@ from companion.reasoning.onboard import OnboardReasoner
 from companion.recovery import FrameUnavailable, Outcome, Record, Recovery, RecoveryParams
 from companion.supervise import supervised
 from companion.telemetry import TelemetryCache
-from landfall_link.mavlink import MavlinkUdpLink
+from landfall_link.mavlink import MavlinkLink, MavlinkUdpLink
 
 MAV_TYPE_ONBOARD_CONTROLLER = 18
 MAV_AUTOPILOT_INVALID = 8
@@ -59,12 +59,16 @@ MAV_CMD_SET_MESSAGE_INTERVAL = 511
 
 
 class Companion:
-    """Build, then ``await run()``; ``stop()`` ends it."""
+    """Build, then ``await run()``; ``stop()`` ends it.
+
+    The MAVLink endpoint is ``link`` when given (``signing_key`` is then the link's business), else a
+    UDP link on ``mavlink_url``."""
 
     def __init__(
         self,
         *,
-        mavlink_url: str,
+        mavlink_url: str | None = None,
+        link: MavlinkLink | None = None,
         component_id: int = 191,
         vehicle_system_id: int = 0,
         signing_key: bytes | None = None,
@@ -89,15 +93,22 @@ class Companion:
         self.log = logger or logging.getLogger("companion")
         self.component_id = component_id
         self.tm = TelemetryCache(vehicle_system_id)
-        self.link = MavlinkUdpLink(
-            mavlink_url,
-            vehicle_system_id or 1,
-            component_id,
-            self._on_message,
-            signing_key=signing_key,
-            logger=logging.getLogger("companion.link"),
-        )
-        self.ctl = VehicleController(self.tm, self.link.send_to, self.link.mav, logger=self.log)
+        if link is None:
+            if mavlink_url is None:
+                raise ValueError("a Companion needs a mavlink_url or a link, got neither")
+            link = MavlinkUdpLink(
+                mavlink_url,
+                vehicle_system_id or 1,
+                component_id,
+                signing_key=signing_key,
+                logger=logging.getLogger("companion.link"),
+            )
+            self._link_name: object = link.url
+        else:
+            self._link_name = link
+        self.link: MavlinkLink = link
+        self.link.attach(self._on_message)
+        self.ctl = VehicleController(self.tm, self.link, logger=self.log)
         self.reasoner: Reasoner = reasoner or Cascade([], [], OnboardReasoner())
         self.params = params or RecoveryParams()
         self.ground = ground
@@ -569,7 +580,7 @@ class Companion:
                     "ground-feed",
                     lambda: ground.run(lambda: telemetry_snapshot(self.tm.state), self.raise_alarm),
                 )
-            self.log.info("companion up on %s (component %d)", self.link.url, self.component_id)
+            self.log.info("companion up on %s (component %d)", self._link_name, self.component_id)
             try:
                 await self._stop.wait()
             finally:
