@@ -37,17 +37,14 @@ from typing import Any
 import numpy as np
 
 from landfall_train import patches
+from landfall_train.photo_set import Photo, load_photos, read_rgb, split
 from landfall_train.photos import (
-    Photo,
     build_parser,
     fine_tune,
     from_onnx,
     interpolate,
-    load_photos,
     member_sidecar,
-    read_rgb,
     render_set,
-    split,
 )
 from landfall_train.train import export, training_paths
 
