@@ -32,7 +32,7 @@ from typing import Any
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import common as mavlink2
 
-from landfall_eval.episode import ProcessSample
+from landfall_eval.processes import ProcessSample
 
 ROOT = Path(__file__).resolve().parent.parent
 TOWARD_M = 1.0

@@ -8,7 +8,7 @@ Timed: ``OnboardReasoner.rank_sync`` and ``confirm_sync`` (image cues included),
 Single-threaded: this process is pinned to one CPU, OpenCV runs one thread, BLAS/OpenMP one.
 
 Baseline, measured in the same run: with the cues, the same analysis without the working-size reduction
-(every crop and the close-up's window analysed at full resolution, ``WORK_AREA_PX`` unbounded); with
+(every crop and the close-up's window analysed at full resolution: ``CueParams.work_area_px`` unbounded); with
 ``--judge landnet`` (LandNet-S, companion/reasoning/landnet.py, reading every crop and the close-up), the
 same net reading each image once instead of with its mirror images (sidecar ``input.views`` for the
 confirmation, ``input.rank_views`` for the crops of a rank).
@@ -38,8 +38,8 @@ from companion.guidance.frames import PinholeCamera  # noqa: E402
 from companion.perception.depth import LidarDepth  # noqa: E402
 from companion.perception.site_check import check_site  # noqa: E402
 from companion.perception.surface_id import propose  # noqa: E402
-from companion.reasoning import image_cues  # noqa: E402
 from companion.reasoning.base import ConfirmRequest, RankRequest  # noqa: E402
+from companion.reasoning.image_cues import CueParams  # noqa: E402
 from companion.reasoning.landnet import LandNet  # noqa: E402
 from companion.reasoning.onboard import JUDGES, OnboardReasoner  # noqa: E402
 from landfall_eval.timing import median_ms, pin_one_core  # noqa: E402
@@ -111,12 +111,8 @@ def main(argv: list[str] | None = None) -> int:
         views = f"{onboard.landnet.rank_views} to rank, {onboard.landnet.views} to confirm"
         baseline = f"baseline: one view (shipped: {views})"
     else:
-        work_area = image_cues.WORK_AREA_PX
-        image_cues.WORK_AREA_PX = 10**9  # baseline: analyse at full resolution
-        try:
-            base = measure(onboard)
-        finally:
-            image_cues.WORK_AREA_PX = work_area
+        full_size = CueParams(work_area_px=10**9)  # baseline: analyse at full resolution
+        base = measure(OnboardReasoner(judge=args.judge, cues=full_size))
         baseline = "baseline: full resolution"
 
     sizes = ", ".join(f"{c.shape[1]}x{c.shape[0]}" for c in crops)

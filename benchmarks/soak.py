@@ -34,7 +34,7 @@ from typing import Any
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from landfall_eval.episode import JsonlTail, free_port, send_alarm, sped_up_env, stop_process  # noqa: E402
+from landfall_eval.processes import JsonlTail, free_port, send_alarm, sped_up_env, stop_process  # noqa: E402
 
 RSS_GROWTH_GOAL = 0.10
 EPISODE_WALL_S = 300.0  # one landing at 4x takes 20-60 s of wall time

@@ -14,7 +14,8 @@ from pathlib import Path
 from typing import Any
 
 from companion.alarms import Alarm, Criticality
-from companion.config import CompanionConfig, ConfigError, load_config
+from companion.config import ConfigError, load_config
+from companion.config_schema import CompanionConfig
 from companion.daemon import Companion
 from companion.ground import GroundFeed, GroundParams
 from companion.perception.depth import DepthError, DepthSource

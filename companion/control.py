@@ -18,6 +18,7 @@ from pymavlink.dialects.v20 import common as mavlink2
 from companion.flavour import Flavour, Mode, flavour_for
 from companion.precision import PrecisionLanding
 from companion.telemetry import TelemetryCache
+from landfall_link.mavlink import MavlinkSender
 
 POSITION_YAW_MASK = 2552  # use x, y, z and yaw
 STREAM_HZ = 20.0  # >= 10 Hz on a real vehicle; 20 keeps PX4's 2 Hz rule at 4x simulation speed
@@ -73,22 +74,22 @@ class TelemetryLost(ControlError):
 
 
 class VehicleController:
-    """Commands one vehicle through ``send_to(msg, system, component)``.
+    """Commands one vehicle through ``link`` (its codec builds the messages, its ``send_to`` sends
+    them: the daemon's MAVLink endpoint, or a test's link without a socket).
 
-    ``on_command_ack`` must be fed every COMMAND_ACK the link receives.
+    :meth:`on_command_ack` and :meth:`on_param_value` must be fed every COMMAND_ACK and PARAM_VALUE
+    the link receives.
     """
 
     def __init__(
         self,
         telemetry: TelemetryCache,
-        send_to: Callable[[Any, int, int], None],
-        mav: Any,
+        link: MavlinkSender,
         *,
         logger: logging.Logger | None = None,
     ) -> None:
         self.tm = telemetry
-        self._send_to = send_to
-        self._mav = mav
+        self._link = link
         self._log = logger or logging.getLogger("companion.control")
         self._acks: dict[int, asyncio.Future[int]] = {}
         self._params: dict[str, asyncio.Future[float]] = {}
@@ -116,6 +117,18 @@ class VehicleController:
     def vehicle(self) -> tuple[int, int]:
         return (self.tm.state.system_id, 1)
 
+    @property
+    def target(self) -> tuple[float, float, float, float] | None:
+        """The position setpoint streamed now (north, east, down in metres NED, yaw in radians); None
+        while the companion commands no position."""
+        return self._target
+
+    @property
+    def engaged_mode(self) -> int | None:
+        """The autopilot's ``custom_mode`` the companion holds (acknowledged, or its land mode); None
+        when it holds none."""
+        return self._engaged_mode
+
     def on_command_ack(self, msg: Any) -> None:
         if (msg.get_srcSystem(), msg.get_srcComponent()) != self.vehicle:
             return
@@ -137,7 +150,7 @@ class VehicleController:
         PX4 bytewise); None when the autopilot does not answer (no such parameter: both stay silent
         then)."""
         sys_id, comp_id = self.vehicle
-        request = self._mav.param_request_read_encode(sys_id, comp_id, name.encode(), -1)
+        request = self._link.mav.param_request_read_encode(sys_id, comp_id, name.encode(), -1)
         value: float | None = await self._ask(self._params, name, lambda _attempt: request, timeout_s, tries)
         return value
 
@@ -170,11 +183,11 @@ class VehicleController:
         """LANDING_TARGET with ``position_valid`` 1: ``xyz`` in ``frame``, ``angles`` (angle_x, angle_y,
         distance) beside them."""
         sys_id, comp_id = self.vehicle
-        msg = self._mav.landing_target_encode(
+        msg = self._link.mav.landing_target_encode(
             time_usec, 0, frame, *angles, 0.0, 0.0, *xyz, [1.0, 0.0, 0.0, 0.0],
             mavlink2.LANDING_TARGET_TYPE_VISION_OTHER, 1,
         )  # fmt: skip
-        self._send_to(msg, sys_id, comp_id)
+        self._link.send_to(msg, sys_id, comp_id)
 
     async def command(self, command: int, *params: float, timeout_s: float = 1.5, tries: int = 3) -> int:
         """COMMAND_LONG to the autopilot; returns its MAV_RESULT (retried on silence)."""
@@ -183,7 +196,7 @@ class VehicleController:
         result: int | None = await self._ask(
             self._acks,
             command,
-            lambda attempt: self._mav.command_long_encode(sys_id, comp_id, command, attempt, *p),
+            lambda attempt: self._link.mav.command_long_encode(sys_id, comp_id, command, attempt, *p),
             timeout_s,
             tries,
         )
@@ -206,7 +219,7 @@ class VehicleController:
             fut: asyncio.Future[Any] = loop.create_future()
             pending[key] = fut
             sys_id, comp_id = self.vehicle
-            self._send_to(encode(attempt), sys_id, comp_id)
+            self._link.send_to(encode(attempt), sys_id, comp_id)
             try:
                 async with asyncio.timeout(timeout_s):
                     return await fut
@@ -274,7 +287,7 @@ class VehicleController:
             return
         n, e, d, yaw = self._target
         sys_id, comp_id = self.vehicle
-        msg = self._mav.set_position_target_local_ned_encode(
+        msg = self._link.mav.set_position_target_local_ned_encode(
             int(self.tm.state.t_boot_s * 1000) & 0xFFFFFFFF,
             sys_id,
             comp_id,
@@ -293,7 +306,7 @@ class VehicleController:
             0,
         )
         try:
-            self._send_to(msg, sys_id, comp_id)
+            self._link.send_to(msg, sys_id, comp_id)
         except OSError as exc:  # the link gone for a moment: the stream sends it again next tick
             self._fault("setpoint not sent", exc)
             return

@@ -9,26 +9,22 @@ import collections
 import contextlib
 import dataclasses
 import logging
-import math
 import time
 from collections.abc import Awaitable, Callable
 from typing import Any
 
-import numpy as np
-
 from companion.alarms import ALARM_TEXT_PREFIX, MAV_CMD_USER_1, Alarm, Criticality, ReasonCode
-from companion.camera import stream_capture_time
 from companion.control import VehicleController
+from companion.frame_source import FrameSource
 from companion.ground import GroundFeed, TeeRecord, telemetry_snapshot
-from companion.guidance.frames import quat_to_matrix
 from companion.precision import check_precision_landing
 from companion.reasoning.base import Reasoner
 from companion.reasoning.cascade import Cascade
 from companion.reasoning.onboard import OnboardReasoner
-from companion.recovery import FrameUnavailable, Outcome, Record, Recovery, RecoveryParams
+from companion.recovery import Outcome, Record, Recovery, RecoveryParams
 from companion.supervise import supervised
 from companion.telemetry import TelemetryCache
-from landfall_link.mavlink import MavlinkUdpLink
+from landfall_link.mavlink import MavlinkLink, MavlinkUdpLink
 
 MAV_TYPE_ONBOARD_CONTROLLER = 18
 MAV_AUTOPILOT_INVALID = 8
@@ -36,7 +32,6 @@ MAV_STATE_STANDBY, MAV_STATE_ACTIVE = 3, 4
 SEVERITY_WARNING = 4  # MAV_SEVERITY_WARNING: autopilot texts this grave or graver go into a recovery's record
 RESULT_ACCEPTED, RESULT_TEMP_REJECTED, RESULT_DENIED, RESULT_UNSUPPORTED, RESULT_IN_PROGRESS = 0, 1, 2, 3, 5
 RESUME_WAIT_S = 60.0  # after a restart mid-recovery: how long to wait for telemetry and sensors
-POSE_WAIT_UPDATES = 3  # position updates a frame newer than the telemetry waits for
 # What the companion needs from the autopilot, Hz: real ArduPilot sends none of it unasked (PX4 and the
 # emulation stream it anyway; asking is harmless there). Asked on the first heartbeat and again while
 # any of it stays missing.
@@ -59,12 +54,16 @@ MAV_CMD_SET_MESSAGE_INTERVAL = 511
 
 
 class Companion:
-    """Build, then ``await run()``; ``stop()`` ends it."""
+    """Build, then ``await run()``; ``stop()`` ends it.
+
+    The MAVLink endpoint is ``link`` when given (``signing_key`` is then the link's business), else a
+    UDP link on ``mavlink_url``."""
 
     def __init__(
         self,
         *,
-        mavlink_url: str,
+        mavlink_url: str | None = None,
+        link: MavlinkLink | None = None,
         component_id: int = 191,
         vehicle_system_id: int = 0,
         signing_key: bytes | None = None,
@@ -89,15 +88,22 @@ class Companion:
         self.log = logger or logging.getLogger("companion")
         self.component_id = component_id
         self.tm = TelemetryCache(vehicle_system_id)
-        self.link = MavlinkUdpLink(
-            mavlink_url,
-            vehicle_system_id or 1,
-            component_id,
-            self._on_message,
-            signing_key=signing_key,
-            logger=logging.getLogger("companion.link"),
-        )
-        self.ctl = VehicleController(self.tm, self.link.send_to, self.link.mav, logger=self.log)
+        if link is None:
+            if mavlink_url is None:
+                raise ValueError("a Companion needs a mavlink_url or a link, got neither")
+            link = MavlinkUdpLink(
+                mavlink_url,
+                vehicle_system_id or 1,
+                component_id,
+                signing_key=signing_key,
+                logger=logging.getLogger("companion.link"),
+            )
+            self._link_name: object = link.url
+        else:
+            self._link_name = link
+        self.link: MavlinkLink = link
+        self.link.attach(self._on_message)
+        self.ctl = VehicleController(self.tm, self.link, logger=self.log)
         self.reasoner: Reasoner = reasoner or Cascade([], [], OnboardReasoner())
         self.params = params or RecoveryParams()
         self.ground = ground
@@ -108,12 +114,18 @@ class Companion:
         )
         self._sensors = sensors
         self._frame_timeout_s = frame_timeout_s
-        self._max_frame_age_s = max_frame_age_s
         # a video camera (companion.camera.CameraStream): the image comes from it, the LiDAR (if any)
         # from the sensor stream, each placed with the autopilot's pose at its own capture time
         self._camera = camera
-        self._camera_latency_s = camera_latency_s
-        self._camera_offset = np.asarray(camera_offset_frd_m, dtype=np.float64)
+        self.view = FrameSource(
+            self.tm,
+            max_frame_age_s=max_frame_age_s,
+            camera=camera,
+            camera_latency_s=camera_latency_s,
+            camera_offset_frd_m=camera_offset_frd_m,
+            record=self.record,
+            logger=self.log,
+        )
         self._watch_battery_pct = watch_battery_pct
         self._watch_failsafe = watch_failsafe_text
         self._watch_gps = watch_gps
@@ -126,7 +138,6 @@ class Companion:
         self.alarms_refused = 0
         self.restarts: collections.Counter[str] = collections.Counter()  # supervised tasks started again
         self._stop = asyncio.Event()
-        self._client: Any = None
         self._gps_was_ok = False
         # a watcher alarm refused for now (no fresh telemetry or frame yet): asked again each second
         # until this monotonic time, since its cause (a failsafe's one STATUSTEXT) may not come again
@@ -196,7 +207,7 @@ class Companion:
         while time.monotonic() < deadline:
             await asyncio.sleep(0.5)
             s = self.tm.state
-            if s.system_id == 0 or self.tm.age_s("position") > 3.0 or not self._sees():
+            if s.system_id == 0 or self.tm.age_s("position") > 3.0 or not self.view.sees():
                 continue
             if s.on_ground:
                 self.log.info("the vehicle is on the ground: nothing to resume")
@@ -206,12 +217,6 @@ class Companion:
                 self.log.info("recovery resumed after a restart")
                 return
         self.log.warning("could not resume the interrupted recovery within %.0f s", RESUME_WAIT_S)
-
-    def _sees(self) -> bool:
-        """A view to land by: a video frame from the camera, else a connected sensor stream."""
-        if self._camera is not None:
-            return self._camera.latest() is not None
-        return self._client is not None
 
     def _take_alarm(self, alarm: Alarm) -> int:
         if self._accept_from and alarm.source[0] not in self._accept_from and alarm.source != (0, 0):
@@ -229,7 +234,7 @@ class Companion:
         if s.on_ground:
             self.log.warning("alarm %r refused: the vehicle is not flying", alarm.reason)
             return RESULT_DENIED
-        if not self._sees():
+        if not self.view.sees():
             missing = "no sensor stream" if self._camera is None else "no camera frame yet"
             self.log.warning("alarm %r refused: %s", alarm.reason, missing)
             return RESULT_TEMP_REJECTED
@@ -237,7 +242,7 @@ class Companion:
             alarm,
             control=self.ctl,
             telemetry=self.tm,
-            frames=self._frame,
+            frames=self.view.frame,
             reasoner=self.reasoner,
             announce=self.announce,
             params=self.params,
@@ -277,140 +282,6 @@ class Companion:
             outcome.reason,
             1000 * self.ctl.longest_stream_gap_s,
         )
-
-    async def _frame(self) -> Any:
-        """A fresh frame for the recovery, or ``FrameUnavailable`` saying why there is none."""
-        from landfall_link.sensorstream import SensorStreamError
-
-        if self._camera is not None:
-            return await self._camera_frame()
-        if self._client is None:
-            raise FrameUnavailable("sensor stream not connected")
-        try:
-            frame = await self._client.frame(want=("image", "lidar"), image_encoding="raw")
-        except SensorStreamError as exc:
-            raise FrameUnavailable(str(exc)) from exc
-        age_s = self.tm.state.t_boot_s - frame.time_boot_ms / 1000.0
-        if age_s > self._max_frame_age_s:
-            raise FrameUnavailable(
-                f"frame captured {age_s:.1f} s ago (sensors.max_frame_age_s {self._max_frame_age_s:g})"
-            )
-        return await self._posed(frame)
-
-    async def _camera_frame(self) -> Any:
-        """The newest video frame, its capture time on the autopilot's clock (the moment it was decoded,
-        on the autopilot's clock fitted from telemetry, less the stream's latency), the LiDAR sweep from
-        the sensor stream when there is one (re-expressed in the body frame at the image's capture), the
-        downward rangefinder from the autopilot's DISTANCE_SENSOR (or the sweep's); placed with the
-        autopilot's pose at the capture time, the camera's offset from the body origin applied."""
-        from landfall_link.sensorstream import SensorFrame, SensorStreamError
-
-        cam = self._camera
-        video = cam.latest()
-        if video is None:
-            why = f" ({cam.last_error})" if cam.last_error else ""
-            raise FrameUnavailable(f"no camera frame yet from {cam.spec.url}{why}")
-        boot = self.tm.clock.boot_at(video.decoded_s)
-        rate = self.tm.clock.rate
-        if boot is None or rate is None:
-            raise FrameUnavailable("the autopilot's clock is not known yet (too little telemetry)")
-        # the configured latency is this computer's seconds; the decoder's hold is the stream's own
-        # (its presentation clock runs with the autopilot's: real time, or the simulator's)
-        hold = cam.decode_delay_s
-        if hold is None:
-            raise FrameUnavailable("the camera's frame interval is not known yet (fewer than two frames)")
-        late = 0.0
-        if video.pts_s is not None and cam.spec.kind in ("rtp", "rtsp"):
-            # dated by its presentation time: a decoder that fell behind does not make it look newer
-            dated = stream_capture_time(video.pts_s, video.decoded_s, cam.arrivals(), self.tm.clock.boot_at)
-            if dated is not None:
-                boot, late = dated
-        t_cap = boot - self._camera_latency_s * rate - hold
-        age_s = self.tm.state.t_boot_s - t_cap
-        if age_s > self._max_frame_age_s:
-            raise FrameUnavailable(
-                f"newest camera frame captured {age_s:.1f} s ago (sensors.max_frame_age_s "
-                f"{self._max_frame_age_s:g}){f'; {cam.last_error}' if cam.last_error else ''}"
-            )
-        lidar, sweep_range = None, math.nan
-        if self._client is not None:
-            try:
-                sweep = await self._client.frame(want=("lidar",))
-            except SensorStreamError as exc:
-                self.log.warning("camera frame without LiDAR: %s", exc)
-            else:
-                lidar = self._lidar_at(sweep, t_cap)
-                sweep_range = sweep.rangefinder_m
-        fresh = self.tm.age_s("rangefinder") < 1.0 and math.isfinite(self.tm.state.rangefinder_m)
-        rangefinder = self.tm.state.rangefinder_m if fresh else sweep_range
-        if not math.isfinite(rangefinder):
-            raise FrameUnavailable(
-                "no distance to the ground for the camera frame: no downward DISTANCE_SENSOR from the "
-                "autopilot and no LiDAR sweep"
-            )
-        u = cam.intrinsics
-        frame = SensorFrame(
-            t_s=t_cap, time_boot_ms=max(0, round(t_cap * 1000)), pos_ned_m=(0.0, 0.0, 0.0),
-            quat_wxyz=(1.0, 0.0, 0.0, 0.0), rangefinder_m=rangefinder, image_rgb=video.image_rgb,
-            depth_m=None, lidar_frd=lidar, fx=u.fx, fy=u.fy, cx=u.cx, cy=u.cy, width=u.width,
-            height=u.height, weather="clear",  # the simulator's field: nothing in the companion reads it
-        )  # fmt: skip
-        posed = await self._posed(frame)
-        if self._camera_offset.any():  # the camera's centre, not the body origin, is where the view is from
-            r = quat_to_matrix(posed.quat_wxyz)
-            pos = tuple(float(v) for v in np.asarray(posed.pos_ned_m) + r @ self._camera_offset)
-            pts = posed.lidar_frd
-            if pts is not None:
-                pts = pts.copy()
-                pts[:, :3] -= self._camera_offset.astype(pts.dtype)
-            posed = dataclasses.replace(posed, pos_ned_m=pos, lidar_frd=pts)
-        if self.record is not None:
-            self.record.record_event("camera_frame", {
-                "frame_seq": video.seq, "pts_s": video.pts_s, "decoded_s": round(video.decoded_s, 4),
-                "capture_boot_s": round(t_cap, 4),
-                "clock_rate": round(rate, 5), "latency_s": self._camera_latency_s,
-                "decode_delay_s": round(hold, 4), "late_s": round(late, 4),
-                "age_s": round(age_s, 3), "lidar": lidar is not None,
-            })  # fmt: skip
-        return posed
-
-    def _lidar_at(self, sweep: Any, t_cap: float) -> Any:
-        """The sweep's points (body FRD at the sweep's capture) in the body frame at ``t_cap``, by the
-        autopilot's poses at both times; as they are when either pose is unknown."""
-        pts = sweep.lidar_frd
-        if pts is None:
-            return None
-        then, now = self.tm.poses.at(sweep.time_boot_ms / 1000.0), self.tm.poses.at(t_cap)
-        if then is None or now is None:
-            return pts
-        r_then, r_now = quat_to_matrix(then.quat_wxyz), quat_to_matrix(now.quat_wxyz)
-        shift = np.asarray(then.pos_ned_m) - np.asarray(now.pos_ned_m)
-        out = np.array(pts, dtype=np.float32, copy=True)
-        world = pts[:, :3].astype(np.float64) @ r_then.T + shift
-        out[:, :3] = world @ r_now
-        return out
-
-    async def _posed(self, frame: Any) -> Any:
-        """The frame placed with the autopilot's estimate at its capture time (module telemetry):
-        whatever pose the sensor side sent is replaced here, before anything reads it. A frame newer
-        than the telemetry waits for up to ``POSE_WAIT_UPDATES`` position updates."""
-        t = frame.time_boot_ms / 1000.0
-        pose = self.tm.poses.at(t)
-        for _ in range(POSE_WAIT_UPDATES):
-            span = self.tm.poses.span()
-            if pose is not None or span is None or t <= span[1]:
-                break
-            with contextlib.suppress(TimeoutError):
-                await self.tm.wait_update(0.5)
-            pose = self.tm.poses.at(t)
-        if pose is None:
-            span = self.tm.poses.span()
-            covers = f"{span[0]:.2f}..{span[1]:.2f} s" if span else "nothing yet"
-            raise FrameUnavailable(
-                f"no autopilot pose at the frame's capture time ({t:.2f} s of its boot clock; "
-                f"the pose history covers {covers})"
-            )
-        return dataclasses.replace(frame, pos_ned_m=pose.pos_ned_m, quat_wxyz=pose.quat_wxyz)
 
     # ------------------------------------------------------------------ MAVLink out
     def announce(self, severity: int, text: str) -> None:
@@ -525,7 +396,7 @@ class Companion:
         while True:
             try:
                 client = client_cls(self._sensors[0], self._sensors[1], timeout_s=self._frame_timeout_s)
-                self._client = await stack.enter_async_context(client)
+                self.view.client = await stack.enter_async_context(client)
                 self.log.info("sensor stream connected: %s:%d", *self._sensors)
                 if self.record is not None:  # what a harness waits for before its alarm
                     self.record.record_event("sensors", {"host": self._sensors[0], "port": self._sensors[1]})
@@ -569,7 +440,7 @@ class Companion:
                     "ground-feed",
                     lambda: ground.run(lambda: telemetry_snapshot(self.tm.state), self.raise_alarm),
                 )
-            self.log.info("companion up on %s (component %d)", self.link.url, self.component_id)
+            self.log.info("companion up on %s (component %d)", self._link_name, self.component_id)
             try:
                 await self._stop.wait()
             finally:

@@ -43,7 +43,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from companion.config import ReasonerConfig, load_config
+from companion.config import load_config
+from companion.config_schema import ReasonerConfig
 from companion.guidance.frames import PinholeCamera
 from companion.perception.depth import (
     ArrayDepth,

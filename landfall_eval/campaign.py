@@ -24,7 +24,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
-from landfall_eval.episode import STOPPING, EpisodeSpec, EpisodeTimes, run_episode, stop_running_episodes
+from landfall_eval.episode import EpisodeSpec, EpisodeTimes, run_episode
+from landfall_eval.processes import STOPPING, stop_running_episodes
 
 __all__ = [
     "EXECUTORS",

@@ -35,7 +35,8 @@ from typing import Any
 from tqdm import tqdm
 
 from landfall_eval.campaign import EXECUTORS, EpisodeJob, RayUnavailable, make_executor
-from landfall_eval.episode import EpisodeSpec, EpisodeTimes, describe_last_state
+from landfall_eval.episode import EpisodeSpec, EpisodeTimes
+from landfall_eval.episode_grade import describe_last_state
 from landfall_eval.grading import summarise
 from landfall_eval.launches import halton_launches
 from simbridge.args import non_negative_seed

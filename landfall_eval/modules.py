@@ -294,11 +294,21 @@ async def _no_frame() -> Any:
     raise FrameUnavailable("the module bench hands the looker its frames")
 
 
+class _Silent:
+    """A link that sends nothing: the module bench commands no vehicle."""
+
+    def __init__(self) -> None:
+        self.mav = mavlink2.MAVLink(None)
+
+    def send_to(self, msg: Any, system: int, component: int) -> None:
+        return None
+
+
 def _looker(cascade: Cascade, context: str = "crop") -> Looker:
     """The recovery's looker for one context level of the rank, on no vehicle: a controller that sends
     nothing, telemetry never heard, no frame source (the bench hands it each frame) and no record."""
     tm = TelemetryCache()
-    ctl = VehicleController(tm, lambda _msg, _sys, _comp: None, mavlink2.MAVLink(None))
+    ctl = VehicleController(tm, _Silent())
     ctx = RecoveryContext(
         BENCH_ALARM, ctl, tm, _no_frame, lambda _sev, _text: None, RecoveryParams(context=context)
     )

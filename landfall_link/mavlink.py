@@ -6,6 +6,10 @@ replies are addressed inside the message (target system/component), never by "la
 
 URLs: ``udpout:HOST:PORT`` sends to a fixed address (and also to peers that talk to us);
 ``udpin:HOST:PORT`` (alias ``udp:``) binds and learns peers from what arrives.
+
+Users of a link depend on the protocols :class:`MavlinkSender` (a codec and ``send_to``: what flying a
+vehicle needs) and :class:`MavlinkLink` (the whole endpoint), not on the UDP class: a test hands them
+a link without a socket, the way httpx's client takes a transport.
 """
 
 from __future__ import annotations
@@ -15,7 +19,7 @@ import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 from pymavlink.dialects.v20 import common as mavlink2
 
@@ -77,11 +81,47 @@ class LinkStats:
     rejected_bad_signature: int = 0
 
 
-class MavlinkUdpLink(asyncio.DatagramProtocol):
-    """One UDP endpoint speaking MAVLink 2 as (``system_id``, ``component_id``).
+class MavlinkSender(Protocol):
+    """What commanding one vehicle needs of a link: the codec that builds messages (pymavlink's
+    ``MAVLink``: its ``*_encode`` methods and ``srcSystem``) and sending one to a peer."""
 
-    Use as ``async with MavlinkUdpLink(url, ...) as link:``; ``handler(msg, addr)`` is called for
-    every valid message, in the event loop.
+    @property
+    def mav(self) -> Any: ...
+
+    def send_to(self, msg: Any, system: int, component: int) -> None:
+        """Send ``msg`` to the peer ``(system, component)`` (component 0: every component of it)."""
+        ...
+
+
+class MavlinkLink(MavlinkSender, Protocol):
+    """One MAVLink endpoint as a daemon uses it: opened and closed as an async context, every valid
+    message that arrives handed to the handler :meth:`attach` set, frames sent to one peer or all."""
+
+    @property
+    def stats(self) -> LinkStats: ...
+
+    async def __aenter__(self) -> Any: ...
+
+    async def __aexit__(self, *exc: object) -> None: ...
+
+    def attach(self, handler: MessageHandler) -> None:
+        """Call ``handler(msg, addr)`` for every valid message from now on (in place of the last)."""
+        ...
+
+    def send(self, msg: Any) -> None:
+        """Send ``msg`` to every live peer."""
+        ...
+
+    def send_statustext(self, severity: int, text: str) -> None:
+        """STATUSTEXT to every peer."""
+        ...
+
+
+class MavlinkUdpLink(asyncio.DatagramProtocol):
+    """One UDP endpoint speaking MAVLink 2 as (``system_id``, ``component_id``): a :class:`MavlinkLink`.
+
+    Use as ``async with MavlinkUdpLink(url, ...) as link:``; ``handler(msg, addr)`` (given here or by
+    :meth:`attach`) is called for every valid message, in the event loop.
     """
 
     def __init__(
@@ -89,7 +129,7 @@ class MavlinkUdpLink(asyncio.DatagramProtocol):
         url: str,
         system_id: int,
         component_id: int,
-        handler: MessageHandler,
+        handler: MessageHandler | None = None,
         *,
         signing_key: bytes | None = None,
         logger: logging.Logger | None = None,
@@ -113,6 +153,10 @@ class MavlinkUdpLink(asyncio.DatagramProtocol):
             sig.sign_outgoing = True
             sig.timestamp = int((time.time() - _MAVLINK_EPOCH_UNIX_S) * 1e5)
             sig.allow_unsigned_callback = lambda _mav, _msgid: False
+
+    def attach(self, handler: MessageHandler) -> None:
+        """Call ``handler(msg, addr)`` for every valid message from now on (in place of the last)."""
+        self._handler = handler
 
     async def __aenter__(self) -> MavlinkUdpLink:
         loop = asyncio.get_running_loop()
@@ -158,6 +202,8 @@ class MavlinkUdpLink(asyncio.DatagramProtocol):
             self.stats.received += 1
             self._peers[addr] = time.monotonic()
             self._routes[(msg.get_srcSystem(), msg.get_srcComponent())] = addr
+            if self._handler is None:
+                continue
             try:
                 self._handler(msg, addr)
             except Exception:

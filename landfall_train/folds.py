@@ -37,17 +37,14 @@ from typing import Any
 import numpy as np
 
 from landfall_train import patches
+from landfall_train.photo_set import Photo, load_photos, read_rgb, split
 from landfall_train.photos import (
-    Photo,
     build_parser,
     fine_tune,
     from_onnx,
     interpolate,
-    load_photos,
     member_sidecar,
-    read_rgb,
     render_set,
-    split,
 )
 from landfall_train.train import export, training_paths
 
@@ -65,7 +62,7 @@ def readings(model: Path, images: dict[str, np.ndarray], short_side: int = 0) ->
     hazard peak), for choosing thresholds afterwards. ``short_side`` (pixels, 0: the sidecar's) reads
     the photographs at another scale, the longer side at most twice it."""
     from companion.reasoning.base import ConfirmRequest
-    from companion.reasoning.image_cues import SITE_WINDOW_CROP
+    from companion.reasoning.image_cues import CueParams
     from companion.reasoning.landnet import LandNet
     from companion.reasoning.net_judge import confirm_reading
     from companion.reasoning.onboard_params import ConfirmParams
@@ -73,7 +70,7 @@ def readings(model: Path, images: dict[str, np.ndarray], short_side: int = 0) ->
     net = LandNet.load(model, backend="onnxruntime")
     if short_side:  # both readings below pass their own side; the longer side's cap scales with it
         net.confirm_short_side_px = net.rank_short_side_px = short_side
-    params = ConfirmParams(site_window=SITE_WINDOW_CROP)  # a crop's window, whatever its shape
+    params = ConfirmParams(site_window=CueParams().site_window_crop)  # a crop's window, whatever its shape
     out = {}
     for key, rgb in images.items():
         vetoes, _categorical, _note, r = confirm_reading(

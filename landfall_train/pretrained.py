@@ -9,7 +9,7 @@ reading in the fold that never learnt from it, and the figures per place and poo
 with their full targets (the cells and the clear site, :mod:`landfall_train.train`'s patches and
 :mod:`landfall_train.closeups`' gravel and membrane close-ups), and ``--photo-batch`` randomised views of
 the labelled photographs of ``--photos`` (``land`` true 1, false 0, null not read) for the clear-site
-output. Every photograph whose licence allows it (:func:`landfall_train.photos.trainable`) is learnt
+output. Every photograph whose licence allows it (:func:`landfall_train.photo_set.trainable`) is learnt
 from; none is held out by default: the photographs from other places that measure the result are
 checked elsewhere (``--hold-out`` leaves sources out).
 
@@ -27,7 +27,7 @@ fixed; AdamW, the backbone at ``--backbone-lr-scale`` of ``--lr``, a short warm-
 The net is laid out channels-last (a third less time a step on a CPU). Inputs are normalised as
 ImageNet's were (:data:`landfall_train.effnet.IMAGENET_MEAN`, ``STD``).
 Photograph views: a random crop of 45-100 % of the area, a quarter turn and a mirror image, colour,
-contrast and brightness jitter, sometimes blur or noise (:func:`landfall_train.photos.photo_view`), and
+contrast and brightness jitter, sometimes blur or noise (:func:`landfall_train.photo_set.photo_view`), and
 here also JPEG compression (``JPEG_P`` of them, quality ``JPEG_QUALITY``).
 The cells' thresholds are calibrated on held-out renders, as LandNet-S's are; the clear-site threshold
 comes from the source folds (``--clear-threshold``).
@@ -64,19 +64,15 @@ from landfall_train import patches
 from landfall_train.augment import augment, targets
 from landfall_train.folds import scores
 from landfall_train.labels import CLASSES, HAZARD_CLASSES
+from landfall_train.photo_set import Photo, photo_view, photos_or_exit, read_rgb, split
 from landfall_train.photos import (
     CLEAR_SHARE,
     CLOSEUP_SHARE,
     CLOSEUPS,
-    Photo,
     add_render_set_args,
     mixed_loss,
-    photo_view,
-    photos_or_exit,
-    read_rgb,
     render_loss,
     render_set,
-    split,
     take_step,
 )
 from landfall_train.train import (
@@ -131,7 +127,7 @@ def copyleft(photo: Photo) -> bool:
 def learnable(
     photos: Sequence[Photo], hold_out: Sequence[str], no_copyleft: bool
 ) -> tuple[list[Photo], list[Photo]]:
-    """(learnt from, not): :func:`landfall_train.photos.split`, and with ``no_copyleft`` every
+    """(learnt from, not): :func:`landfall_train.photo_set.split`, and with ``no_copyleft`` every
     photograph under a share-alike licence among the latter."""
     learn, held = split(photos, hold_out)
     if no_copyleft:

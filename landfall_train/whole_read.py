@@ -42,7 +42,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from landfall_train.photos import Photo, photos_or_exit, read_rgb
+from landfall_train.photo_set import Photo, photos_or_exit, read_rgb
 from landfall_train.pretrained import (
     PHOTO_DIRS,
     choose_threshold,

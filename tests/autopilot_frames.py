@@ -1,4 +1,5 @@
-"""MAVLink frames from a pretend autopilot, fed straight into a companion's receive path."""
+"""MAVLink frames from a pretend autopilot, fed into a companion's receive path through a link without a
+socket (``tests.fake_link``)."""
 
 from __future__ import annotations
 
@@ -7,9 +8,9 @@ from typing import Any
 from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.daemon import Companion
+from tests.fake_link import FakeLink
 
 AUTOPILOT = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
-ADDR = ("127.0.0.1", 14580)
 
 
 def frames(*msgs: Any) -> bytes:
@@ -22,5 +23,24 @@ def frames(*msgs: Any) -> bytes:
     return out
 
 
+def on_fake_link(**options: Any) -> Companion:
+    """A companion built on a :class:`FakeLink` (``answer`` goes to the link, the rest to the daemon)."""
+    return Companion(link=FakeLink(answer=options.pop("answer", None)), **options)
+
+
+def link_of(c: Companion) -> FakeLink:
+    if not isinstance(c.link, FakeLink):
+        raise TypeError(f"the companion flies on {type(c.link).__name__}; these helpers need a FakeLink")
+    return c.link
+
+
 def feed(c: Companion, *msgs: Any) -> None:
-    c.link.datagram_received(frames(*msgs), ADDR)  # type: ignore[attr-defined]
+    """The messages received from the autopilot, in one datagram."""
+    link_of(c).receive(frames(*msgs))
+
+
+def accept_commands(msg: Any) -> bytes:
+    """The autopilot's part: COMMAND_ACK ACCEPTED for every COMMAND_LONG (an ``answer`` for FakeLink)."""
+    if msg.get_type() != "COMMAND_LONG":
+        return b""
+    return frames(AUTOPILOT.command_ack_encode(msg.command, mavlink2.MAV_RESULT_ACCEPTED, 0, 0, 0, 0))

@@ -17,7 +17,7 @@ import pytest
 
 os.environ.setdefault("MAVLINK20", "1")
 
-from landfall_eval.episode import sped_up_env, stop_process
+from landfall_eval.processes import sped_up_env, stop_process
 from simbridge.world.camera import Frame
 from simbridge.world.live import LiveWorld
 from tests.mavclient import MavClient

@@ -13,18 +13,8 @@ from typing import Any
 import pytest
 
 from landfall_eval.cli import build_parser, episode_specs
-from landfall_eval.episode import (
-    EpisodeSpec,
-    EpisodeTimes,
-    LogWatch,
-    ProcessSample,
-    _grade,
-    _record_events,
-    alarm_sim_time_s,
-    run_episode,
-    simbridge_command,
-    touchdown_to_site_m,
-)
+from landfall_eval.episode import EpisodeSpec, EpisodeTimes, run_episode, simbridge_command
+from landfall_eval.episode_grade import LogWatch, alarm_sim_time_s, grade, record_events, touchdown_to_site_m
 from landfall_eval.grading import (
     SURFACES,
     kinematic_lower_bound_s,
@@ -34,6 +24,7 @@ from landfall_eval.grading import (
 )
 from landfall_eval.landing import chosen_pixel, landing_distance_m
 from landfall_eval.launches import halton_launches
+from landfall_eval.processes import ProcessSample
 from simbridge.scenarios import load_scenario
 
 EPISODE_KEYS = {
@@ -104,7 +95,7 @@ def test_grade_reads_the_episode_log_and_the_flight_record(tmp_path: Path) -> No
         "safe": True,
         "reasons": [],
     }
-    got = _grade(states, takeover, touchdown, _record_events(tmp_path / "record"))
+    got = grade(states, takeover, touchdown, record_events(tmp_path / "record"))
     assert got["launch_ned_m"] == [0.5, 0.0, -109.0]  # where the companion took control
     assert got["rounds"] == 2
     assert [c["tier"] for c in got["calls"]] == ["onboard", "gpt-5", "onboard"]
@@ -114,7 +105,7 @@ def test_grade_reads_the_episode_log_and_the_flight_record(tmp_path: Path) -> No
     assert got["kinematic_ratio"] == pytest.approx(39.0 / bound, abs=1e-3)
     assert got["trajectory_ne_m"][0] == [0.5, 0.0]
     assert got["trajectory_ne_m"][-1] == [20.0, 0.0]
-    none = _grade(states, takeover, None, [])
+    none = grade(states, takeover, None, [])
     assert none["surface"] == "no_landing"
     assert not none["safe"]
     assert none["time_to_touchdown_s"] is None
@@ -300,7 +291,7 @@ def test_curated_with_an_rtp_camera_streams_it_and_grades_by_the_video_frames(tm
     """``--camera rtp`` reaches simbridge (its camera as H.264 over RTP, two frames a wall second, its
     calibration written out), names its episodes apart, is refused with real firmware; the landing
     distance takes each video frame's true pose by its presentation time."""
-    from landfall_eval.episode import video_frames_by_stamp
+    from landfall_eval.episode_grade import video_frames_by_stamp
 
     parse = build_parser().parse_args
     base = ["curated", "--scenario", "scenario1", "--runs", "1", "--out", str(tmp_path), "--camera", "rtp"]
@@ -543,7 +534,7 @@ def test_city_episode_starts_at_its_halton_point(tmp_path: Path) -> None:
 def test_a_companion_that_cannot_start_is_an_error_and_leaves_no_simulator_behind(tmp_path: Path) -> None:
     """The companion exits at once (its configuration is not TOML): the episode is an infrastructure
     error saying so, and simbridge is stopped with it (nothing of the episode left running)."""
-    import landfall_eval.episode as episode
+    from landfall_eval.processes import running
 
     bad = tmp_path / "bad.toml"
     bad.write_text("[reasoner\nonboard_model = ")
@@ -552,12 +543,13 @@ def test_a_companion_that_cannot_start_is_an_error_and_leaves_no_simulator_behin
     assert e["outcome"] == "error"
     assert e["error"].startswith("the companion exited before the vehicle was ready"), e["error"]
     assert e["error_kind"] == "infrastructure"
-    assert not episode._RUNNING
+    assert running() == 0
     assert "bad.toml" in (tmp_path / "ep" / "companion.log").read_text()  # the companion said why
 
 
 def test_line_tail_reads_each_line_once_and_waits_for_a_line_being_written(tmp_path: Path) -> None:
-    from landfall_eval.episode import JsonlTail, LineTail, _recorded
+    from landfall_eval.episode_grade import recorded
+    from landfall_eval.processes import JsonlTail, LineTail
 
     path = tmp_path / "companion.log"
     tail = LineTail(path)
@@ -579,8 +571,8 @@ def test_line_tail_reads_each_line_once_and_waits_for_a_line_being_written(tmp_p
     record = tmp_path / "record" / "session"
     record.mkdir(parents=True)
     (record / "events.jsonl").write_text('{"kind": "state"}\n{"kind": "sensors"}\n')
-    assert _recorded(tmp_path / "record", "sensors")
-    assert not _recorded(tmp_path / "record", "outcome", "recovery_failed")
+    assert recorded(tmp_path / "record", "sensors")
+    assert not recorded(tmp_path / "record", "outcome", "recovery_failed")
 
 
 @pytest.mark.slow

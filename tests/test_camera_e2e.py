@@ -13,7 +13,7 @@ from typing import Any
 
 import pytest
 
-from landfall_eval.episode import match_video_frames
+from landfall_eval.episode_grade import match_video_frames
 from tests.conftest import Rig, free_udp_port
 from tests.test_companion_e2e import _events
 from tests.test_sitl import _wait_event
@@ -66,7 +66,7 @@ def test_an_alarm_lands_on_the_clear_roof_with_the_camera_read_from_an_rtp_strea
     assert len(used) >= 3, [e["kind"] for e in events]
     sent = rig.sim.events("camera_frame")
     # the frame simbridge sent for each one the companion used (the decoder's presentation times count
-    # from the first packet it received: landfall_eval.episode.match_video_frames finds the base)
+    # from the first packet it received: landfall_eval.episode_grade.match_video_frames finds the base)
     pairs = {id(u): r for u, r in zip(used, match_video_frames(sent, used), strict=True)}
 
     def truth_of(frame: dict[str, Any]) -> dict[str, Any]:

@@ -15,7 +15,8 @@ import cv2
 import numpy as np
 import pytest
 
-from companion.config import ConfigError, ReasonerConfig
+from companion.config import ConfigError
+from companion.config_schema import ReasonerConfig
 from companion.eval_cli import main as eval_main
 from companion.perception.site_check import SiteCheck
 from companion.reasoning.base import ConfirmRequest, RankRequest

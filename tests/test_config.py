@@ -1,4 +1,5 @@
-"""companion.config: defaults, precedence, errors naming the option, the signing key, the shipped TOML."""
+"""companion.config and its schema (companion.config_schema): defaults, precedence, errors naming the
+option, the signing key, the shipped TOML."""
 
 from __future__ import annotations
 
@@ -11,14 +12,8 @@ from pathlib import Path
 import pytest
 from pydantic import ValidationError
 
-from companion.config import (
-    CompanionConfig,
-    ConfigError,
-    RoundsByCriticality,
-    SearchWindow,
-    env_var_name,
-    load_config,
-)
+from companion.config import ConfigError, env_var_name, load_config
+from companion.config_schema import CompanionConfig, RoundsByCriticality, SearchWindow
 from companion.reasoning.tiers import secrets as tier_secrets
 
 REPO = Path(__file__).resolve().parents[1]

@@ -13,7 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from companion.config import CompanionConfig, load_config
+from companion.config import load_config
+from companion.config_schema import CompanionConfig
 
 DEPLOY = Path(__file__).resolve().parents[1] / "deploy"
 ROOT = DEPLOY.parent

@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
+import asyncio
 import math
-import time
-from typing import Any
 
 import pytest
 
@@ -12,7 +11,7 @@ from companion.control import OperatorTakeover, TouchedDown
 from companion.daemon import Companion
 from companion.flavour import Mode
 from companion.guidance.descent import height_above_site
-from tests.autopilot_frames import ADDR, AUTOPILOT, feed, frames
+from tests.autopilot_frames import AUTOPILOT, accept_commands, feed, frames, link_of, on_fake_link
 
 LEVEL = (1.0, 0.0, 0.0, 0.0)
 
@@ -63,14 +62,21 @@ OFFBOARD = 6 << 16
 LOITER = 4 << 16 | 3 << 24
 
 
+def _just_engaged_px4() -> Companion:
+    """OFFBOARD acknowledged a moment ago over an airborne PX4 (holding in LOITER before); no heartbeat
+    since has shown it; a position target set."""
+    c = on_fake_link(answer=accept_commands, sensors=None, watch_battery_pct=None)
+    feed(c, AUTOPILOT.heartbeat_encode(2, 12, 128 | 29, LOITER, 4), AUTOPILOT.extended_sys_state_encode(0, 2))
+    asyncio.run(asyncio.wait_for(c.ctl.set_mode(Mode.GUIDED), 5.0))
+    assert c.ctl.engaged_mode == OFFBOARD
+    c.ctl.set_target(0.0, 0.0, -50.0, 0.0)
+    return c
+
+
 def _engaged_px4() -> Companion:
-    """A companion whose controller holds OFFBOARD (acknowledged) over an airborne PX4."""
-    c = Companion(mavlink_url="udp:14550", sensors=None, watch_battery_pct=None)
-    feed(
-        c, AUTOPILOT.heartbeat_encode(2, 12, 128 | 29, OFFBOARD, 4), AUTOPILOT.extended_sys_state_encode(0, 2)
-    )
-    c.ctl._engaged_mode = OFFBOARD  # what set_mode records once the autopilot acknowledges
-    c.ctl._mode_set_at = 0.0
+    """A companion whose controller holds OFFBOARD (acknowledged, and heard since) over an airborne PX4."""
+    c = _just_engaged_px4()
+    feed(c, AUTOPILOT.heartbeat_encode(2, 12, 128 | 29, OFFBOARD, 4))
     c.ctl.check_interruption()  # our own mode, in the air: nothing
     return c
 
@@ -81,6 +87,7 @@ def test_a_disarm_with_a_mode_change_is_a_touchdown_not_a_takeover() -> None:
     feed(c, AUTOPILOT.heartbeat_encode(2, 12, 29, LOITER, 3))
     with pytest.raises(TouchedDown, match="disarmed"):
         c.ctl.check_interruption()
+    assert c.ctl.target is None
 
 
 def test_landed_state_on_the_ground_is_a_touchdown() -> None:
@@ -92,20 +99,10 @@ def test_landed_state_on_the_ground_is_a_touchdown() -> None:
 
 def test_an_armed_vehicle_in_someone_elses_mode_is_still_a_takeover() -> None:
     c = _engaged_px4()
-    c.ctl.set_target(0.0, 0.0, -50.0, 0.0)
     feed(c, AUTOPILOT.heartbeat_encode(2, 12, 128 | 29, LOITER, 4))
     with pytest.raises(OperatorTakeover):
         c.ctl.check_interruption()
-    assert c.ctl._target is None  # the companion stops commanding at once
-
-
-def _just_engaged_px4() -> Companion:
-    """OFFBOARD acknowledged a moment ago; no heartbeat since has shown it."""
-    c = _engaged_px4()
-    c.ctl._mode_set_at = time.monotonic()
-    c.ctl._own_mode_heard = False
-    c.ctl.set_target(0.0, 0.0, -50.0, 0.0)
-    return c
+    assert c.ctl.target is None  # the companion stops commanding at once
 
 
 def test_a_late_heartbeat_from_before_our_mode_change_is_not_a_takeover() -> None:
@@ -118,7 +115,7 @@ def test_a_late_heartbeat_from_before_our_mode_change_is_not_a_takeover() -> Non
     feed(c, AUTOPILOT.heartbeat_encode(2, 12, 128 | 29, OFFBOARD, 4))  # the next one: ours
     c.ctl.check_interruption()
     assert c.ctl.takeover is None
-    assert c.ctl._target is not None
+    assert c.ctl.target == (0.0, 0.0, -50.0, 0.0)
     feed(c, AUTOPILOT.heartbeat_encode(2, 12, 128 | 29, LOITER, 4))  # ours was heard: now one is enough
     with pytest.raises(OperatorTakeover):
         c.ctl.check_interruption()
@@ -138,22 +135,19 @@ def test_a_duplicated_heartbeat_counts_once() -> None:
     one heartbeat, not the two in a row a takeover right after our mode change needs."""
     c = _just_engaged_px4()
     frame = frames(AUTOPILOT.heartbeat_encode(2, 12, 128 | 29, LOITER, 4))
-    c.link.datagram_received(frame + frame, ADDR)  # type: ignore[attr-defined]
+    link_of(c).receive(frame + frame)
     c.ctl.check_interruption()
     assert c.ctl.takeover is None
-    assert c.tm.heartbeats == 2  # the engaged heartbeat and this one
+    assert c.tm.heartbeats == 2  # the one before our mode change and this one
 
 
 def test_a_mode_change_whose_acks_were_all_lost_is_seen_in_the_heartbeats() -> None:
     """What a CI run over a lossy relay caught: every COMMAND_ACK of DO_SET_MODE dropped, the companion
     aborted the recovery ("no COMMAND_ACK for command 176") though the autopilot had taken the mode.
     Two heartbeats in the requested mode, received after the request, are the autopilot's answer too."""
-    import asyncio
-
-    c = Companion(mavlink_url="udp:14550", sensors=None, watch_battery_pct=None)
+    c = on_fake_link(sensors=None, watch_battery_pct=None)  # the link eats every answer
     feed(c, AUTOPILOT.heartbeat_encode(2, 12, 128 | 29, LOITER, 4), AUTOPILOT.extended_sys_state_encode(0, 2))
-    sent: list[Any] = []
-    c.ctl._send_to = lambda msg, s, comp: sent.append(msg)  # the link eats every answer
+    sent = link_of(c).sent
 
     async def fly() -> None:
         task = asyncio.ensure_future(c.ctl.set_mode(Mode.GUIDED))
@@ -170,4 +164,4 @@ def test_a_mode_change_whose_acks_were_all_lost_is_seen_in_the_heartbeats() -> N
             await task
 
     asyncio.run(fly())
-    assert c.ctl._engaged_mode == OFFBOARD
+    assert c.ctl.engaged_mode == OFFBOARD

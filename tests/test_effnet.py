@@ -25,7 +25,7 @@ from landfall_train.effnet import (  # noqa: E402
     pretrained_state,
 )
 from landfall_train.labels import CLASSES  # noqa: E402
-from landfall_train.photos import Photo  # noqa: E402
+from landfall_train.photo_set import Photo  # noqa: E402
 from landfall_train.pretrained import (  # noqa: E402
     build_parser,
     choose_threshold,

@@ -17,7 +17,8 @@ from hypothesis import strategies as st
 from pymavlink.dialects.v20 import common as mavlink2
 
 from companion.alarms import Alarm
-from companion.config import CompanionConfig, ConfigError, load_config
+from companion.config import ConfigError, load_config
+from companion.config_schema import CompanionConfig
 from companion.daemon import Companion
 from companion.ground import alarm_from_mqtt
 from companion.reasoning.base import ReasonerError

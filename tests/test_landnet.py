@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from companion.config import ConfigError, ReasonerConfig
+from companion.config import ConfigError
+from companion.config_schema import ReasonerConfig
 from companion.perception.surface_id import Candidate
 from companion.reasoning.base import ConfirmRequest, Ranking, RankRequest
 from companion.reasoning.landnet import (

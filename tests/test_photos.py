@@ -1,4 +1,5 @@
-"""Learning from photographs (landfall_train.photos, .folds) and saying how sure the judgement is."""
+"""Learning from photographs (landfall_train.photo_set, .photos, .folds) and saying how sure the
+judgement is."""
 
 from __future__ import annotations
 
@@ -18,20 +19,16 @@ from companion.reasoning.onboard import OnboardReasoner
 torch = pytest.importorskip("torch", reason="the training extra: pip install -e '.[train]'")
 
 from landfall_train.folds import scores  # noqa: E402
-from landfall_train.photos import (  # noqa: E402
+from landfall_train.photo_set import (  # noqa: E402
     Photo,
-    _views,
-    from_onnx,
-    interpolate,
     load_photos,
     photo_view,
     photo_view_middle,
-    pitched,
     roof_surfaces,
     split,
     trainable,
-    with_real_roof,
 )
+from landfall_train.photos import _views, from_onnx, interpolate, pitched, with_real_roof  # noqa: E402
 
 
 def _reading(clear_p: float, spread: float = 0.0) -> SceneReading:

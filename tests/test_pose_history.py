@@ -83,7 +83,7 @@ async def test_the_companion_never_uses_the_pose_a_frame_claims() -> None:
     t = frame.time_boot_ms
     _feed(c, t - 50, (10.0, 20.0, -60.0), 0.5)
     _feed(c, t + 50, (12.0, 20.0, -60.0), 0.5)
-    posed = await c._posed(frame)
+    posed = await c.view.posed(frame)
     assert posed.pos_ned_m == pytest.approx((11.0, 20.0, -60.0))
     assert posed.quat_wxyz == pytest.approx(_yaw_quat(0.5))
     assert posed.image_rgb is frame.image_rgb
@@ -92,7 +92,7 @@ async def test_the_companion_never_uses_the_pose_a_frame_claims() -> None:
     c2 = Companion(mavlink_url="udpin:127.0.0.1:0")
     _feed(c2, t + 5_000, (0.0, 0.0, -50.0), 0.0)
     with pytest.raises(FrameUnavailable, match="no autopilot pose at the frame's capture time"):
-        await asyncio.wait_for(c2._posed(old), 5.0)
+        await asyncio.wait_for(c2.view.posed(old), 5.0)
 
 
 def test_a_reset_of_the_estimate_is_a_step_its_velocity_does_not_explain() -> None:

@@ -255,13 +255,13 @@ def test_landing_targets_go_in_the_frame_each_autopilot_reads() -> None:
 
     from companion.control import ControlError, VehicleController
     from companion.telemetry import TelemetryCache
+    from tests.fake_link import FakeLink
 
-    sent: list[Any] = []
-    mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=191)
-    ctl = VehicleController(TelemetryCache(1), lambda msg, _s, _c: sent.append(msg.pack(mav)), mav)
+    link = FakeLink()
+    ctl = VehicleController(TelemetryCache(1), link)
     ctl.send_landing_target((3.0, 4.0, 12.0), 5_000_000)
     ctl.send_landing_target_local((5.4, -27.0, -21.2), 6_000_000)
-    frd, local = (mavlink2.MAVLink(None).decode(bytearray(b)) for b in sent)
+    frd, local = (mavlink2.MAVLink(None).decode(bytearray(m.pack(link.mav))) for m in link.sent)
     assert frd.frame == mavlink2.MAV_FRAME_BODY_FRD
     assert (frd.x, frd.y, frd.z, frd.position_valid) == (3.0, 4.0, 12.0, 1)
     assert frd.distance == pytest.approx(13.0)
@@ -274,4 +274,4 @@ def test_landing_targets_go_in_the_frame_each_autopilot_reads() -> None:
         ctl.send_landing_target_local((math.nan, 0.0, 0.0), 0)
     with pytest.raises(ControlError):
         ctl.send_landing_target((1.0, 0.0, -2.0), 0)  # above the vehicle
-    assert len(sent) == 2
+    assert len(link.sent) == 2

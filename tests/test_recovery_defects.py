@@ -134,47 +134,47 @@ def test_a_setpoint_stream_survives_a_failing_send_and_release_never_raises(
     controller releases cleanly; engaged again, it streams again."""
     from companion.control import VehicleController
     from companion.telemetry import TelemetryCache
+    from tests.autopilot_frames import accept_commands
+    from tests.fake_link import FakeLink
 
-    mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=191)
-    setpoints: list[float] = []
-    failures = {"left": 3}
-    ctl: VehicleController
+    class FlakyLink(FakeLink):
+        """The third to fifth setpoints fail as a link gone for a moment does."""
 
-    def send(msg: Any, _s: int, _c: int) -> None:
-        if msg.get_type() == "COMMAND_LONG":  # the autopilot accepts the mode change
-            ack = types.SimpleNamespace(
-                command=msg.command, result=mavlink2.MAV_RESULT_ACCEPTED,
-                get_srcSystem=lambda: 1, get_srcComponent=lambda: 1,
-            )  # fmt: skip
-            asyncio.get_running_loop().call_soon(ctl.on_command_ack, ack)
-            return
-        if msg.get_type() == "SET_POSITION_TARGET_LOCAL_NED" and len(setpoints) >= 2 and failures["left"]:
-            failures["left"] -= 1
-            raise OSError("Network is unreachable")
-        setpoints.append(asyncio.get_running_loop().time())
+        failures = 3
+
+        def send_to(self, msg: Any, system: int, component: int) -> None:
+            if msg.get_type() == "SET_POSITION_TARGET_LOCAL_NED" and len(setpoints()) >= 2 and self.failures:
+                self.failures -= 1
+                raise OSError("Network is unreachable")
+            super().send_to(msg, system, component)
+
+    def setpoints() -> list[Any]:
+        return link.sent_of("SET_POSITION_TARGET_LOCAL_NED")
 
     tm = TelemetryCache(1)
     tm.state.pos_ned_m = (0.0, 0.0, -10.0)  # a PX4 hovering 10 m up
     tm.state.autopilot = mavlink2.MAV_AUTOPILOT_PX4
-    ctl = VehicleController(tm, send, mav)
+    link = FlakyLink(answer=accept_commands)  # the autopilot accepts the mode change
+    ctl = VehicleController(tm, link)
+    link.attach(lambda msg, _addr: ctl.on_command_ack(msg))
 
     async def scenario() -> tuple[int, int]:
         await ctl.engage()
         await asyncio.sleep(0.6)
-        during = len(setpoints)
+        during = len(setpoints())
         await ctl.release()
-        after_release = len(setpoints)
+        after_release = len(setpoints())
         await asyncio.sleep(0.2)
-        assert len(setpoints) == after_release  # released: nothing more sent
+        assert len(setpoints()) == after_release  # released: nothing more sent
         await ctl.engage()
         await asyncio.sleep(0.3)
-        again = len(setpoints) - after_release
+        again = len(setpoints()) - after_release
         await ctl.release()
         return during, again
 
     with caplog.at_level(logging.ERROR, logger="companion.control"):
         during, again = asyncio.run(scenario())
-    assert failures["left"] == 0
+    assert link.failures == 0
     assert during >= 8  # 20 Hz for 0.6 s, three ticks lost to the failing link
     assert again >= 3
     said = [r.getMessage() for r in caplog.records if "setpoint not sent" in r.getMessage()]

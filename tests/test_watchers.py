@@ -9,11 +9,11 @@ import math
 import pytest
 
 from companion.daemon import Companion
-from tests.autopilot_frames import AUTOPILOT, feed
+from tests.autopilot_frames import AUTOPILOT, feed, on_fake_link
 
 
 def _flying() -> Companion:
-    c = Companion(mavlink_url="udp:14550", sensors=None, watch_battery_pct=None)
+    c = on_fake_link(sensors=None, watch_battery_pct=None)
     feed(
         c,
         AUTOPILOT.heartbeat_encode(2, 12, 128 | 29, 6 << 16 | 4 << 24, 4),  # PX4, armed

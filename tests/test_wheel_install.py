@@ -91,7 +91,7 @@ def test_the_harness_alarm_reaches_a_companion_beside_a_simulator_all_from_the_w
 ) -> None:
     """The bug a new user met: from a wheel, ``companion-bench`` looked for ``trigger_alarm.py`` in the
     checkout and every launch failed ("can't open file .../site-packages/trigger_alarm.py"). Here the
-    harness's own alarm sender (landfall_eval.episode.send_alarm, what every episode uses) reaches a
+    harness's own alarm sender (landfall_eval.processes.send_alarm, what every episode uses) reaches a
     companion started from the wheel, beside simbridge (JSBSim's F450) started from the wheel; the
     companion answers, and refuses for now: there is no sensor stream to land with. (A whole episode
     from a fresh install compiles simbridge's renderer first, minutes of the suite: `make demo` and
@@ -108,7 +108,7 @@ def test_the_harness_alarm_reaches_a_companion_beside_a_simulator_all_from_the_w
         )  # fmt: skip
     try:
         code = (
-            "import sys, time; from landfall_eval.episode import send_alarm; "
+            "import sys, time; from landfall_eval.processes import send_alarm; "
             f"r = send_alarm({port}, 'wheel check', 'high', time.monotonic() + 20); "
             "print(r.returncode); print(r.stdout); print(r.stderr)"
         )

@@ -14,14 +14,14 @@ import numpy as np
 import pytest
 
 from companion.reasoning.base import ConfirmRequest
-from companion.reasoning.image_cues import SITE_WINDOW_CROP
+from companion.reasoning.cue_params import CueParams
 from companion.reasoning.landnet import DEFAULT_MODEL, LandNet, LandNetError
 from companion.reasoning.net_judge import confirm_reading
 from companion.reasoning.onboard_params import ConfirmParams
 
 torch = pytest.importorskip("torch", reason="the training extra: pip install -e '.[train]'")
 
-from landfall_train.photos import Photo  # noqa: E402
+from landfall_train.photo_set import Photo  # noqa: E402
 from landfall_train.whole_read import fit, fold_report, held_out, mixed, probability, whole_blob  # noqa: E402
 
 MEAN = np.array([0.485, 0.456, 0.406], np.float32)
@@ -97,7 +97,7 @@ def test_a_confirmation_weighs_the_whole_read_into_the_clear_probability(tmp_pat
 
 def test_confirm_reading_judges_the_mean_and_the_whole_read_can_refuse(tmp_path: Path) -> None:
     rgb = np.full((96, 96, 3), 128, np.uint8)
-    params = ConfirmParams(site_window=SITE_WINDOW_CROP)
+    params = ConfirmParams(site_window=CueParams().site_window_crop)
     net = LandNet.load(_with_whole_read(tmp_path, 0.0, -30.0, weight=1.0), backend="onnxruntime")
     vetoes, _categorical, _note, r = confirm_reading(
         net, ConfirmRequest(rgb), params, lidar_vetoes=[], street_level=False, where=""

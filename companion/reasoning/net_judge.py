@@ -37,7 +37,7 @@ import cv2
 import numpy as np
 
 from companion.reasoning.base import ConfirmRequest, RankRequest
-from companion.reasoning.image_cues import SITE_WINDOW_CROP, SITE_WINDOW_FRAME, centre, check_rgb
+from companion.reasoning.image_cues import CueParams, centre, check_rgb
 from companion.reasoning.landnet import COUNTED, LandNet, SceneReading
 from companion.reasoning.onboard_params import ConfirmParams, GeometryWeights
 
@@ -45,8 +45,8 @@ __all__ = ["confirm_reading", "rank_readings", "site_window", "unsure"]
 
 FRAME_ASPECT = 16.0 / 9.0  # a whole camera frame (the companion's camera), within ASPECT_TOL
 ASPECT_TOL = 0.05
-FRAME_WINDOW = SITE_WINDOW_FRAME
-CROP_WINDOW = SITE_WINDOW_CROP
+FRAME_WINDOW = CueParams().site_window_frame  # the image cues' site windows
+CROP_WINDOW = CueParams().site_window_crop
 MAX_MARKING_SHARE = 0.02  # of the window's cells: a painted line, not one stray cell
 MAX_CANOPY_SHARE = 0.4  # of the window's pixels green and textured: a tree's crown, not a roof
 CANOPY_EXG = 0.06  # excess green (2G - R - B) / (R + G + B) above which a pixel is vegetation ...

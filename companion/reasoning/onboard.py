@@ -65,7 +65,7 @@ from typing import Any
 from companion.perception.site_check import SiteCheck
 from companion.perception.surface_id import Candidate
 from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequest, Reasoner
-from companion.reasoning.image_cues import ImageCues, analyse
+from companion.reasoning.image_cues import CueParams, ImageCues, analyse
 from companion.reasoning.landnet import LandNet, SceneReading
 from companion.reasoning.net_judge import confirm_reading, rank_readings, unsure
 from companion.reasoning.onboard_params import ConfirmParams, GeometryWeights
@@ -153,9 +153,10 @@ class OnboardReasoner:
         *,
         judge: str = "cues",
         landnet: LandNet | None = None,
+        cues: CueParams | None = None,
     ) -> None:
         """``judge``: ``"cues"`` or ``"landnet"``; with ``"landnet"``, ``landnet`` (default: the packaged
-        model, loaded now).
+        model, loaded now); with ``"cues"``, ``cues`` the image cues' thresholds (default: ``CueParams()``).
 
         Raises:
             ValueError: an unknown judge.
@@ -166,6 +167,7 @@ class OnboardReasoner:
         self.weights = weights or GeometryWeights()
         self.confirm_params = confirm or ConfirmParams()
         self.judge = judge
+        self.cue_params = cues if cues is not None else CueParams()
         self.landnet = (landnet or LandNet.load()) if judge == "landnet" else None
 
     # the work runs in a worker thread: the daemon's event loop also streams the setpoints, and a
@@ -197,7 +199,7 @@ class OnboardReasoner:
         all_cues: list[ImageCues | SceneReading] = (
             [self.landnet.read_rank(c) for c in cores]
             if self.landnet is not None
-            else [analyse(c) for c in cores]
+            else [analyse(c, params=self.cue_params) for c in cores]
         )
         largest = max(c.size_px[0] * c.size_px[1] for c in all_cues)
         sites: list[_Site] = []
@@ -238,7 +240,7 @@ class OnboardReasoner:
         if self.landnet is not None:
             return self._confirm_net(request, self.landnet, t0)
         p = self.confirm_params
-        cues = analyse(request.image, site=True, window=p.site_window)
+        cues = analyse(request.image, site=True, window=p.site_window, params=self.cue_params)
         check = request.check
         lidar_clear = check is not None and check.clear
         relax = request.critical

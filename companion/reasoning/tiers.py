@@ -18,7 +18,8 @@ from typing import Any
 
 import httpx
 
-from companion.config import CompanionConfig, ConfigError, LvlmProfileConfig, ReasonerConfig
+from companion.config import ConfigError
+from companion.config_schema import CompanionConfig, LvlmProfileConfig, ReasonerConfig
 from companion.reasoning.base import Reasoner
 from companion.reasoning.cascade import Cascade, CascadeParams, Hedged
 from companion.reasoning.landnet import LandNet, LandNetError

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from landfall_eval.episode import describe_last_state
+from landfall_eval.episode_grade import describe_last_state
 from landfall_eval.grading import failure_class
 
 if TYPE_CHECKING:
