@@ -23,6 +23,7 @@ build_parser().parse_args(["--mavlink", "udp:14550", "--sensors", "127.0.0.1:560
 sim = ("simbridge", "landfall_eval", "jsbsim", "numba", "tqdm")
 loaded = sorted(m for m, mod in sys.modules.items() if mod is not None and m.split(".")[0] in sim)
 print("LOADED", loaded)
+print("SCIPY", "scipy" in sys.modules)  # 37 MB of the vehicle's memory (companion/guidance/ipm.py)
 """
 
 
@@ -30,6 +31,7 @@ def test_the_companion_imports_no_simulator_module() -> None:
     out = subprocess.run([sys.executable, "-c", CHECK], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr[-3000:]
     assert "LOADED []" in out.stdout
+    assert "SCIPY False" in out.stdout
 
 
 def test_no_companion_module_imports_the_simulator_even_lazily() -> None:

@@ -18,6 +18,7 @@ from companion.guidance import (
     RayDoesNotDescend,
     frd_to_ned,
     ground_down_from_range,
+    ipm,
     pixel_to_ned,
     pixel_to_ned_flat,
     pixel_to_ned_surface,
@@ -223,6 +224,23 @@ def test_nearest_many_returns_none_where_nothing_is_near() -> None:
     assert hits[0] is not None
     assert hits[0].pixel_distance == pytest.approx(5.0)
     assert hits[0].range_m == pytest.approx(50.0)
+
+
+def test_nearest_many_in_blocks_finds_each_pixels_nearest_return(monkeypatch: pytest.MonkeyPatch) -> None:
+    rng = np.random.default_rng(7)
+    cloud = np.column_stack([rng.uniform(-20, 20, (300, 2)), rng.uniform(30, 60, 300)])
+    index = LidarPixelIndex(cloud, CAM)
+    pixels = rng.uniform(0, [CAM.width, CAM.height], (57, 2))
+    d = np.hypot(index.uv[None, :, 0] - pixels[:, 0, None], index.uv[None, :, 1] - pixels[:, 1, None])
+    whole = index.nearest_many(pixels, max_px=1e9)
+    monkeypatch.setattr(ipm, "NEAREST_BLOCK", len(index) * 5)  # five pixels a block, the last one short
+    blocked = index.nearest_many(pixels, max_px=1e9)
+    for k, (a, b) in enumerate(zip(whole, blocked, strict=True)):
+        assert a is not None
+        assert b == a
+        assert a.pixel_distance == pytest.approx(d[k].min())
+    hit = index.nearest(*pixels[3].tolist(), max_px=1e9)
+    assert hit == whole[3]
 
 
 def test_nearest_far_from_every_return_raises_no_return_near_pixel() -> None:

@@ -1,8 +1,10 @@
 """Inverse perspective mapping: an image pixel -> the LiDAR return under it -> a world NED point.
 
 The LiDAR returns (body FRD) are projected through the pinhole camera (:mod:`.frames`); those in front
-of the camera and inside the image go into a k-d tree over their pixel coordinates. A pixel then maps
-to the return whose projection lies nearest to it in the image, and that return's body point maps to
+of the camera and inside the image are indexed by their pixel coordinates. A pixel then maps to the
+return whose projection lies nearest to it in the image (an exact search over every return: a frame is
+asked a few pixels, which costs less than building a k-d tree, and the companion need not load SciPy's
+spatial module, 37 MB of its memory), and that return's body point maps to
 NED with the vehicle pose of the same capture. When the LiDAR has failed, the degraded mode
 intersects the pixel's ray with a horizontal ground plane, e.g. at the height the rangefinder reads.
 
@@ -23,7 +25,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from scipy.spatial import cKDTree  # type: ignore[import-untyped, unused-ignore]
 
 from companion.guidance.frames import GeometryInputError, PinholeCamera, _finite, _vector, quat_to_matrix
 
@@ -42,6 +43,7 @@ __all__ = [
 ]
 
 DEFAULT_MAX_PX = 25.0
+NEAREST_BLOCK = 2_000_000  # (pixel, return) pairs compared at once: 16 MB of squared distances
 """Default search radius in pixels. A 100 x 512 hemisphere seen by a 960 px, 90 deg camera leaves
 returns up to ~8 px apart near the image centre; 25 px tolerates a few dropouts in a row."""
 _MIN_DESCENT = 1e-3  # sine of the smallest depression angle for the flat-plane fallback (~0.06 deg)
@@ -186,8 +188,6 @@ class LidarPixelIndex:
         self.uv: np.ndarray = uv.take(keep, axis=0)
         self.points_frd.flags.writeable = False
         self.uv.flags.writeable = False
-        # Unbalanced, uncompacted: ~3x faster to build, and we build once per frame for a few queries.
-        self._tree = cKDTree(self.uv, leafsize=32, balanced_tree=False, compact_nodes=False)
 
     def __len__(self) -> int:
         """Number of returns inside the image."""
@@ -207,11 +207,11 @@ class LidarPixelIndex:
         """
         uf, vf = _finite("u", u), _finite("v", v)
         limit = _finite("max_px", max_px, 0.0)
-        dist, idx = self._tree.query((uf, vf), k=1)
-        distance = float(dist)
+        dist, idx = self._nearest(np.array([[uf, vf]]))
+        distance = float(dist[0])
         if distance > limit:
             raise NoReturnNearPixel(uf, vf, distance, limit)
-        return self._hit(int(idx), distance)
+        return self._hit(int(idx[0]), distance)
 
     def nearest_many(self, uv: npt.ArrayLike, max_px: float = DEFAULT_MAX_PX) -> list[IpmHit | None]:
         """:meth:`nearest` for (K, 2) pixel coordinates at once; None where nothing is within ``max_px``."""
@@ -223,11 +223,28 @@ class LidarPixelIndex:
         limit = _finite("max_px", max_px, 0.0)
         if pixels.shape[0] == 0:
             return []
-        dist, idx = self._tree.query(pixels, k=1)
+        dist, idx = self._nearest(pixels)
         return [
             self._hit(int(i), float(d)) if d <= limit else None
             for d, i in zip(np.atleast_1d(dist).tolist(), np.atleast_1d(idx).tolist(), strict=True)
         ]
+
+    def _nearest(self, pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The pixel distance to the nearest projection of each of (K, 2) ``pixels`` and its index (the
+        first of equals), every return compared, in blocks of at most ``NEAREST_BLOCK`` pairs."""
+        n = len(self.uv)
+        step = max(1, NEAREST_BLOCK // n)
+        dist = np.empty(len(pixels))
+        idx = np.empty(len(pixels), np.intp)
+        for s in range(0, len(pixels), step):
+            block = pixels[s : s + step]
+            du = self.uv[None, :, 0] - block[:, 0, None]
+            dv = self.uv[None, :, 1] - block[:, 1, None]
+            d2 = du * du + dv * dv
+            best = d2.argmin(axis=1)
+            idx[s : s + step] = best
+            dist[s : s + step] = np.sqrt(d2[np.arange(len(block)), best])
+        return dist, idx
 
     def _hit(self, i: int, distance: float) -> IpmHit:
         x, y, z = self.points_frd[i].tolist()
