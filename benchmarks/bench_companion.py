@@ -5,12 +5,17 @@ the alarm itself and measures the time until the companion's first SET_POSITION_
 toward the chosen site passes the relay (the first target more than ``TOWARD_M`` from the companion's
 first setpoint, the hold where the alarm found the vehicle); the hold setpoint's time is printed too.
 The baseline in the same run is the companion's answer time to the alarm command (its COMMAND_ACK).
-The companion's RSS is sampled every 0.2 s through the whole landing.
+The companion's RSS is sampled every 0.2 s through the whole landing. The companion runs as deploy/'s
+service runs it, keeping a flight record (``--record``); its record's ``sensors`` event says when its
+sensor stream is up.
 
 ``--autopilot px4-sitl`` (or ``ardupilot-sitl``) flies real firmware: the alarm goes out once simbridge's
 episode log says ``ready`` (the firmware holds at the launch pose).
 
+``--config FILE`` runs the companion with that configuration (e.g. another onboard model).
+
 Usage: python benchmarks/bench_companion.py [--runs 3] [--speed 4] [--autopilot px4|px4-sitl|...]
+       [--config FILE]
 """
 
 from __future__ import annotations
@@ -32,6 +37,8 @@ from typing import Any
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import common as mavlink2
 
+from landfall_eval.episode import SENSORS_UP
+from landfall_eval.episode_grade import recorded
 from landfall_eval.processes import ProcessSample
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -78,7 +85,9 @@ class Relay(asyncio.DatagramProtocol):
             self.transport.sendto(data, self.companion_addr)
 
 
-async def one_run(speed: float, autopilot: str = "px4") -> tuple[float, float, float, float, str]:
+async def one_run(
+    speed: float, autopilot: str = "px4", config: Path | None = None
+) -> tuple[float, float, float, float, str]:
     comp_port, relay_port, sensors = (
         _port(socket.SOCK_DGRAM),
         _port(socket.SOCK_DGRAM),
@@ -96,14 +105,19 @@ async def one_run(speed: float, autopilot: str = "px4") -> tuple[float, float, f
             "--episode-log", str(episode), "--log-level", "WARNING", cwd=ROOT,
         )  # fmt: skip
         log = Path(tmp) / "companion.log"
+        record = Path(tmp) / "record"
         with log.open("wb") as fh:
             comp = await asyncio.create_subprocess_exec(
                 sys.executable, "-m", "companion", "--mavlink", f"udp:{comp_port}",
-                "--sensors", f"127.0.0.1:{sensors}", stdout=fh, stderr=subprocess.STDOUT, cwd=ROOT,
+                "--sensors", f"127.0.0.1:{sensors}", "--record", str(record),
+                *(["--config", str(config)] if config else []), stdout=fh, stderr=subprocess.STDOUT,
+                cwd=ROOT,
             )  # fmt: skip
         try:
-            # another process writes the log: polling the file is the only signal there is
-            while "sensor stream connected" not in log.read_text():  # noqa: ASYNC110
+            # the companion's flight record says when its sensor stream is up
+            while not recorded(record, SENSORS_UP):
+                if comp.returncode is not None:
+                    raise RuntimeError(f"the companion exited: {log.read_text()[-2000:]}")
                 await asyncio.sleep(0.1)
             while not (episode.exists() and '"ready"' in episode.read_text()):  # noqa: ASYNC110
                 await asyncio.sleep(0.2)  # real firmware takes off to the launch pose first
@@ -143,10 +157,11 @@ def main() -> int:
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--speed", type=float, default=4.0)
     ap.add_argument("--autopilot", choices=("px4", "ardupilot", "px4-sitl", "ardupilot-sitl"), default="px4")
+    ap.add_argument("--config", type=Path, default=None, help="the companion's TOML configuration")
     args = ap.parse_args()
     rows = []
     for k in range(args.runs):
-        first, hold, ack, rss, verdict = asyncio.run(one_run(args.speed, args.autopilot))
+        first, hold, ack, rss, verdict = asyncio.run(one_run(args.speed, args.autopilot, args.config))
         rows.append((first, ack, rss, hold))
         print(
             f"run {k + 1}/{args.runs}: alarm->first setpoint toward the site {first * 1e3:.1f} ms "
