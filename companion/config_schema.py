@@ -6,6 +6,20 @@ whole of it. ``deploy/companion.toml`` lists every option with its unit and defa
 Values are checked strictly (a TOML file has types: ``"10"`` for an integer is a mistake worth naming);
 :func:`companion.config.load_config` builds a :class:`CompanionConfig` from the file, the environment and
 the flags, and names the option where a check here fails.
+
+**Every default is written here, once.** The parts that fly keep their own frozen dataclasses
+(:class:`~companion.recovery.RecoveryParams`, :class:`~companion.recovery.search_plan.SearchLimits`,
+:class:`~companion.perception.surface_id.SurfaceParams`, the depth sources) and their field names: the
+recovery, its tests, the evaluation and the benchmarks build them with a value or two changed, some
+outside what a file may set (``sensor_loss_s=0``), and they also hold what no key sets (the depth source
+object, the search's pace). A field that is a key reads its default from :data:`DEFAULTS`
+(``final_land_m: float = DEFAULTS.recovery.final_land_m``), and
+:meth:`RecoveryParams.from_config <companion.recovery.RecoveryParams.from_config>` builds them all from a
+loaded configuration: a field named as a key of its section takes that key's value
+(:meth:`_Section.values_for`); the few that differ (the per-criticality tables, the ``search_*`` keys of
+``SearchLimits``, ``reasoner.context``, ``perception.lidar_range_m``) are mapped there by name. The
+sections are not the runtime types themselves: their bounds would refuse the tests' values, and the
+per-criticality tables the recovery indexes by :class:`~companion.alarms.Criticality` would change shape.
 """
 
 from __future__ import annotations
