@@ -13,17 +13,14 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from companion.alarms import Alarm, Criticality
+from companion.alarms import Alarm
 from companion.config import ConfigError, load_config
 from companion.config_schema import CompanionConfig
 from companion.daemon import Companion
 from companion.ground import GroundFeed, GroundParams
-from companion.perception.depth import DepthError, DepthSource
-from companion.perception.sources import make_source
-from companion.perception.surface_id import SurfaceParams
+from companion.perception.depth import DepthError
 from companion.reasoning.tiers import BUILTIN_PROFILES, ONBOARD, build_cascade, secrets
 from companion.recovery import RecoveryParams
-from companion.recovery.search_plan import SearchLimits
 from companion.redact import redact_logs
 
 
@@ -60,51 +57,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def params_from(cfg: CompanionConfig) -> RecoveryParams:
-    r, pc = cfg.recovery, cfg.perception
-    return RecoveryParams(
-        rounds_by_criticality={c: cfg.rounds_for(c.name.lower()) for c in Criticality},  # type: ignore[arg-type]
-        descent_fraction=r.descent_fraction,
-        final_land_m=r.final_land_m,
-        arrival_tolerance_m=r.arrival_tolerance_m,
-        arrival_speed_m_s=r.arrival_speed_m_s,
-        move_timeout_s=r.move_timeout_s,
-        move_timeout_s_per_m=r.move_timeout_s_per_m,
-        explore_climb_m=r.explore_climb_m,
-        explore_max_alt_m=r.explore_max_alt_m,
-        blind_descent_agl_m=r.blind_descent_agl_m,
-        sensor_loss_s=r.sensor_loss_s,
-        link_loss_s=r.link_loss_s,
-        failsafe_grace_s=r.failsafe_grace_s,
-        land_timeout_s=r.land_timeout_s,
-        search=SearchLimits(
-            reserve_pct=r.search_reserve_pct,
-            window_s={c: getattr(r.search_window_s, c.name.lower()) for c in Criticality},
-            max_legs=r.search_max_legs,
-        ),
-        search_agl_m=r.search_agl_m,
-        surface=SurfaceParams(
-            cell_px=pc.cell_px,
-            window_cells=pc.window_cells,
-            max_slope_deg=pc.max_slope_deg,
-            max_roughness_m=pc.max_roughness_m,
-            min_area_m2=pc.min_area_m2,
-            edge_margin_m=pc.edge_margin_m,
-            max_candidates=pc.max_candidates,
-            extend_with_image=pc.extend_with_image,
-            strip_min_length_m=pc.strip_min_length_m,
-            strip_min_aspect=pc.strip_min_aspect,
-        ),
-        depth_source=_depth_source(cfg),
-        context=cfg.reasoner.context,
-    )
-
-
-def _depth_source(cfg: CompanionConfig) -> DepthSource:
-    pc = cfg.perception
+    """The recovery's parameters of ``cfg`` (:meth:`RecoveryParams.from_config`); a depth source that
+    cannot be built is a configuration error of ``perception.depth``."""
     try:
-        return make_source(pc.depth, cell_px=pc.cell_px, model=pc.depth_model, lidar_range_m=pc.lidar_range_m)
+        return RecoveryParams.from_config(cfg)
     except DepthError as exc:
-        raise ConfigError(f"perception.depth = {pc.depth!r}", str(exc)) from exc
+        raise ConfigError(f"perception.depth = {cfg.perception.depth!r}", str(exc)) from exc
 
 
 def _interrupted(record: Any) -> Alarm | None:

@@ -6,10 +6,25 @@ whole of it. ``deploy/companion.toml`` lists every option with its unit and defa
 Values are checked strictly (a TOML file has types: ``"10"`` for an integer is a mistake worth naming);
 :func:`companion.config.load_config` builds a :class:`CompanionConfig` from the file, the environment and
 the flags, and names the option where a check here fails.
+
+**Every default is written here, once.** The parts that fly keep their own frozen dataclasses
+(:class:`~companion.recovery.RecoveryParams`, :class:`~companion.recovery.search_plan.SearchLimits`,
+:class:`~companion.perception.surface_id.SurfaceParams`, the depth sources) and their field names: the
+recovery, its tests, the evaluation and the benchmarks build them with a value or two changed, some
+outside what a file may set (``sensor_loss_s=0``), and they also hold what no key sets (the depth source
+object, the search's pace). A field that is a key reads its default from :data:`DEFAULTS`
+(``final_land_m: float = DEFAULTS.recovery.final_land_m``), and
+:meth:`RecoveryParams.from_config <companion.recovery.RecoveryParams.from_config>` builds them all from a
+loaded configuration: a field named as a key of its section takes that key's value
+(:meth:`_Section.values_for`); the few that differ (the per-criticality tables, the ``search_*`` keys of
+``SearchLimits``, ``reasoner.context``, ``perception.lidar_range_m``) are mapped there by name. The
+sections are not the runtime types themselves: their bounds would refuse the tests' values, and the
+per-criticality tables the recovery indexes by :class:`~companion.alarms.Criticality` would change shape.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from collections.abc import Mapping
@@ -28,7 +43,10 @@ from pydantic import (
     model_validator,
 )
 
+from companion.alarms import Criticality
+
 __all__ = [
+    "DEFAULTS",
     "AlarmsConfig",
     "CameraConfig",
     "CompanionConfig",
@@ -53,6 +71,12 @@ class _Section(BaseModel):
     # Strict: a TOML file has types, so "10" for an integer is a mistake worth naming. Environment text is
     # parsed to the field's type before validation (companion.config's _parse_text).
     model_config = ConfigDict(frozen=True, extra="forbid", strict=True, allow_inf_nan=False)
+
+    def values_for(self, params: type[Any]) -> dict[str, Any]:
+        """This section's values for the fields of the dataclass ``params`` named as its keys: such a
+        field is that key (its default is the key's, through :data:`DEFAULTS`)."""
+        keys = type(self).model_fields
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(params) if f.name in keys}
 
 
 def _host_port(text: str) -> str:
@@ -179,6 +203,10 @@ class _ByCriticality(_Section):
             )
         return self
 
+    def per_criticality(self) -> dict[Criticality, Any]:
+        """The values keyed by :class:`~companion.alarms.Criticality`, as the recovery reads them."""
+        return {c: getattr(self, c.name.lower()) for c in Criticality}
+
 
 class RoundsByCriticality(_ByCriticality):
     """Round budget per alarm criticality; a critical alarm accepts a riskier site sooner."""
@@ -219,6 +247,10 @@ class RecoveryConfig(_Section):
     search_window_s: SearchWindow = SearchWindow()
     search_agl_m: float = Field(default=75.0, gt=0)
     search_max_legs: int = Field(default=40, ge=0)
+
+    def rounds(self) -> dict[Criticality, int]:
+        """The round budget per criticality, each capped by ``max_rounds``."""
+        return {c: min(self.max_rounds, n) for c, n in self.rounds_by_criticality.per_criticality().items()}
 
 
 class PerceptionConfig(_Section):
@@ -385,7 +417,8 @@ class CompanionConfig(_Section):
 
     def rounds_for(self, criticality: Literal["low", "high", "critical"]) -> int:
         """Round budget for an alarm: the criticality's budget, capped by ``recovery.max_rounds``."""
-        by = self.recovery.rounds_by_criticality
-        return min(
-            self.recovery.max_rounds, {"low": by.low, "high": by.high, "critical": by.critical}[criticality]
-        )
+        return self.recovery.rounds()[Criticality.parse(criticality)]
+
+
+#: Every option at its default: where the runtime parameters take theirs (module docstring).
+DEFAULTS = CompanionConfig()

@@ -232,7 +232,7 @@ def fly_and_land(
         raise FlightError(f"OFFBOARD refused: {mode.text}")
     n0, e0, d0 = ap.estimated_state.pos_ned_m
     tn, te = target_ne_m
-    goto(tn, te, d0, p.move_timeout_s + math.hypot(tn - n0, te - e0) / 2.0)
+    goto(tn, te, d0, p.move_timeout(math.hypot(tn - n0, te - e0)))
     while True:
         s = vehicle.state
         rng_m = world.rangefinder_m(s.pos_ned_m, s.quat)  # a sensor: the truth measured

@@ -232,6 +232,13 @@ def test_recovery_without_any_frame_lands_where_it_is_and_says_so() -> None:
     assert _record(ctx).of("state")[-1]["state"] == "landed"
 
 
+def test_recovery_search_flies_the_height_and_lidar_range_of_its_params() -> None:
+    """The search plan is built from the recovery's parameters (``recovery.search_agl_m``,
+    ``perception.lidar_range_m``), not from defaults of its own."""
+    rec = _recovery(context(params=RecoveryParams(search_agl_m=60.0, lidar_range_m=120.0)))
+    assert (rec.searcher.plan.search_agl_m, rec.searcher.plan.lidar_range_m) == (60.0, 120.0)
+
+
 def test_recovery_parts_share_its_context_and_the_package_docstring_lists_them() -> None:
     """The parts ``companion.recovery``'s docstring names (``- ``attr``: :class:`~module.Class```) are
     the parts a Recovery owns, each of that class, all on the one context; and every module it names

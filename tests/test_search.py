@@ -151,7 +151,7 @@ def test_roof_leg_flies_to_raised_level_ground_the_lidar_saw_at_its_edge() -> No
     assert leg.target_ned_m[1] == pytest.approx(5.0, abs=6.0)
     assert "roofs seen by the LiDAR" in leg.reason
     # and it flies high enough over the roof: 20 m clear of it, and the search height over the ground
-    assert -leg.target_ned_m[2] >= 75.0
+    assert -leg.target_ned_m[2] >= p.search_agl_m
 
 
 def test_roof_leg_ignores_roofs_already_judged_and_tree_crowns() -> None:

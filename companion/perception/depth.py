@@ -31,6 +31,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from companion.config_schema import DEFAULTS
 from companion.guidance.frames import PinholeCamera
 
 __all__ = [
@@ -154,9 +155,9 @@ class LidarDepth:
         range_m: the LiDAR's maximum range (a surface farther away returns nothing).
     """
 
-    cell_px: int = 4
+    cell_px: int = DEFAULTS.perception.cell_px
     gap_cells: int = 3
-    range_m: float = 100.0
+    range_m: float = DEFAULTS.perception.lidar_range_m
     name: str = "lidar"
 
     def depth_map(
@@ -234,7 +235,7 @@ class ArrayDepth:
 
     depth_px: np.ndarray
     metric: bool = True
-    cell_px: int = 4
+    cell_px: int = DEFAULTS.perception.cell_px
     name: str = "file"
 
     def depth_map(

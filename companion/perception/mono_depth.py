@@ -24,6 +24,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from companion.config_schema import DEFAULTS
 from companion.guidance.frames import PinholeCamera
 from companion.perception.depth import DepthError, DepthMap, normalise_relative, to_cells
 
@@ -90,7 +91,12 @@ class DepthAnythingV2:
     name = "depth-anything-v2"
 
     def __init__(
-        self, model: str | Path = DEFAULT_MODEL, *, cell_px: int = 4, input_size: int = 518, net: Any = None
+        self,
+        model: str | Path = DEFAULT_MODEL,
+        *,
+        cell_px: int = DEFAULTS.perception.cell_px,
+        input_size: int = 518,
+        net: Any = None,
     ) -> None:
         if input_size < _PATCH:
             raise DepthError(f"input_size must be >= {_PATCH}, got {input_size}")

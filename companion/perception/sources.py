@@ -5,13 +5,18 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from companion.config_schema import DEFAULTS
 from companion.perception.depth import DepthError, DepthSource, FirstAvailable, LidarDepth
 
 __all__ = ["make_source"]
 
 
 def make_source(
-    kind: str, *, cell_px: int = 4, model: str | Path | None = None, lidar_range_m: float = 100.0
+    kind: str,
+    *,
+    cell_px: int = DEFAULTS.perception.cell_px,
+    model: str | Path | None = None,
+    lidar_range_m: float = DEFAULTS.perception.lidar_range_m,
 ) -> DepthSource:
     """A configured depth source: ``lidar``, ``depth-anything`` or ``auto`` (LiDAR, else the image).
 

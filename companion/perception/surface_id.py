@@ -47,6 +47,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from companion.config_schema import DEFAULTS
 from companion.guidance.frames import CAMERA_TO_BODY, PinholeCamera, quat_to_matrix
 from companion.perception.depth import DepthError, DepthMap, DepthSource, grid_shape
 from companion.perception.flatness import Flatness, flatness
@@ -61,26 +62,29 @@ _K3 = np.ones((3, 3), np.uint8)
 
 @dataclass(frozen=True, slots=True)
 class SurfaceParams:
-    """Surface ID thresholds (the ``[perception]`` section of the companion configuration)."""
+    """Surface ID thresholds. A field named as a ``[perception]`` key is that key (its default is the
+    schema's, :data:`~companion.config_schema.DEFAULTS`); no key sets the others."""
 
-    cell_px: int = 4
-    window_cells: int = 5
-    max_slope_deg: float = 8.0
-    max_roughness_m: float = 0.06
-    min_area_m2: float = 30.0
-    edge_margin_m: float = 2.0
-    max_candidates: int = 5
+    cell_px: int = DEFAULTS.perception.cell_px
+    window_cells: int = DEFAULTS.perception.window_cells
+    max_slope_deg: float = DEFAULTS.perception.max_slope_deg
+    max_roughness_m: float = DEFAULTS.perception.max_roughness_m
+    min_area_m2: float = DEFAULTS.perception.min_area_m2
+    edge_margin_m: float = DEFAULTS.perception.edge_margin_m
+    max_candidates: int = DEFAULTS.perception.max_candidates
     max_relative_gradient: float = 0.004
     min_area_frac: float = 0.01  # relative depth: smallest component, fraction of the image
     relative_margin_frac: float = 0.02  # relative depth: edge margin, fraction of the image width
     score_area_m2: float = 400.0  # landable area beyond this adds nothing to the score
     same_surface_m: float = 1.0  # contained boxes this close in height are the same surface
     same_surface_rel: float = 0.02  # the same for relative depth (fraction of the depth range)
-    extend_with_image: bool = True  # grow metric surfaces over unmeasured cells that look the same
+    # grow metric surfaces over unmeasured cells that look the same
+    extend_with_image: bool = DEFAULTS.perception.extend_with_image
     roof_height_m: float = ROOF_HEIGHT_M  # a surface this far above its surroundings is elevated (a roof)
     ground_level_factor: float = 0.5  # score factor for surfaces at street level (traffic, people)
-    strip_min_length_m: float = 45.0  # an elevated surface this long ...
-    strip_min_aspect: float = 2.5  # ... and this many times longer than wide is a deck, not a roof
+    strip_min_length_m: float = DEFAULTS.perception.strip_min_length_m  # an elevated surface this long ...
+    # ... and this many times longer than wide is a deck, not a roof
+    strip_min_aspect: float = DEFAULTS.perception.strip_min_aspect
 
 
 @dataclass(frozen=True, slots=True)

@@ -12,9 +12,11 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from companion.alarms import Alarm, Criticality
+from companion.config_schema import DEFAULTS, CompanionConfig
 from companion.control import VehicleController
 from companion.faults import FaultHook
 from companion.perception.depth import DepthSource, LidarDepth
+from companion.perception.sources import make_source
 from companion.perception.surface_id import Candidate, SurfaceParams
 from companion.recovery.search_plan import SearchLimits
 from companion.site_ledger import Hazard, SiteLedger
@@ -54,32 +56,56 @@ class State(enum.Enum):
 
 @dataclass(frozen=True, slots=True)
 class RecoveryParams:
-    rounds_by_criticality: dict[Criticality, int] = field(
-        default_factory=lambda: {Criticality.LOW: 10, Criticality.HIGH: 6, Criticality.CRITICAL: 3}
-    )
-    descent_fraction: float = 0.8  # descend by this share of the rangefinder distance per step
-    final_land_m: float = 5.0
-    arrival_tolerance_m: float = 0.5
-    arrival_speed_m_s: float = 0.3
-    move_timeout_s: float = 60.0
-    move_timeout_s_per_m: float = 0.5  # on top of move_timeout_s, per metre to fly: a 2 m/s cruise
-    explore_climb_m: float = 15.0
-    explore_max_alt_m: float = 90.0  # below the LiDAR's range (100 m): higher up it sees nothing
-    blind_descent_agl_m: float = 70.0  # no LiDAR return at all and the ground farther: descend to this
-    surface: SurfaceParams = field(default_factory=SurfaceParams)
-    depth_source: DepthSource = field(default_factory=LidarDepth)
-    rejected_radius_m: float = 4.0  # a rejected site rules out candidates this close to it
-    context: str = "crop"  # what the reasoner sees per candidate: crop, pad20..pad60, or full (+ frame)
-    closeup_half_m: float = 6.0  # the confirmation close-up shows this far around the site
-    land_timeout_s: float = 120.0
-    sensor_loss_s: float = 30.0  # wall seconds without a usable frame before landing without sensors
-    link_loss_s: float = 60.0  # wall seconds without telemetry before leaving the vehicle to the autopilot
+    """The recovery's parameters. A field named as a ``[recovery]`` key is that key: its default is the
+    schema's (:data:`~companion.config_schema.DEFAULTS`) and :meth:`from_config` copies its value;
+    ``deploy/companion.toml`` gives its unit and meaning. The fields no key sets say so."""
+
+    rounds_by_criticality: dict[Criticality, int] = field(default_factory=DEFAULTS.recovery.rounds)
+    descent_fraction: float = DEFAULTS.recovery.descent_fraction  # of the rangefinder distance, a step
+    final_land_m: float = DEFAULTS.recovery.final_land_m
+    arrival_tolerance_m: float = DEFAULTS.recovery.arrival_tolerance_m
+    arrival_speed_m_s: float = DEFAULTS.recovery.arrival_speed_m_s
+    move_timeout_s: float = DEFAULTS.recovery.move_timeout_s
+    move_timeout_s_per_m: float = DEFAULTS.recovery.move_timeout_s_per_m  # on top of move_timeout_s
+    explore_climb_m: float = DEFAULTS.recovery.explore_climb_m
+    explore_max_alt_m: float = DEFAULTS.recovery.explore_max_alt_m  # below the LiDAR's range
+    blind_descent_agl_m: float = DEFAULTS.recovery.blind_descent_agl_m  # no LiDAR return: descend to this
+    surface: SurfaceParams = field(default_factory=SurfaceParams)  # [perception]
+    depth_source: DepthSource = field(default_factory=LidarDepth)  # [perception]: depth = "lidar"
+    rejected_radius_m: float = 4.0  # no key: a rejected site rules out candidates this close to it
+    context: str = DEFAULTS.reasoner.context  # what the reasoner sees per candidate: crop, pad20..60, full
+    closeup_half_m: float = 6.0  # no key: the confirmation close-up shows this far around the site
+    land_timeout_s: float = DEFAULTS.recovery.land_timeout_s
+    sensor_loss_s: float = DEFAULTS.recovery.sensor_loss_s  # wall seconds without a usable frame
+    link_loss_s: float = DEFAULTS.recovery.link_loss_s  # wall seconds without telemetry
     # wall seconds the companion waits after the autopilot's own failsafe took its mode, streaming a
     # hold and commanding no mode: a failsafe may clear by itself (PX4's offboard-loss fallback) or
     # hold before it acts (PX4's COM_BAT_ACT_T, 5 s), and a command then would cancel it
-    failsafe_grace_s: float = 6.0
+    failsafe_grace_s: float = DEFAULTS.recovery.failsafe_grace_s
     search: SearchLimits = field(default_factory=SearchLimits)  # when searching on must stop
-    search_agl_m: float = 75.0  # a search leg's least height above the ground
+    search_agl_m: float = DEFAULTS.recovery.search_agl_m  # a search leg's least height above the ground
+    lidar_range_m: float = DEFAULTS.perception.lidar_range_m  # how far a search leg's LiDAR reaches
+
+    @classmethod
+    def from_config(cls, cfg: CompanionConfig) -> RecoveryParams:
+        """The parameters ``cfg`` sets: ``[recovery]``, ``[perception]`` and ``reasoner.context``; what the
+        daemon flies with (``companion.cli``).
+
+        Raises:
+            DepthError: the configured depth source cannot be built (a missing extra or network).
+        """
+        r, pc = cfg.recovery, cfg.perception
+        built = {  # the fields not copied from [recovery] as they stand
+            "rounds_by_criticality": r.rounds(),  # capped by max_rounds
+            "surface": SurfaceParams(**pc.values_for(SurfaceParams)),
+            "depth_source": make_source(
+                pc.depth, cell_px=pc.cell_px, model=pc.depth_model, lidar_range_m=pc.lidar_range_m
+            ),
+            "lidar_range_m": pc.lidar_range_m,
+            "context": cfg.reasoner.context,
+            "search": SearchLimits.from_config(r),
+        }
+        return cls(**(r.values_for(cls) | built))
 
     def move_timeout(self, distance_m: float) -> float:
         """Wall seconds a move of ``distance_m`` may take before it counts as not reached."""

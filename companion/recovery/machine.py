@@ -100,7 +100,9 @@ class Recovery:
             FaultHook.from_env(),
         )
         p = ctx.p
-        plan = SearchPlanner(alarm.criticality, p.search, search_agl_m=p.search_agl_m, lidar_range_m=100.0)
+        plan = SearchPlanner(
+            alarm.criticality, p.search, search_agl_m=p.search_agl_m, lidar_range_m=p.lidar_range_m
+        )
         onboard = onboard_tier(reasoner)
         self.looker = Looker(ctx, reasoner=reasoner, onboard=onboard, plan=plan)
         self.follower = SiteFollower(ctx)

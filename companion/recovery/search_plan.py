@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from companion.alarms import Criticality
+from companion.config_schema import DEFAULTS, RecoveryConfig
 from companion.guidance.frames import PinholeCamera, compass_point, quat_to_matrix
 from companion.perception.site_check import world_points
 from companion.site_ledger import Hazard, SiteLedger
@@ -56,17 +57,31 @@ CAMERA_TILES = (3, 2)  # columns, rows: the frame is read in tiles near the scal
 
 @dataclass(frozen=True, slots=True)
 class SearchLimits:
-    """When searching must stop. Percent of the battery; seconds of the autopilot's clock."""
+    """When searching must stop. Percent of the battery; seconds of the autopilot's clock.
 
-    reserve_pct: float = 25.0  # kept on top of what the landing itself needs
+    ``reserve_pct``, ``window_s`` and ``max_legs`` are the ``[recovery]`` keys ``search_reserve_pct``,
+    ``search_window_s`` and ``search_max_legs``: their defaults are the schema's and :meth:`from_config`
+    copies them. No key sets the others.
+    """
+
+    reserve_pct: float = DEFAULTS.recovery.search_reserve_pct  # on top of what the landing itself needs
     window_s: dict[Criticality, float] = field(
-        default_factory=lambda: {Criticality.LOW: 480.0, Criticality.HIGH: 300.0, Criticality.CRITICAL: 60.0}
+        default_factory=DEFAULTS.recovery.search_window_s.per_criticality
     )
     default_drain_pct_s: float = 0.1  # before enough flight was seen to measure it
     descent_m_s: float = 1.0  # the staged descent's pace, confirmations included
     cruise_m_s: float = 3.0  # the pace of a flight to the chosen site
     landing_margin_s: float = 60.0  # spare time in the landing's need (a missed approach, a re-look)
-    max_legs: int = 40  # a bound on legs whatever the battery says (a broken battery gauge)
+    max_legs: int = DEFAULTS.recovery.search_max_legs  # whatever the battery says (a broken battery gauge)
+
+    @classmethod
+    def from_config(cls, r: RecoveryConfig) -> SearchLimits:
+        """The limits ``[recovery]`` sets."""
+        return cls(
+            reserve_pct=r.search_reserve_pct,
+            window_s=r.search_window_s.per_criticality(),
+            max_legs=r.search_max_legs,
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -123,9 +138,9 @@ class SearchPlanner:
         criticality: Criticality,
         limits: SearchLimits | None = None,
         *,
-        search_agl_m: float = 75.0,
+        search_agl_m: float = DEFAULTS.recovery.search_agl_m,
         clearance_m: float = 20.0,
-        lidar_range_m: float = 100.0,
+        lidar_range_m: float = DEFAULTS.perception.lidar_range_m,
         cell_m: float = 10.0,
     ) -> None:
         self.criticality = criticality
