@@ -6,9 +6,12 @@ the unit's writable paths."""
 from __future__ import annotations
 
 import configparser
+import enum
+import re
 import shlex
 import shutil
 import subprocess
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -93,3 +96,55 @@ def test_the_pieces_meet_on_the_companion_defaults() -> None:
     assert flag(sim, "--mavlink") == f"udpout:127.0.0.1:{companion_port}"
     assert flag(sim, "--sensors") == cfg.sensors.endpoint
     assert unit("simbridge.service")["Unit"]["Before"] == ["companion.service"]  # the companion finds it up
+
+
+DEFAULT_WORDS = re.compile(r"Default:? (none|\"[^\"]*\"|\[[^\]]*\]|true|false|-?[0-9][0-9_.e+-]*)")
+
+
+def _stated_defaults() -> list[tuple[str, str, str, int]]:
+    """(section, key, the default its comment states, line number) for each key of deploy/companion.toml
+    whose comment block says "Default ..."."""
+    out = []
+    section, comment = "", ""
+    for n, raw in enumerate((DEPLOY / "companion.toml").read_text().splitlines(), 1):
+        line = raw.strip()
+        if line.startswith("["):
+            section, comment = line.strip("[]"), ""
+        elif line.startswith("#"):
+            comment += " " + line.lstrip("# ")
+        elif "=" in line:
+            key = line.partition("=")[0].strip()
+            found = DEFAULT_WORDS.findall(comment)
+            if found:
+                out.append((section, key, found[-1].rstrip("."), n))
+            comment = ""
+        else:
+            comment = ""
+    return out
+
+
+def test_the_example_configuration_states_each_default_as_the_schema_has_it() -> None:
+    from companion.config_schema import DEFAULTS
+
+    stated = _stated_defaults()
+    assert len(stated) > 40  # the file states most of its defaults
+    wrong = []
+    for section, key, text, n in stated:
+        owner: object = DEFAULTS
+        for part in section.split("."):
+            owner = getattr(owner, part, None)
+        if owner is None or not hasattr(owner, key):
+            continue  # an example section (a profile, a table entry), not a schema default
+        actual = getattr(owner, key)
+        expected = None if text == "none" else tomllib.loads(f"v = {text}")["v"]
+        if isinstance(actual, tuple):
+            actual = list(actual)
+        if expected is None:
+            ok = actual in (None, "", [], {})
+        elif isinstance(actual, enum.Enum):
+            ok = actual.value == expected
+        else:
+            ok = actual == expected or str(actual) == str(expected)
+        if not ok:
+            wrong.append(f"line {n}: [{section}] {key}: the comment says {text}, the schema {actual!r}")
+    assert not wrong, "\n".join(wrong)
