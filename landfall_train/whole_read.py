@@ -22,7 +22,7 @@ landfall_train.pretrained --folds``): each photograph's net reading comes from t
 learnt from its place; the regression is fitted once per fold on the other folds' places, so each
 whole read is held out in the same way. The threshold for the mean is the one with the most
 confirmations right pooled over the folds among those with at most ``--max-false-accept`` false accepts
-(:func:`landfall_train.pretrained.choose_threshold`); the report (``--report``) gives the pooled
+(:func:`landfall_train.fold_figures.choose_threshold`); the report (``--report``) gives the pooled
 figures and those per place and per set, as the folds' own report does.
 """
 
@@ -42,15 +42,9 @@ from typing import Any
 import cv2
 import numpy as np
 
+from landfall_train.fold_figures import choose_threshold, figures, pooled
 from landfall_train.photo_set import Photo, photos_or_exit, read_rgb
-from landfall_train.pretrained import (
-    PHOTO_DIRS,
-    choose_threshold,
-    figures,
-    learnable,
-    place,
-    pooled,
-)
+from landfall_train.pretrained import PHOTO_DIRS, learnable, place
 from landfall_train.train import _commit
 
 _log = logging.getLogger("landfall_train.whole_read")

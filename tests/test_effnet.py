@@ -24,16 +24,14 @@ from landfall_train.effnet import (  # noqa: E402
     landnet_e,
     pretrained_state,
 )
+from landfall_train.fold_figures import choose_threshold, figures, judged_at  # noqa: E402
 from landfall_train.labels import CLASSES  # noqa: E402
 from landfall_train.photo_set import Photo  # noqa: E402
 from landfall_train.pretrained import (  # noqa: E402
     build_parser,
-    choose_threshold,
     copyleft,
     deal,
-    figures,
     fit,
-    judged_at,
     learnable,
     place,
     warm_state,
@@ -260,7 +258,7 @@ def test_rethreshold_sets_the_folds_threshold_in_the_sidecar_only(tmp_path: Path
 
 
 def test_pooled_fold_figures_pair_ranks_within_a_fold_only() -> None:
-    from landfall_train.pretrained import pooled
+    from landfall_train.fold_figures import pooled
 
     a = [_photo("a", True), _photo("a", False, "cluttered_roof")]
     b = [_photo("b", True), _photo("b", False, "cluttered_roof")]
