@@ -39,7 +39,6 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 
 from landfall_train.fold_figures import choose_threshold, figures, pooled
@@ -63,13 +62,12 @@ def _imagenet() -> tuple[np.ndarray, np.ndarray]:
 
 
 def whole_blob(rgb: np.ndarray, side: int = SIDE_PX, views: int = VIEWS) -> np.ndarray:
-    """(views, 3, side, side) float32: the whole image squeezed to a square, ImageNet-normalised, and for
-    two views its mirror image (what the companion feeds the whole read)."""
+    """What the companion feeds the whole read (:func:`companion.reasoning.landnet.whole_batch`) with
+    ImageNet's normalisation."""
+    from companion.reasoning.landnet import whole_batch
+
     mean, std = _imagenet()
-    x = cv2.resize(rgb, (side, side), interpolation=cv2.INTER_AREA).astype(np.float32) / 255.0
-    chw = ((x - mean) / std).transpose(2, 0, 1)
-    batch = [chw, chw[:, :, ::-1]] if views == 2 else [chw]
-    return np.ascontiguousarray(np.stack(batch))
+    return whole_batch(rgb, side, views, mean, std)
 
 
 def features(photos: Sequence[Photo], threads: int = 1) -> np.ndarray:

@@ -53,7 +53,7 @@ from companion.reasoning.image_cues import check_rgb
 __all__ = [
     "BACKENDS", "BARE", "DEFAULT_MODEL", "OUTPUTS", "PACKAGED", "VIEWS", "LandNet",
     "LandNetError", "SceneReading", "average_views", "model_outputs", "model_path", "onnx_runner",
-    "rank_hazard", "view_batch",
+    "rank_hazard", "view_batch", "whole_batch",
 ]  # fmt: skip
 
 _log = logging.getLogger(__name__)
@@ -99,6 +99,15 @@ _WORDS = {
     "marking": "painted lane markings",
     "ground": "paving or bare ground",
 }
+
+
+def whole_batch(rgb: np.ndarray, side: int, views: int, mean: Any, std: Any) -> np.ndarray:
+    """(views, 3, side, side) float32: an RGB uint8 image squeezed whole to a ``side`` square,
+    normalised by ``mean`` / ``std`` and read in ``views`` views (:func:`view_batch`): what a whole-image
+    read sees, at training (``landfall_train.whole_read``) and on the vehicle alike."""
+    x = cv2.resize(rgb, (side, side), interpolation=cv2.INTER_AREA).astype(np.float32) / np.float32(255)
+    chw = ((x - np.asarray(mean, np.float32)) / np.asarray(std, np.float32)).transpose(2, 0, 1)
+    return np.ascontiguousarray(view_batch(chw, views), np.float32)
 
 
 def view_batch(chw: np.ndarray, views: int) -> np.ndarray:
@@ -423,13 +432,11 @@ class LandNet:
         if self._whole is None:
             return reading
         img = check_rgb(rgb)
-        side = self.whole_side_px
-        x = cv2.resize(img, (side, side), interpolation=cv2.INTER_AREA).astype(np.float32) / np.float32(255)
-        blob = view_batch(((x - self.whole_mean) / self.whole_std).transpose(2, 0, 1), self.whole_views)
+        blob = whole_batch(img, self.whole_side_px, self.whole_views, self.whole_mean, self.whole_std)
         with self._lock:
-            logits = self._whole(np.ascontiguousarray(blob, np.float32))[0]
+            logits = self._whole(blob)[0]
         # the views' features were averaged when the read was fitted; the logit is linear in them
-        whole_p = float(_sigmoid(np.asarray(logits, np.float64).reshape(-1).mean(keepdims=True))[0])
+        whole_p = float(_sigmoid(np.asarray(logits).reshape(-1).mean(keepdims=True))[0])
         mixed = (1.0 - self.whole_weight) * reading.clear_p + self.whole_weight * whole_p
         return replace(reading, clear_p=mixed, net_clear_p=reading.clear_p, whole_p=whole_p)
 
