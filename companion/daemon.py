@@ -22,6 +22,7 @@ from companion.reasoning.base import Reasoner
 from companion.reasoning.cascade import Cascade
 from companion.reasoning.onboard import OnboardReasoner
 from companion.recovery import Outcome, Record, Recovery, RecoveryParams
+from companion.recovery.looking import warm_up
 from companion.supervise import supervised
 from companion.telemetry import TelemetryCache
 from landfall_link.mavlink import MavlinkLink, MavlinkUdpLink
@@ -407,6 +408,19 @@ class Companion:
                     warned = True
                 await asyncio.sleep(1.0)
 
+    async def _warm_up(self) -> None:
+        """Surface ID and the onboard tier once, in a worker thread, so that the first alarm does not
+        pay the libraries' first-call costs (:func:`companion.recovery.looking.warm_up`). A failure
+        here costs only that time: it is logged and the daemon goes on."""
+        t0 = time.monotonic()
+        try:
+            await asyncio.to_thread(warm_up, self.reasoner)
+        except Exception as exc:  # the first alarm's round meets the same error and handles it
+            self.log.warning("warm-up failed (%s: %s): the first alarm pays the first-call costs",
+                             type(exc).__name__, exc)  # fmt: skip
+            return
+        self.log.info("warmed up in %.0f ms: Surface ID and the onboard tier", (time.monotonic() - t0) * 1e3)
+
     # ------------------------------------------------------------------ lifetime
     def stop(self) -> None:
         self._stop.set()
@@ -426,6 +440,7 @@ class Companion:
             start("streams", self._streams)
             start("watchers", self._watchers)
             start("precision-check", self._precision_check)
+            start("warm-up", self._warm_up, forever=False)
             if self._sensors is not None:
                 start("sensors", lambda: self._connect_sensors(stack, SensorClient), forever=False)
             if self._camera is not None:

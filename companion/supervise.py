@@ -2,7 +2,8 @@
 
 The daemon runs a handful of tasks for its whole life (heartbeats, the autopilot's message rates, the
 alarm watchers, the precision-landing check, the ground feed) and a few one-shot ones (the sensor
-stream's connection, a resumed recovery). :func:`supervised` states what happens when one fails:
+stream's connection, the start-up warm-up, a resumed recovery). :func:`supervised` states what
+happens when one fails:
 
 - an exception (anything but cancellation) is logged with its traceback and the task is started again
   after a back-off that doubles from ``first_s`` to at most ``max_s`` (back to ``first_s`` after a run

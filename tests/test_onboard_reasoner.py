@@ -550,3 +550,17 @@ def test_onboard_confirm_street_level_among_buildings_is_a_last_resort_only() ->
     assert "street level among buildings" in town.rationale
     roof = ONBOARD.confirm_sync(ConfirmRequest(image, None, site_up_m=20.0, built_up=True))
     assert roof.accept, roof.rationale
+
+
+@pytest.mark.parametrize("judge", ["cues", "landnet"])
+def test_a_warm_up_leaves_every_later_answer_as_it_was(city: LiveWorld, judge: str) -> None:
+    """OnboardReasoner.warm_up reads plain grey images and keeps nothing: the rank and the
+    confirmation of the same frame give the same answers after it as a reasoner never warmed."""
+    frame, check = close_up(city, (0.0, -27.0), 22.0, 30.0)
+    crops = (frame.rgb[:270, :480].copy(), frame.rgb[270:, 480:].copy())
+    cold, warm = OnboardReasoner(judge=judge), OnboardReasoner(judge=judge)
+    warm.warm_up()
+    a, b = (r.confirm_sync(ConfirmRequest(frame.rgb, check)) for r in (cold, warm))
+    assert (a.accept, a.rationale) == (b.accept, b.rationale)
+    ra, rb = (r.rank_sync(RankRequest(crops)) for r in (cold, warm))
+    assert (ra.order, ra.rationale) == (rb.order, rb.rationale)

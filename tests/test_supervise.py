@@ -131,3 +131,50 @@ def _heartbeat(sock: socket.socket) -> mavlink2.MAVLink_heartbeat_message:
         for msg in mav.parse_buffer(sock.recv(65536)) or []:
             if msg.get_type() == "HEARTBEAT":
                 return msg
+
+
+@pytest.mark.parametrize("fails", [False, True])
+def test_the_daemon_warms_up_once_at_start_and_a_failed_warm_up_only_costs_its_time(
+    fails: bool, caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The start-up warm-up (Surface ID's conversions, the onboard tier) runs once in a worker thread
+    with the reasoner the daemon flies with; when it raises, a warning says so, it is not started
+    again and the heartbeat goes on."""
+    import companion.daemon as daemon
+
+    gcs = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    gcs.bind(("127.0.0.1", 0))
+    gcs.settimeout(5.0)
+    c = Companion(
+        mavlink_url=f"udpout:127.0.0.1:{gcs.getsockname()[1]}", sensors=None, watch_battery_pct=None
+    )
+    seen: list[tuple[object, str]] = []
+    done = threading.Event()
+
+    def warm_up(reasoner: object) -> None:
+        seen.append((reasoner, threading.current_thread().name))
+        done.set()
+        if fails:
+            raise RuntimeError("no model file")
+
+    monkeypatch.setattr(daemon, "warm_up", warm_up)
+
+    async def scenario() -> None:
+        run = asyncio.create_task(c.run())
+        assert await asyncio.to_thread(done.wait, 10.0)
+        heard = await asyncio.to_thread(_heartbeat, gcs)
+        assert heard.type == mavlink2.MAV_TYPE_ONBOARD_CONTROLLER
+        c.stop()
+        await asyncio.wait_for(run, 10.0)
+
+    with caplog.at_level(logging.INFO):
+        asyncio.run(scenario())
+    gcs.close()
+    assert len(seen) == 1
+    assert seen[0][0] is c.reasoner
+    assert seen[0][1] != threading.main_thread().name  # off the event loop's thread
+    assert not c.restarts
+    if fails:
+        assert "warm-up failed (RuntimeError: no model file)" in caplog.text
+    else:
+        assert "warmed up in" in caplog.text

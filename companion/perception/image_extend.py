@@ -54,6 +54,13 @@ class ImageCells:
         return cls(lab, edge)
 
 
+def warm_up() -> None:
+    """Run :meth:`ImageCells.from_image` once on a tiny image: OpenCV builds its CIELAB tables on the
+    first conversion (about 0.1 s on this project's machine), which the first alarm's Surface ID would
+    otherwise pay."""
+    ImageCells.from_image(np.zeros((16, 16, 3), np.uint8), 2, 2, 8)
+
+
 def extend_unmeasured(
     surface: np.ndarray,
     known: np.ndarray,

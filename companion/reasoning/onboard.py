@@ -62,6 +62,8 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from companion.perception.site_check import SiteCheck
 from companion.perception.surface_id import Candidate
 from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequest, Reasoner
@@ -177,6 +179,14 @@ class OnboardReasoner:
 
     async def confirm(self, request: ConfirmRequest) -> Decision:
         return await asyncio.to_thread(self.confirm_sync, request)
+
+    def warm_up(self) -> None:
+        """A rank of two plain grey crops and a confirmation of a plain grey close-up, answers dropped:
+        the first reading pays ONNX Runtime's first run and OpenCV's first conversions, which a start-up
+        pays better than the first alarm. Holds no state: later answers are the same."""
+        grey = np.full((96, 128, 3), 128, np.uint8)
+        self.rank_sync(RankRequest((grey, grey)))
+        self.confirm_sync(ConfirmRequest(np.full((540, 960, 3), 128, np.uint8)))
 
     # ------------------------------------------------------------------ rank
     def rank_sync(self, request: RankRequest) -> Ranking:

@@ -18,6 +18,7 @@ from companion.guidance.ipm import IpmError, LidarPixelIndex, pixel_to_ned_flat,
 from companion.perception.appearance import appearance_candidates, clear_cells
 from companion.perception.crops import crop, pad_of, rank_crops, site_box
 from companion.perception.depth import DepthError
+from companion.perception.image_extend import warm_up as warm_up_surface_id
 from companion.perception.site_check import SiteCheck, check_site, world_points
 from companion.perception.surface_id import (
     Candidate,
@@ -62,6 +63,14 @@ def onboard_tier(reasoner: Reasoner) -> OnboardReasoner:
     own (its judge, cues or LandNet-S, as configured) when there is one, else a default one."""
     onboard = getattr(reasoner, "onboard", None)
     return onboard if isinstance(onboard, OnboardReasoner) else OnboardReasoner()
+
+
+def warm_up(reasoner: Reasoner) -> None:
+    """Surface ID's image conversions and the onboard tier once each, so that the first alarm's round
+    does not pay the libraries' first-call costs (measured in docs/performance.md). Blocking: the
+    daemon runs it in a worker thread at start-up."""
+    warm_up_surface_id()
+    onboard_tier(reasoner).warm_up()
 
 
 class Looker:
