@@ -109,20 +109,22 @@ def test_the_daemon_starts_a_failed_watcher_again_and_keeps_its_heartbeat(
 
     c.watch_once = watch_once  # type: ignore[method-assign]
 
-    async def scenario() -> None:
-        run = asyncio.create_task(c.run())
-        assert await asyncio.to_thread(again.wait, 10.0)
-        heard = await asyncio.to_thread(_heartbeat, gcs)
-        assert heard.type == mavlink2.MAV_TYPE_ONBOARD_CONTROLLER
-        c.stop()
-        await asyncio.wait_for(run, 10.0)
-
     with caplog.at_level(logging.INFO):
-        asyncio.run(scenario())
+        asyncio.run(_run_until(c, again, gcs))
     gcs.close()
     assert c.restarts == {"watchers": 1}
     assert "the watchers task failed" in caplog.text
     assert "tasks started again after a failure: {'watchers': 1}" in caplog.text
+
+
+async def _run_until(c: Companion, event: threading.Event, gcs: socket.socket) -> None:
+    """Run the daemon until ``event`` is set, hear its heartbeat on ``gcs`` after that, stop it."""
+    run = asyncio.create_task(c.run())
+    assert await asyncio.to_thread(event.wait, 10.0)
+    heard = await asyncio.to_thread(_heartbeat, gcs)
+    assert heard.type == mavlink2.MAV_TYPE_ONBOARD_CONTROLLER
+    c.stop()
+    await asyncio.wait_for(run, 10.0)
 
 
 def _heartbeat(sock: socket.socket) -> mavlink2.MAVLink_heartbeat_message:
@@ -159,16 +161,8 @@ def test_the_daemon_warms_up_once_at_start_and_a_failed_warm_up_only_costs_its_t
 
     monkeypatch.setattr(daemon, "warm_up", warm_up)
 
-    async def scenario() -> None:
-        run = asyncio.create_task(c.run())
-        assert await asyncio.to_thread(done.wait, 10.0)
-        heard = await asyncio.to_thread(_heartbeat, gcs)
-        assert heard.type == mavlink2.MAV_TYPE_ONBOARD_CONTROLLER
-        c.stop()
-        await asyncio.wait_for(run, 10.0)
-
     with caplog.at_level(logging.INFO):
-        asyncio.run(scenario())
+        asyncio.run(_run_until(c, done, gcs))
     gcs.close()
     assert len(seen) == 1
     assert seen[0][0] is c.reasoner
