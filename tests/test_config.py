@@ -660,13 +660,20 @@ def test_reasoner_onboard_model_names_a_packaged_net_or_a_file_and_a_bad_one_fai
 ) -> None:
     import shutil
 
-    from companion.reasoning.landnet import DEFAULT_MODEL
+    from companion.reasoning.landnet import DEFAULT_MODEL, PACKAGED
     from companion.reasoning.tiers import build_cascade
 
     assert CompanionConfig().reasoner.onboard_model == "landnet-s"
+    assert PACKAGED["landnet-s"] == DEFAULT_MODEL
+    for name in PACKAGED:  # each packaged net by its name
+        path = write(Path(f"{name}.toml"), f'[reasoner]\nonboard_model = "{name}"\n')
+        packaged = build_cascade(load_config(path, {}, {}).reasoner).onboard.landnet
+        assert packaged is not None
+        assert packaged.name == name
     Path("nets").mkdir()
-    shutil.copy(DEFAULT_MODEL, "nets/mine.onnx")
-    meta = json.loads(DEFAULT_MODEL.with_suffix(".json").read_text()) | {"name": "mine"}
+    light = PACKAGED["landnet-s"]  # one file and its sidecar (LandNet-E's whole read is a second file)
+    shutil.copy(light, "nets/mine.onnx")
+    meta = json.loads(light.with_suffix(".json").read_text()) | {"name": "mine"}
     Path("nets/mine.json").write_text(json.dumps(meta))
     path = write(Path("companion.toml"), '[reasoner]\nonboard_model = "nets/mine.onnx"\n')
     net = build_cascade(load_config(path, {}, {}).reasoner).onboard.landnet

@@ -1,6 +1,8 @@
-"""LandNet-S (companion/reasoning/landnet.py) and the onboard tier with ``judge="landnet"``: loading and its
-errors, input validation, determinism (threads included), any crop size, the onboard switch and its
-config, close-ups of simbridge scenes, and a training smoke test (landfall_train; needs torch)."""
+"""The LandNet runtime (companion/reasoning/landnet.py) and the onboard tier with ``judge="landnet"``,
+on the packaged LandNet-S, the default: loading and its errors, input validation, determinism (threads
+included), any crop size, the onboard switch and its config, close-ups of simbridge scenes, and a
+training smoke test (landfall_train; needs torch). The packaged LandNet-E with its whole read:
+tests/test_landnet_e.py."""
 
 from __future__ import annotations
 
@@ -53,10 +55,12 @@ from tests.views import (
     site_cut,
 )
 
+LIGHT = PACKAGED["landnet-s"]
+
 
 @pytest.fixture(scope="module")
 def net() -> LandNet:
-    return LandNet.load()
+    return LandNet.load(LIGHT)
 
 
 @pytest.fixture(scope="module")
@@ -70,7 +74,7 @@ def _image(h: int, w: int, seed: int = 0) -> np.ndarray:
 
 # --- loading ------------------------------------------------------------------------------------------
 def test_landnet_load_packaged_model_and_sidecar(net: LandNet) -> None:
-    meta = json.loads(DEFAULT_MODEL.with_suffix(".json").read_text())
+    meta = json.loads(LIGHT.with_suffix(".json").read_text())
     assert net.classes == tuple(meta["classes"])
     assert {"roof", "object", "person", "vehicle", "water", "marking"} <= set(net.classes)
     assert 0.0 < net.clear_threshold < 1.0
@@ -80,14 +84,15 @@ def test_landnet_load_packaged_model_and_sidecar(net: LandNet) -> None:
     assert [m["seed"] for m in meta["members"]] == [0, 1]
     assert all(m["command"].startswith("python -m landfall_train --seed") for m in meta["members"])
     assert meta["calibration"]["views"] == net.views
-    assert DEFAULT_MODEL.stat().st_size < 4_000_000
+    assert LIGHT.stat().st_size < 4_000_000
 
 
 def test_a_packaged_model_is_named_and_a_path_is_a_file(tmp_path: Path) -> None:
-    assert model_path(None) == model_path("") == model_path("landnet-s") == DEFAULT_MODEL
+    assert model_path(None) == model_path("") == model_path("landnet-s") == DEFAULT_MODEL == LIGHT
+    assert model_path("landnet-e") == PACKAGED["landnet-e"]
     onnx = tmp_path / "mine.onnx"
-    shutil.copy(DEFAULT_MODEL, onnx)
-    shutil.copy(DEFAULT_MODEL.with_suffix(".json"), onnx.with_suffix(".json"))
+    shutil.copy(LIGHT, onnx)
+    shutil.copy(LIGHT.with_suffix(".json"), onnx.with_suffix(".json"))
     assert model_path(str(onnx)) == onnx
     assert LandNet.load(str(onnx)).name == "landnet-s"  # the sidecar's name
 
@@ -101,8 +106,8 @@ def test_landnet_load_missing_file_is_an_error_naming_it(tmp_path: Path) -> None
 
 def _copy_model(tmp_path: Path) -> Path:
     onnx = tmp_path / "m.onnx"
-    shutil.copy(DEFAULT_MODEL, onnx)
-    shutil.copy(DEFAULT_MODEL.with_suffix(".json"), onnx.with_suffix(".json"))
+    shutil.copy(LIGHT, onnx)
+    shutil.copy(LIGHT.with_suffix(".json"), onnx.with_suffix(".json"))
     return onnx
 
 
@@ -129,7 +134,7 @@ def test_landnet_load_corrupt_weights_are_an_error_naming_the_file(tmp_path: Pat
 def test_landnet_onnxruntime_and_opencv_read_alike(net: LandNet) -> None:
     """The default runtime (ONNX Runtime) and the fallback (OpenCV's DNN module) give the same reading."""
     assert net.backend == "onnxruntime"
-    cv = LandNet.load(backend="opencv")
+    cv = LandNet.load(LIGHT, backend="opencv")
     for h, w in ((96, 96), (240, 320), (540, 960)):
         img = _image(h, w)
         a, b = net.read(img), cv.read(img)
@@ -156,24 +161,24 @@ def test_landnet_load_bad_sidecar_is_an_error_naming_it(tmp_path: Path) -> None:
     onnx.with_suffix(".json").write_text(json.dumps(meta))
     with pytest.raises(LandNetError, match=r"m\.json: unreadable model sidecar"):
         LandNet.load(onnx)
-    meta = json.loads(DEFAULT_MODEL.with_suffix(".json").read_text())
+    meta = json.loads(LIGHT.with_suffix(".json").read_text())
     meta["input"]["views"] = 3
     onnx.with_suffix(".json").write_text(json.dumps(meta))
     with pytest.raises(LandNetError, match=r"m\.json: .*input\.views must be one of \(1, 2, 4\), got 3"):
         LandNet.load(onnx)
-    meta = json.loads(DEFAULT_MODEL.with_suffix(".json").read_text())
+    meta = json.loads(LIGHT.with_suffix(".json").read_text())
     meta["hazard_classes"] = ["object", "lava"]
     onnx.with_suffix(".json").write_text(json.dumps(meta))
     with pytest.raises(LandNetError, match=r"m\.json: .*hazard_classes must be a non-empty list"):
         LandNet.load(onnx)
     for key in ("confirm_short_side_px", "rank_short_side_px"):
         for bad in (16, "96", 96.0, True):
-            meta = json.loads(DEFAULT_MODEL.with_suffix(".json").read_text())
+            meta = json.loads(LIGHT.with_suffix(".json").read_text())
             meta["input"][key] = bad
             onnx.with_suffix(".json").write_text(json.dumps(meta))
             with pytest.raises(LandNetError, match=rf"m\.json: .*input\.{key} must be an integer"):
                 LandNet.load(onnx)
-    meta = json.loads(DEFAULT_MODEL.with_suffix(".json").read_text())
+    meta = json.loads(LIGHT.with_suffix(".json").read_text())
     del meta["input"]["confirm_short_side_px"]  # an older sidecar: both read at short_side_px
     del meta["input"]["rank_short_side_px"]
     onnx.with_suffix(".json").write_text(json.dumps(meta))
@@ -466,7 +471,8 @@ def _cut_decision(
     frame, _check = close_up(city, ne, up_m, HEIGHT_M)
     d = judge.confirm_sync(ConfirmRequest(site_cut(city, frame, HEIGHT_M)))
     assert d.tier == "onboard"
-    assert "[landnet-s]" in d.rationale or d.rationale.startswith("rejected: ")
+    name = judge.landnet.name if judge.landnet is not None else ""
+    assert f"[{name}" in d.rationale or d.rationale.startswith("rejected: ")
     return d.accept, d.rationale
 
 

@@ -12,9 +12,11 @@ import numpy as np
 import pytest
 
 from companion.reasoning.base import ConfirmRequest
-from companion.reasoning.landnet import DEFAULT_MODEL, LandNet, SceneReading
+from companion.reasoning.landnet import PACKAGED, LandNet, SceneReading
 from companion.reasoning.net_judge import UNSURE_MARGIN, UNSURE_SPREAD, unsure
 from companion.reasoning.onboard import OnboardReasoner
+
+LIGHT = PACKAGED["landnet-s"]  # one file (LandNet-E's whole read is a second)
 
 torch = pytest.importorskip("torch", reason="the training extra: pip install -e '.[train]'")
 
@@ -49,8 +51,8 @@ def test_unsure_near_the_threshold_or_when_the_views_disagree() -> None:
 
 def _model_with_threshold(tmp_path: Path, threshold: float) -> LandNet:
     onnx = tmp_path / "m.onnx"
-    shutil.copy(DEFAULT_MODEL, onnx)
-    meta = json.loads(DEFAULT_MODEL.with_suffix(".json").read_text())
+    shutil.copy(LIGHT, onnx)
+    meta = json.loads(LIGHT.with_suffix(".json").read_text())
     meta["thresholds"]["clear"] = threshold
     onnx.with_suffix(".json").write_text(json.dumps(meta))
     return LandNet.load(onnx)
@@ -58,7 +60,7 @@ def _model_with_threshold(tmp_path: Path, threshold: float) -> LandNet:
 
 def test_an_unsure_confirm_says_so_in_its_rationale_record_and_decision(tmp_path: Path) -> None:
     flat = np.full((96, 96, 3), 118, np.uint8)  # mirror-symmetric: its views agree exactly
-    p = LandNet.load().read(flat).clear_p
+    p = LandNet.load(LIGHT).read(flat).clear_p
     transcript: list[dict[str, object]] = []
     guess = OnboardReasoner(judge="landnet", landnet=_model_with_threshold(tmp_path, p)).confirm_sync(
         ConfirmRequest(flat, transcript=transcript)
@@ -75,7 +77,7 @@ def test_an_unsure_confirm_says_so_in_its_rationale_record_and_decision(tmp_path
 
 
 def test_members_read_back_from_the_merged_model_give_its_outputs() -> None:
-    members = [from_onnx(f"{DEFAULT_MODEL}#m{k}/") for k in (0, 1)]
+    members = [from_onnx(f"{LIGHT}#m{k}/") for k in (0, 1)]
     net = LandNet.load(backend="onnxruntime")
     img = np.random.default_rng(3).integers(0, 256, (128, 160, 3), dtype=np.uint8)
     x = torch.from_numpy(((img.astype(np.float32) / 255 - 0.5) / 0.25).transpose(2, 0, 1)[None].copy())
@@ -85,7 +87,7 @@ def test_members_read_back_from_the_merged_model_give_its_outputs() -> None:
 
 
 def test_interpolate_moves_the_weights_that_share_of_the_way() -> None:
-    net = from_onnx(f"{DEFAULT_MODEL}#m0/")
+    net = from_onnx(f"{LIGHT}#m0/")
     start = {k: v.clone() for k, v in net.state_dict().items()}
     with torch.no_grad():
         for p in net.parameters():
@@ -269,13 +271,14 @@ def _membrane(seed: int) -> np.ndarray:
     return np.asarray(np.clip(img + rng.normal(0, 3, img.shape), 0, 255), np.uint8)
 
 
+@pytest.mark.parametrize("model", ["landnet-e", "landnet-s"])
 @pytest.mark.parametrize("seed", range(3))
-def test_the_shipped_judgement_confirms_clear_gravel_and_membrane_roof_close_ups(seed: int) -> None:
+def test_the_packaged_nets_confirm_clear_gravel_and_membrane_roof_close_ups(seed: int, model: str) -> None:
     """The study's close-ups of clear roofs are gravel and membrane: the net must not refuse those
     surfaces for their texture (pebbles of 1-6 px, 0.5-2 cm gravel at 0.3-1 cm per pixel). This
     generator is not the one training draws from (landfall_train.closeups). Coarser stones (4-9 px)
     still read as painted markings now and then: docs/reasoning.md, "Learning from photographs"."""
-    judge = OnboardReasoner(judge="landnet", landnet=LandNet.load())
+    judge = OnboardReasoner(judge="landnet", landnet=LandNet.load(PACKAGED[model]))
     for img in (_gravel(seed, (1.0, 3.0)), _gravel(seed, (2.0, 6.0)), _membrane(seed)):
         d = judge.confirm_sync(ConfirmRequest(img))
         assert d.accept, d.rationale

@@ -15,14 +15,24 @@ import pytest
 
 from companion.reasoning.base import ConfirmRequest
 from companion.reasoning.cue_params import CueParams
-from companion.reasoning.landnet import DEFAULT_MODEL, LandNet, LandNetError
+from companion.reasoning.landnet import PACKAGED, LandNet, LandNetError
 from companion.reasoning.net_judge import confirm_reading
 from companion.reasoning.onboard_params import ConfirmParams
+
+LIGHT = PACKAGED["landnet-s"]  # one file: the tests attach their own whole read to it
 
 torch = pytest.importorskip("torch", reason="the training extra: pip install -e '.[train]'")
 
 from landfall_train.photo_set import Photo  # noqa: E402
-from landfall_train.whole_read import fit, fold_report, held_out, mixed, probability, whole_blob  # noqa: E402
+from landfall_train.whole_read import (  # noqa: E402
+    closeup_features,
+    fit,
+    fold_report,
+    held_out,
+    mixed,
+    probability,
+    whole_blob,
+)
 
 MEAN = np.array([0.485, 0.456, 0.406], np.float32)
 STD = np.array([0.229, 0.224, 0.225], np.float32)
@@ -50,12 +60,12 @@ def _export(path: Path, gain: float, bias: float) -> None:
 def _with_whole_read(tmp_path: Path, gain: float, bias: float, **entry: Any) -> Path:
     """The packaged LandNet-S copied to ``tmp_path`` with a whole read attached to its sidecar."""
     onnx = tmp_path / "m.onnx"
-    shutil.copy(DEFAULT_MODEL, onnx)
+    shutil.copy(LIGHT, onnx)
     whole = tmp_path / "m-whole.onnx"
     with warnings.catch_warnings():  # the TorchScript exporter (dynamo=False) is deprecated, and works
         warnings.simplefilter("ignore", DeprecationWarning)
         _export(whole, gain, bias)
-    meta = json.loads(DEFAULT_MODEL.with_suffix(".json").read_text())
+    meta = json.loads(LIGHT.with_suffix(".json").read_text())
     meta["thresholds"]["net_clear"] = meta["thresholds"]["clear"]
     meta["thresholds"]["clear"] = 0.42
     meta["whole_read"] = {
@@ -75,7 +85,7 @@ def _red_logit(rgb: np.ndarray, gain: float, bias: float) -> float:
 
 def test_a_confirmation_weighs_the_whole_read_into_the_clear_probability(tmp_path: Path) -> None:
     net = LandNet.load(_with_whole_read(tmp_path, 2.0, -0.5), backend="onnxruntime")
-    packaged = json.loads(DEFAULT_MODEL.with_suffix(".json").read_text())["thresholds"]["clear"]
+    packaged = json.loads(LIGHT.with_suffix(".json").read_text())["thresholds"]["clear"]
     assert (net.clear_threshold, net.net_clear_threshold) == (0.42, packaged)
     rng = np.random.default_rng(3)
     rgb = rng.integers(0, 256, (90, 120, 3), dtype=np.uint8)
@@ -109,7 +119,7 @@ def test_confirm_reading_judges_the_mean_and_the_whole_read_can_refuse(tmp_path:
 
 
 def test_plain_models_are_unchanged_by_a_confirmation() -> None:
-    net = LandNet.load(DEFAULT_MODEL, backend="onnxruntime")
+    net = LandNet.load(LIGHT, backend="onnxruntime")
     rgb = np.full((64, 64, 3), 90, np.uint8)
     r = net.read(rgb)
     assert net.confirmation(r, rgb) is r
@@ -218,3 +228,27 @@ def test_whole_blob_is_the_normalised_square_and_its_mirror() -> None:
     assert blob.dtype == np.float32
     assert np.allclose(blob[1], blob[0][:, :, ::-1])
     assert blob[0, 0, 0, 0] == pytest.approx((1.0 - MEAN[0]) / STD[0], abs=1e-5)
+
+
+def test_roof_close_ups_join_every_fold_fit_and_are_never_scored() -> None:
+    """landfall_train.whole_read --closeups: procedural roof close-ups read as photographs are, labelled
+    clear when nothing stands on them, enter each fold's fit; the held-out probabilities are still one
+    per photograph, and the close-ups move them."""
+    from landfall_train.closeups import OBJECT, closeup
+    from landfall_train.whole_read import CLOSEUP_SEED, SIDE_PX
+
+    x, y = closeup_features(4)
+    assert x.shape == (4, 1280)
+    labels = [0.0 if (closeup(CLOSEUP_SEED, k, SIDE_PX)[1] == OBJECT).any() else 1.0 for k in range(4)]
+    assert y.tolist() == labels
+    assert closeup_features(0)[0].shape == (0, 1280)
+    rng = np.random.default_rng(0)
+    photos = [Photo(Path(f"/p/{k}.jpg"), "roof_clear" if k % 2 else "road", bool(k % 2), f"s{k % 3}", "CC0")
+              for k in range(12)]  # fmt: skip
+    feats = rng.normal(0.0, 1.0, (12, 1280))
+    folds = [["s0"], ["s1"], ["s2"]]
+    alone = held_out(photos, feats, folds)
+    both = held_out(photos, feats, folds, extra=(rng.normal(0.0, 1.0, (4, 1280)), np.array([1.0, 0, 1, 0])))
+    assert alone.shape == both.shape == (12,)
+    assert not np.isnan(both).any()
+    assert not np.allclose(alone, both)

@@ -65,8 +65,11 @@ WHOLE = "whole"  # (N, 1) logit of a whole-image read (sidecar whole_read; landf
 
 MODELS = Path(__file__).with_name("models")
 # The packaged models by name (``reasoner.onboard_model``); any other value is the path of an ONNX file
-# with its sidecar (``python -m landfall_train.pretrained`` writes LandNet-E's: docs/reasoning.md).
-PACKAGED = {"landnet-s": MODELS / "landnet-s.onnx"}
+# with its sidecar. LandNet-S (a small net trained from nothing on simbridge's renders and a few
+# photographs) is the default; LandNet-E (EfficientNet-Lite0's ImageNet backbone fine-tuned, with its
+# whole-image read; ``make model-e``, ``make model-e-package``) is right far more often on real
+# photographs and reads simbridge's rendered water from high up as roof (docs/reasoning.md).
+PACKAGED = {"landnet-s": MODELS / "landnet-s.onnx", "landnet-e": MODELS / "landnet-e.onnx"}
 DEFAULT_MODEL = PACKAGED["landnet-s"]
 HAZARD_SCALE = 3.0  # rank: hazard points of a surely-not-clear site (the image cues' water weight)
 # rank, a model with the bare head (landfall-landnet/2; the packaged model has none): weight of the
