@@ -23,13 +23,14 @@ E = PACKAGED["landnet-e"]
 
 
 @pytest.fixture(scope="module")
-def net() -> LandNet:
-    return LandNet.load(E)
+def judge() -> OnboardReasoner:
+    return OnboardReasoner(judge="landnet", landnet=LandNet.load(E))
 
 
-@pytest.fixture(scope="module")
-def judge(net: LandNet) -> OnboardReasoner:
-    return OnboardReasoner(judge="landnet", landnet=net)
+@pytest.fixture
+def net(judge: OnboardReasoner) -> LandNet:
+    assert judge.landnet is not None
+    return judge.landnet
 
 
 def test_the_packaged_model_carries_its_whole_read_and_says_how_its_weights_are_stored(net: LandNet) -> None:
