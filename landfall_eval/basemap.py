@@ -38,6 +38,8 @@ CLASS_RGB: dict[SurfaceClass, tuple[int, int, int]] = {
     SurfaceClass.PIER: (150, 110, 70),
     SurfaceClass.VEHICLE: (112, 64, 140),
     SurfaceClass.PEDESTRIAN: (240, 140, 0),
+    SurfaceClass.RAIL: (110, 84, 70),
+    SurfaceClass.MACHINERY: (200, 90, 60),
 }
 
 CLASS_LABEL: dict[SurfaceClass, str] = {
@@ -60,6 +62,8 @@ CLASS_LABEL: dict[SurfaceClass, str] = {
     SurfaceClass.PIER: "pier",
     SurfaceClass.VEHICLE: "parked vehicle",
     SurfaceClass.PEDESTRIAN: "pedestrian",
+    SurfaceClass.RAIL: "railway",
+    SurfaceClass.MACHINERY: "machinery",
 }
 
 _N_CLASSES = 32  # > every SurfaceClass value; bincount bins per block
@@ -127,6 +131,7 @@ def basemap(
     seed: int,
     bounds_ne_m: tuple[float, float, float, float] | None = None,
     max_px: int = 1600,
+    place: str = "downtown",
 ) -> BaseMap:
     """Draw a scenario's world from simbridge's ground truth.
 
@@ -138,6 +143,7 @@ def basemap(
             None draws the whole world. The picture snaps outward to whole blocks of cells, so it may
             reach past the bounds by less than one pixel (never past the world's edge by more).
         max_px: the longest side of the picture in pixels; the grid is reduced by a whole stride.
+        place: for ``city``, the kind of place (simbridge ``--place``).
 
     Raises:
         BaseMapError: bad bounds or ``max_px``, or bounds that miss the world.
@@ -160,7 +166,7 @@ def basemap(
     from simbridge.world.live import LiveWorld
 
     if scenario == "city":  # the city of this seed; the episode seed only moves actors, left out below
-        terrain = load_scenario(scenario, 0, city_seed=seed).terrain
+        terrain = load_scenario(scenario, 0, city_seed=seed, place=place).terrain
     else:
         terrain = load_scenario(scenario, seed).terrain
     if not isinstance(terrain, LiveWorld):  # the flat scenario: open ground everywhere
@@ -261,3 +267,30 @@ def _shade(rgb: np.ndarray, height: np.ndarray, px_m: float) -> np.ndarray:
     gain = 1.0 + 0.45 * (np.clip(lit, 0.3, 1.4) - 1.0) + 0.08 * np.clip(height / 60.0, -0.1, 1.0)
     out: np.ndarray = np.clip(rgb * gain[..., None], 0, 255).astype(np.uint8)
     return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m landfall_eval.basemap --place KIND --city-seed S --out MAP.png``: the whole map of a
+    procedural place (docs/simbridge.md's maps of the kinds of place are drawn with it)."""
+    import argparse
+
+    import cv2
+
+    from simbridge.args import non_negative_seed
+    from simbridge.world.places import DEFAULT_PLACE, PLACES
+
+    ap = argparse.ArgumentParser(prog="python -m landfall_eval.basemap", description=main.__doc__)
+    ap.add_argument("--place", choices=PLACES, default=DEFAULT_PLACE)
+    ap.add_argument("--city-seed", type=non_negative_seed, default=0, metavar="S")
+    ap.add_argument("--max-px", type=int, default=900, help="the picture's longest side (default 900)")
+    ap.add_argument("--out", required=True, help="the picture (.png or .jpg)")
+    args = ap.parse_args(argv)
+    bm = basemap("city", args.city_seed, max_px=args.max_px, place=args.place)
+    if not cv2.imwrite(args.out, cv2.cvtColor(bm.rgb, cv2.COLOR_RGB2BGR)):
+        ap.error(f"cannot write {args.out}")
+    print(f"{args.out}: {args.place} {args.city_seed}, {bm.px_m:.2f} m a pixel, world {bm.world_digest}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -74,7 +74,8 @@ def error_entry(
     """The results.json entry of an episode that the executor itself could not run to its end."""
     return {
         "id": spec.id, "kind": spec.kind, "scenario": spec.scenario, "seed": spec.seed,
-        "city_seed": spec.city_seed, "launch_index": spec.launch_index, "run": spec.run,
+        "city_seed": spec.city_seed, "place": spec.place if spec.kind == "city" else None,
+        "launch_index": spec.launch_index, "run": spec.run,
         "reasoner": spec.reasoner, "context": spec.context, "weather": spec.weather,
         "autopilot": spec.autopilot, "ekf_error": spec.ekf_error, "gps_fault": spec.gps_fault_entry,
         "camera": spec.camera,

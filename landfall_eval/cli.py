@@ -3,8 +3,8 @@
     companion-bench modules [--iterations 20] [--reasoner NAME] --out DIR
     companion-bench curated --scenario scenario1|scenario2|river_crossing --runs N [--weather W[,W...]]
                             [--context C] [--reasoner NAME] --out DIR
-    companion-bench city --seeds N [--start-index K] [--city-seeds S[,S...]] [--weather W[,W...]]
-                         [--context C] [--reasoner NAME] --out DIR
+    companion-bench city --seeds N [--start-index K] [--city-seeds S[,S...]] [--place KIND]
+                         [--weather W[,W...]] [--context C] [--reasoner NAME] --out DIR
     ... [--executor local|ray [--ray-address ADDR] [--cpus-per-episode C]] [--resume]
     companion-bench images DIR [--context crop|full] [--reasoner NAME] --out OUT
 
@@ -40,6 +40,7 @@ from landfall_eval.episode_grade import describe_last_state
 from landfall_eval.grading import summarise
 from landfall_eval.launches import halton_launches
 from simbridge.args import non_negative_seed
+from simbridge.world.places import DEFAULT_PLACE, PLACES
 from simbridge.world.scenario_file import builtin_scenario_names
 
 __all__ = ["SCHEMA", "load_results", "main", "save_results"]
@@ -240,6 +241,10 @@ def build_parser() -> argparse.ArgumentParser:
         "(simbridge --city-seed); default 0",
     )  # fmt: skip
     cities.add_argument("--city-seed", type=non_negative_seed, metavar="S", help="one city: --city-seeds S")
+    y.add_argument(
+        "--place", choices=PLACES, default=DEFAULT_PLACE,
+        help=f"the kind of place the cities are (simbridge --place; default {DEFAULT_PLACE})",
+    )  # fmt: skip
     g = sub.add_parser(
         "images", parents=[common], help="the image judgement on a labelled folder of photographs"
     )
@@ -303,6 +308,7 @@ def episode_specs(args: argparse.Namespace) -> list[EpisodeSpec]:
             launch=launch.as_tuple(),
             launch_index=launch.index,
             city_seed=city,
+            place=args.place,
             weather=w,
             **base,
         )
@@ -443,6 +449,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             config[key] = getattr(args, key)
     if args.command == "city":
         config["start_index"] = args.start_index
+        config["place"] = args.place
         seeds = city_seeds(args)
         config["city_seeds"] = list(seeds)
         if len(seeds) == 1:

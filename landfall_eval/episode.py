@@ -71,7 +71,7 @@ class EpisodeSpec:
     ``launch`` (north, east, height above ground) overrides the scenario's launch point (the city);
     ``launch_index`` is its index in the Halton sequence, ``run`` the repetition of a curated scenario;
     ``city_seed`` the procedural city's seed (simbridge ``--city-seed``; every episode of a campaign
-    flies the same city).
+    flies the same city) and ``place`` its kind (simbridge ``--place``).
     """
 
     kind: str  # "curated" or "city"
@@ -85,6 +85,7 @@ class EpisodeSpec:
     launch_index: int | None = None
     run: int | None = None
     city_seed: int | None = None
+    place: str = "downtown"  # the kind of place a city episode flies (simbridge.world.places)
     criticality: str = "high"
     reason: str = "GPS spoofing detected"
     ekf_error: str = "off"  # the emulation's estimator errors (simbridge --ekf-error)
@@ -102,8 +103,9 @@ class EpisodeSpec:
     @property
     def id(self) -> str:
         """Stable name: what resumption matches episodes by."""
+        town = "city" if self.place == "downtown" else self.place  # downtown keeps the ids of before
         where = (
-            f"city{self.city_seed}-i{self.launch_index}"
+            f"{town}{self.city_seed}-i{self.launch_index}"
             if self.kind == "city"
             else f"{self.scenario}-r{self.run}"
         )
@@ -173,7 +175,7 @@ def simbridge_command(
     if spec.autopilot == "px4-sitl" and sitl is not None:
         cmd += ["--px4", str(sitl)]
     if spec.city_seed is not None:
-        cmd += ["--city-seed", str(spec.city_seed)]
+        cmd += ["--city-seed", str(spec.city_seed), "--place", spec.place]
     if spec.ekf_error != "off":
         cmd += ["--ekf-error", spec.ekf_error]
     if spec.gps_fault is not None:
@@ -241,6 +243,7 @@ def run_episode(
         "scenario": spec.scenario,
         "seed": spec.seed,
         "city_seed": spec.city_seed,
+        "place": spec.place if spec.kind == "city" else None,
         "world_digest": None,
         "launch_index": spec.launch_index,
         "run": spec.run,

@@ -46,9 +46,13 @@ SURFACES = (
     "water",
     "pier",
     "ground",
+    "rail",
+    "machinery",
     "no_landing",
 )
-_OBSTRUCTION_WORDS = ("within", "rooftop object", "parapet", "person", "vehicle", "tree", "guard rail")
+_OBSTRUCTION_WORDS = (
+    "within", "rooftop object", "parapet", "person", "vehicle", "tree", "guard rail", "machinery",
+)  # fmt: skip
 
 
 def surface_class(touchdown: Mapping[str, Any] | None) -> str:

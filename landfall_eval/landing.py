@@ -142,6 +142,7 @@ def landing_target_ned(
         int(header["seed"]),
         launch,
         city_seed=int(city_seed) if isinstance(city_seed, int) else 0,
+        place=str(header.get("place") or "downtown"),
     )
     world = sc.terrain
     if not isinstance(world, LiveWorld):

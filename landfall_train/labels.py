@@ -53,11 +53,20 @@ for _c, _k in {
     C.CROSSWALK: 8,
     C.PARKING_LOT: 8,
     C.PARKING_ROOF: 8,
+    C.RAIL: 8,
+    C.MACHINERY: 1,
 }.items():
     _TOP[int(_c)] = _k
 _WALL = np.full(256, 2, np.uint8)  # class of a wall hit: a wall, unless it is the side of an object
 # (a pitched roof is stepped on the grid: the risers of its steps are roof too)
-for _c, _k in {C.ROOF_CLUTTER: 1, C.PEDESTRIAN: 3, C.VEHICLE: 4, C.TREE: 7, C.ROOF_PITCHED: 0}.items():
+for _c, _k in {
+    C.ROOF_CLUTTER: 1,
+    C.PEDESTRIAN: 3,
+    C.VEHICLE: 4,
+    C.TREE: 7,
+    C.ROOF_PITCHED: 0,
+    C.MACHINERY: 1,
+}.items():
     _WALL[int(_c)] = _k
 _MARKING = np.zeros(256, bool)
 _MARKING[[int(M.LANE_MARKING), int(M.ZEBRA)]] = True

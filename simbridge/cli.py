@@ -20,6 +20,7 @@ from simbridge.scenarios import scenario_names
 from simbridge.sim import AUTOPILOTS, PX4_SITL_AUTOPILOT, SITL_AUTOPILOT, SimBridge, SimConfig
 from simbridge.sitl import ENV_BINARY, SitlError
 from simbridge.wind import WindConfig
+from simbridge.world.places import DEFAULT_PLACE, PLACES
 
 
 def _floats(text: str, n: int, what: str) -> tuple[float, ...]:
@@ -127,6 +128,12 @@ def build_parser() -> argparse.ArgumentParser:
         default=0,
         metavar="N",
         help="seed of the procedural city (--scenario city): one city seed, one city, whatever --seed",
+    )
+    p.add_argument(
+        "--place",
+        choices=PLACES,
+        default=DEFAULT_PLACE,
+        help=f"the kind of place --scenario city builds (default {DEFAULT_PLACE}; docs/simbridge.md)",
     )
     p.add_argument("--speed", type=float, default=1.0, help="simulated seconds per wall second")
     p.add_argument(
@@ -248,6 +255,7 @@ def config_from_args(args: argparse.Namespace) -> SimConfig:
         scenario=args.scenario,
         seed=args.seed,
         city_seed=args.city_seed,
+        place=args.place,
         speed=args.speed,
         start=args.start,
         episode_log=args.episode_log,

@@ -11,7 +11,8 @@ autopilot's clock can be placed on the log's), ``frame`` (``time_boot_ms``, ``po
 ``start`` and ``stop``.
 
 The first line, ``start``, says what was flown: ``scenario``, ``autopilot``, ``seed`` (the episode's),
-``city_seed`` (the procedural city's; null for other scenarios), ``world_digest`` (16 hex digits
+``city_seed`` (the procedural city's; null for other scenarios), ``place`` (the kind of place the
+procedural city is, :mod:`simbridge.world.places`; null for other scenarios), ``world_digest`` (16 hex digits
 fingerprinting the static world, :meth:`simbridge.world.model.WorldGrid.digest`; null for ``flat``),
 ``start`` and ``home_ned_m``. Episodes with equal digests flew the same world.
 """

@@ -15,6 +15,7 @@ import numpy as np
 
 from simbridge.args import non_negative_seed
 from simbridge.geo import euler_to_quat
+from simbridge.world.places import DEFAULT_PLACE, PLACES
 
 
 def _pose(text: str) -> tuple[float, float, float, float]:
@@ -38,6 +39,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="the episode's seed: traffic and sensor noise")
     p.add_argument(
         "--city-seed", type=non_negative_seed, default=0, metavar="N", help="seed of the procedural city"
+    )
+    p.add_argument(
+        "--place", choices=PLACES, default=DEFAULT_PLACE, help="the kind of place --scenario city builds"
     )
     p.add_argument("--weather", choices=("clear", "fog", "rain"), default="clear")
     p.add_argument(
@@ -63,7 +67,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from simbridge.world.live import LiveWorld
 
     try:
-        scenario = load_scenario(args.scenario, args.seed, city_seed=args.city_seed)
+        scenario = load_scenario(args.scenario, args.seed, city_seed=args.city_seed, place=args.place)
     except ValueError as exc:
         parser.error(str(exc))
     world = scenario.terrain

@@ -1,9 +1,10 @@
 """Named scenarios: the world, where the vehicle starts, and where home is.
 
 ``flat`` is open ground; ``scenario1`` and ``scenario2`` are the curated city blocks (TOML files in
-simbridge/world/scenarios/); ``city`` is the procedural city of ``city_seed``; any path ending in
-``.toml`` is loaded as a scenario file. Scenario coordinates are NED metres from the scenario origin; the
-launch point is above the origin unless the scenario (or ``launch``) says otherwise.
+simbridge/world/scenarios/); ``city`` is the procedural place of ``city_seed``, of the kind ``place``
+names (:mod:`simbridge.world.places`: ``downtown``, the default, or ``suburb``); any path ending in
+``.toml`` is loaded as a scenario file. Scenario coordinates are NED metres from the scenario origin;
+the launch point is above the origin unless the scenario (or ``launch``) says otherwise.
 
 Two seeds (DESIGN.md section 7): the episode's ``seed`` drives the traffic and pedestrians (and, in
 simbridge, the sensor noise and the wind); the city's own ``city_seed`` draws the city, so one campaign
@@ -41,6 +42,7 @@ def load_scenario(
     world_kwargs: dict[str, object] | None = None,
     *,
     city_seed: int = 0,
+    place: str = "downtown",
 ) -> Scenario:
     """Build a scenario; ``launch`` = (north, east[, height above ground]) overrides its launch point.
 
@@ -50,10 +52,12 @@ def load_scenario(
         launch: (north, east[, height above ground]) metres, overriding the launch point.
         world_kwargs: keyword arguments for :class:`~simbridge.world.live.LiveWorld` (sensor models).
         city_seed: the procedural city's seed (``city`` only; ignored otherwise).
+        place: the kind of place ``city`` builds (:data:`simbridge.world.places.PLACES`; ignored
+            otherwise).
 
     Raises:
-        ValueError: an unknown name (the message lists the known ones), a bad scenario file or a
-            negative ``city_seed``.
+        ValueError: an unknown name or place (the message lists the known ones), a bad scenario file
+            or a negative ``city_seed``.
     """
     if name == "flat":
         sc = Scenario(name="flat", terrain=FlatTerrain())
@@ -61,9 +65,9 @@ def load_scenario(
         from simbridge.world.live import LiveWorld
 
         if name == "city":
-            from simbridge.world.city import generate_city
+            from simbridge.world.places import generate_place
 
-            world = generate_city(city_seed)  # CityError (a ValueError) for a negative seed
+            world = generate_place(place, city_seed)  # CityError (a ValueError) for a negative seed
         else:
             from simbridge.world.scenario_file import BUILTIN_SCENARIO_DIR, load_scenario_file
 

@@ -27,6 +27,7 @@ from simbridge.scenarios import Scenario, load_scenario
 from simbridge.telemetry import Telemetry
 from simbridge.vehicle import Vehicle
 from simbridge.wind import WindConfig, WindModel
+from simbridge.world.places import PLACES
 
 _MAX_BATCH_STEPS = 6  # physics steps between two looks at the socket (50 ms simulated)
 SITL_AUTOPILOT = "ardupilot-sitl"  # real ArduCopter firmware (simbridge.sitl_bridge)
@@ -42,6 +43,7 @@ class SimConfig:
     scenario: str = "flat"
     seed: int = 0  # the episode: traffic, sensor noise, wind (and a scenario file's furniture)
     city_seed: int = 0  # the procedural city (scenario "city"): one campaign, one city
+    place: str = "downtown"  # the kind of place the scenario "city" builds (simbridge.world.places)
     speed: float = 1.0
     start: str = "air"
     episode_log: Path | None = None
@@ -98,6 +100,8 @@ class SimConfig:
             raise ValueError(f"--start must be 'air' or 'ground', got {self.start!r}")
         if self.city_seed < 0:
             raise ValueError(f"--city-seed must be >= 0, got {self.city_seed}")
+        if self.place not in PLACES:
+            raise ValueError(f"--place must be one of {', '.join(PLACES)}, got {self.place!r}")
         if not 1 <= self.system_id <= 255:
             raise ValueError(f"system id must be 1..255, got {self.system_id}")
         if self.weather not in ("clear", "fog", "rain"):
@@ -111,7 +115,7 @@ class SimBridge:
         self.config = config
         self.log = logger or logging.getLogger("simbridge")
         self.scenario: Scenario = load_scenario(
-            config.scenario, config.seed, config.launch, city_seed=config.city_seed
+            config.scenario, config.seed, config.launch, city_seed=config.city_seed, place=config.place
         )
         rng = np.random.default_rng(config.seed)
         wind = WindModel(config.wind, rng) if config.wind != WindConfig() else None
@@ -137,10 +141,11 @@ class SimBridge:
             0.0,
             "start",
             {
-                "scenario": sc.name,
+                "scenario": "city" if config.scenario == "city" else sc.name,  # what load_scenario takes
                 "autopilot": config.autopilot,
                 "seed": config.seed,
                 "city_seed": config.city_seed if config.scenario == "city" else None,
+                "place": config.place if config.scenario == "city" else None,
                 "world_digest": sc.world_digest,
                 "start": config.start,
                 "home_ned_m": list(self.home_ned_m),
@@ -434,7 +439,7 @@ class SimBridge:
             cfg.mavlink,
             self.link.local_port,
             cfg.scenario,
-            f" (city seed {cfg.city_seed})" if cfg.scenario == "city" else "",
+            f" ({cfg.place}, city seed {cfg.city_seed})" if cfg.scenario == "city" else "",
             cfg.seed,
             cfg.speed,
             cfg.start,

@@ -82,7 +82,8 @@ def map_figure(
     seed = world_seed(scenario, eps, config)
     if bm is None:
         try:
-            bm = basemap(scenario, seed, bounds, max_px=MAP_MAX_PX)
+            place = str(config.get("place", "downtown"))
+            bm = basemap(scenario, seed, bounds, max_px=MAP_MAX_PX, place=place)
         except ValueError as exc:  # an unknown scenario, or bounds outside its world
             log.warning("no background for the %s map: %s", scenario, exc)
             note = f"No background map: {exc}"
@@ -335,7 +336,8 @@ def thumbnail(e: Episode, config: Mapping[str, Any], path: Path) -> bool:
     half = THUMB_HALF_M
     seed = e.city_seed if e.city_seed is not None else world_seed(e.scenario, [e], config)
     try:
-        bm = basemap(e.scenario, seed, (n - half, n + half, east - half, east + half), max_px=240)
+        bounds = (n - half, n + half, east - half, east + half)
+        bm = basemap(e.scenario, seed, bounds, max_px=240, place=str(config.get("place", "downtown")))
     except ValueError as exc:
         log.warning("no thumbnail for %s: %s", e.id, exc)
         return False

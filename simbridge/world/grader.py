@@ -2,7 +2,8 @@
 
 Uses ground truth only (the world grid with actors where they are at touchdown time):
 
-* forbidden surfaces: road, highway, sidewalk, crosswalk, water, pier, tree, vehicle, person;
+* forbidden surfaces: road, highway, sidewalk, crosswalk, water, pier, tree, vehicle, person, rail,
+  machinery (containers, stacked material, machines in a yard);
 * flatness: slope of a plane fitted to the cells within ``flat_radius_m`` (<= ``max_slope_deg``) and
   the residual roughness (<= ``max_roughness_m``);
 * clearance: no person, vehicle or object (clutter, parapet, tree, rail, or anything standing more
@@ -39,6 +40,7 @@ _OBSTACLE_NAMES = {
     SurfaceClass.PARAPET: "parapet",
     SurfaceClass.TREE: "tree",
     SurfaceClass.GUARD_RAIL: "guard rail",
+    SurfaceClass.MACHINERY: "machinery",
 }
 
 

@@ -42,6 +42,8 @@ class SurfaceClass(enum.IntEnum):
     PIER = 16
     VEHICLE = 17
     PEDESTRIAN = 18
+    RAIL = 19  # a railway's track: ballast, sleepers and rails
+    MACHINERY = 20  # containers, stacked material, trucks' trailers and machines parked in a yard
 
 
 class Material(enum.IntEnum):
@@ -100,6 +102,8 @@ GRADE_SURFACE: dict[SurfaceClass, str] = {
     SurfaceClass.PIER: "pier",
     SurfaceClass.VEHICLE: "road",
     SurfaceClass.PEDESTRIAN: "sidewalk",
+    SurfaceClass.RAIL: "rail",
+    SurfaceClass.MACHINERY: "machinery",
 }
 
 # Classes a vehicle must never land on, whatever the geometry says.
@@ -107,14 +111,15 @@ FORBIDDEN_CLASSES = frozenset(
     {
         SurfaceClass.ROAD, SurfaceClass.HIGHWAY, SurfaceClass.GUARD_RAIL, SurfaceClass.SIDEWALK,
         SurfaceClass.CROSSWALK, SurfaceClass.WATER, SurfaceClass.PIER, SurfaceClass.TREE,
-        SurfaceClass.VEHICLE, SurfaceClass.PEDESTRIAN, SurfaceClass.UNKNOWN,
+        SurfaceClass.VEHICLE, SurfaceClass.PEDESTRIAN, SurfaceClass.UNKNOWN, SurfaceClass.RAIL,
+        SurfaceClass.MACHINERY,
     }
 )  # fmt: skip
 # Classes that count as an obstacle inside the rotor-clearance disc.
 OBSTACLE_CLASSES = frozenset(
     {
         SurfaceClass.ROOF_CLUTTER, SurfaceClass.PARAPET, SurfaceClass.TREE, SurfaceClass.VEHICLE,
-        SurfaceClass.PEDESTRIAN, SurfaceClass.GUARD_RAIL,
+        SurfaceClass.PEDESTRIAN, SurfaceClass.GUARD_RAIL, SurfaceClass.MACHINERY,
     }
 )  # fmt: skip
 
