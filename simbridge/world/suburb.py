@@ -59,10 +59,15 @@ class _SuburbBuilder(SuburbSites, SuburbLots):
             azimuth_deg=float(self.rng.uniform(90.0, 270.0)),
             elevation_deg=float(self.rng.uniform(35.0, 65.0)),
         )
-        school = "no school" if pitch is None else f"a school with its sports field at {pitch[0]:.0f} N {pitch[1]:.0f} E"
+        school = (
+            "no school"
+            if pitch is None
+            else f"a school with its sports field at {pitch[0]:.0f} N {pitch[1]:.0f} E"
+        )
         desc = (
             f"procedural suburb {self.size:.0f} m square, seed {seed}: {self.n_buildings} buildings on "
-            f"{len(collectors)} collector roads and {len(local)} residential streets, {school}, a park and open lawns"
+            f"{len(collectors)} collector roads and {len(local)} residential streets, {school}, "
+            "a park and open lawns"
         )
         return World(
             name="suburb", seed=seed, grid=self.grid, launch_ne_m=(0.0, 0.0), launch_height_m=100.0, sun=sun,

@@ -97,7 +97,7 @@ class SuburbLots(SuburbPlan):
         )  # fmt: skip
 
     def _place(self, lot: Lot, size_u: float, size_v: float, v_min: float, keep: list[Box]) -> Box | None:
-        """A free spot for a box (behind ``v_min``, clear of the ``keep`` boxes), or None after a few tries."""
+        """A free spot for a box (behind ``v_min``, clear of the ``keep`` boxes); None after a few tries."""
         hu, hv = lot.front_m / 2 - EDGE_M - size_u / 2, lot.depth_m / 2 - EDGE_M - size_v
         if hu <= 0 or hv <= v_min:
             return None

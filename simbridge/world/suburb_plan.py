@@ -73,6 +73,7 @@ class Road:
 
 
 def as_pts(a: np.ndarray) -> list[Pt]:
+    """(k, 2) points as the (north, east) tuples the painters, lanes and walkways take."""
     return [(float(n), float(e)) for n, e in a]
 
 
@@ -94,13 +95,14 @@ class SuburbPlan(Props):
     def _rect_free(self, centre: Pt, length_m: float, width_m: float, yaw_rad: float) -> bool:
         """Whether a rotated rectangle lies in the grid and on land nothing has claimed."""
         c, s = math.cos(yaw_rad), math.sin(yaw_rad)
+        hl, hw = length_m / 2, width_m / 2
         corners = np.array(
             [
-                (centre[0] + a * length_m / 2 * c - b * width_m / 2 * s, centre[1] + a * length_m / 2 * s + b * width_m / 2 * c)
+                (centre[0] + a * hl * c - b * hw * s, centre[1] + a * hl * s + b * hw * c)
                 for a in (-1, 1)
                 for b in (-1, 1)
             ]
-        )  # fmt: skip
+        )
         if not self._inside(corners, 1.0).all():
             return False
         got = self.claim.rect_mask(centre, length_m, width_m, yaw_rad)
@@ -168,7 +170,9 @@ class SuburbPlan(Props):
                 at += (road.arclength()[-1] * 0.6 if crescent else 0.0) + self._u((55.0, 100.0))
         return out
 
-    def _accept(self, parent: Road, pts: np.ndarray, d_from_parent: np.ndarray, width_m: float, turn_r_m: float) -> Road | None:
+    def _accept(
+        self, parent: Road, pts: np.ndarray, d_from_parent: np.ndarray, width_m: float, turn_r_m: float
+    ) -> Road | None:
         """The street if it stays in the grid and clear of claimed land (but where it meets its parent)."""
         if not self._inside(pts, turn_r_m + 25.0).all():  # room for a lot between it and the edge
             return None
@@ -185,7 +189,8 @@ class SuburbPlan(Props):
 
     def _cul_de_sac(self, parent: Road, at_m: float, side: float) -> Road | None:
         """Out from the parent at right angles, bending gently, to a turning circle 60-170 m on."""
-        p0, n0 = self.parent_frame(parent, at_m)
+        pts, nrm = parent.at(np.array([at_m]))
+        p0, n0 = pts[0], nrm[0]
         heading = math.atan2(side * n0[1], side * n0[0])
         turn = self._u((-1.0, 1.0)) / 110.0  # radians per metre
         steps = round(self._u((60.0, 170.0)) / STEP_M)
@@ -207,11 +212,6 @@ class SuburbPlan(Props):
         d = depth * np.sin(t)
         return self._accept(parent, base + nrm * (side * d)[:, None], d, self._u(LOCAL_W_M), 0.0)
 
-    @staticmethod
-    def parent_frame(parent: Road, at_m: float) -> tuple[np.ndarray, np.ndarray]:
-        pts, nrm = parent.at(np.array([at_m]))
-        return pts[0], nrm[0]
-
     # ------------------------------------------------------------------ painting them
     def _paint_roads(self, collectors: list[Road], local: list[Road]) -> None:
         """Sidewalks first, then carriageways cut through them (residential streets through the
@@ -219,18 +219,29 @@ class SuburbPlan(Props):
         g = self.grid
         for road in collectors:
             w = road.width_m + 2 * road.sidewalk_m
-            g.fill_polyline(as_pts(road.points), w, height_m=SIDEWALK_H, cls=SurfaceClass.SIDEWALK, mat=Material.PAVING)
+            g.fill_polyline(
+                as_pts(road.points), w, height_m=SIDEWALK_H, cls=SurfaceClass.SIDEWALK, mat=Material.PAVING
+            )
         for road in local + collectors:
-            g.fill_polyline(as_pts(road.points), road.width_m, height_m=0.0, cls=SurfaceClass.ROAD, mat=Material.ASPHALT)
+            g.fill_polyline(
+                as_pts(road.points), road.width_m, height_m=0.0, cls=SurfaceClass.ROAD, mat=Material.ASPHALT
+            )
             if road.turn_r_m > 0:
                 end = (float(road.points[-1, 0]), float(road.points[-1, 1]))
                 g.fill_disc(end, road.turn_r_m, height_m=0.0, cls=SurfaceClass.ROAD, mat=Material.ASPHALT)
                 if self.rng.random() < 0.5:  # a planted island in the turning circle
-                    g.fill_disc(end, road.turn_r_m - 6.0, height_m=0.15, cls=SurfaceClass.GRASS, mat=Material.GRASS)
+                    g.fill_disc(
+                        end, road.turn_r_m - 6.0, height_m=0.15, cls=SurfaceClass.GRASS, mat=Material.GRASS
+                    )
         for road in collectors:
             pts = road.points
             for a, b in zip(pts[:-1:2], pts[1::2], strict=False):  # 2 m dashes every 8 m
-                g.fill_polyline(as_pts(np.array([a, (a + b) / 2])), MARK_W_M, cls=SurfaceClass.ROAD, mat=Material.LANE_MARKING)
+                g.fill_polyline(
+                    as_pts(np.array([a, (a + b) / 2])),
+                    MARK_W_M,
+                    cls=SurfaceClass.ROAD,
+                    mat=Material.LANE_MARKING,
+                )
         for k, a in enumerate(collectors):
             for b in collectors[k + 1 :]:
                 d = np.hypot(*(a.points[:, None, :] - b.points[None, :, :]).transpose(2, 0, 1))
@@ -238,7 +249,13 @@ class SuburbPlan(Props):
                 if d[i, j] < STEP_M:
                     mid = (a.points[i] + b.points[j]) / 2
                     r = max(a.width_m, b.width_m) * 0.75
-                    g.fill_disc((float(mid[0]), float(mid[1])), r, height_m=0.0, cls=SurfaceClass.ROAD, mat=Material.ASPHALT)
+                    g.fill_disc(
+                        (float(mid[0]), float(mid[1])),
+                        r,
+                        height_m=0.0,
+                        cls=SurfaceClass.ROAD,
+                        mat=Material.ASPHALT,
+                    )
 
     # ------------------------------------------------------------------ traffic and people
     def _collector_traffic(self, road: Road) -> None:

@@ -44,10 +44,17 @@ class SuburbSites(SuburbPlan):
         c, s = math.cos(yaw), math.sin(yaw)
         return (cn + u * c - v * s, ce + u * s + v * c)
 
-    def _site_box(self, frame: Frame, u0: float, u1: float, v0: float, v1: float) -> tuple[float, float, float, float]:
+    def _site_box(
+        self, frame: Frame, u0: float, u1: float, v0: float, v1: float
+    ) -> tuple[float, float, float, float]:
         """A box in a site's frame as a north/east box (sites are turned by multiples of 90 degrees)."""
         corners = np.array([self._local(frame, u, v) for u in (u0, u1) for v in (v0, v1)])
-        return (float(corners[:, 0].min()), float(corners[:, 0].max()), float(corners[:, 1].min()), float(corners[:, 1].max()))
+        return (
+            float(corners[:, 0].min()),
+            float(corners[:, 0].max()),
+            float(corners[:, 1].min()),
+            float(corners[:, 1].max()),
+        )
 
     def _site_paint(self, frame: Frame, length_m: float, width_m: float, mask_of: str, height_m: float | None,
                     cls: SurfaceClass | None, mat: Material | None, **shape: float) -> None:  # fmt: skip
@@ -106,20 +113,34 @@ class SuburbSites(SuburbPlan):
             self._site_paint(field, field_l, field_w, "all", 0.0, SurfaceClass.GRASS, Material.GRASS)
             if track:
                 shape = {"half_straight": l_p / 2, "r_in": r_in}
-                self._site_paint(field, field_l, field_w, "track", 0.02, SurfaceClass.GROUND, Material.SOIL, **shape)
-                self._site_paint(field, field_l, field_w, "track_lines", None, None, Material.LANE_MARKING, **shape)
+                self._site_paint(
+                    field, field_l, field_w, "track", 0.02, SurfaceClass.GROUND, Material.SOIL, **shape
+                )
+                self._site_paint(
+                    field, field_l, field_w, "track_lines", None, None, Material.LANE_MARKING, **shape
+                )
                 ring = [
-                    self._local(field, (l_p / 2) * math.copysign(1.0, math.cos(t)) + (r_in + 3.0) * math.cos(t),
-                                (r_in + 3.0) * math.sin(t))  # fmt: skip
+                    self._local(
+                        field,
+                        (l_p / 2) * math.copysign(1.0, math.cos(t)) + (r_in + 3.0) * math.cos(t),
+                        (r_in + 3.0) * math.sin(t),
+                    )
                     for t in np.linspace(0.0, 2 * math.pi, 41)
                 ]  # joggers on the track: the centre line of its middle lanes
                 self.walkways.append(Walkway(tuple(ring), int(self.rng.integers(2, 7)), 0.02, 3.0))
-            self._site_paint(field, l_p, w_p, "pitch_lines", None, None, Material.LANE_MARKING, pl=l_p, pw=w_p)
+            self._site_paint(
+                field, l_p, w_p, "pitch_lines", None, None, Material.LANE_MARKING, pl=l_p, pw=w_p
+            )
             for end in (-1.0, 1.0):  # goals: a crossbar 2.4 m up behind each goal line
                 u = end * (l_p / 2 + 0.8)
                 a, b = self._local(field, u, -3.66 * scale), self._local(field, u, 3.66 * scale)
-                self.grid.fill_polyline([a, b], 0.3, height_m=2.44, cls=SurfaceClass.GUARD_RAIL, mat=Material.METAL)
-            corners = [self._local(field, su * l_p / 2 * 0.9, sv * w_p / 2 * 0.9) for su, sv in ((-1, -1), (1, 1), (-1, 1), (1, -1))]
+                self.grid.fill_polyline(
+                    [a, b], 0.3, height_m=2.44, cls=SurfaceClass.GUARD_RAIL, mat=Material.METAL
+                )
+            corners = [
+                self._local(field, su * l_p / 2 * 0.9, sv * w_p / 2 * 0.9)
+                for su, sv in ((-1, -1), (1, 1), (-1, 1), (1, -1))
+            ]
             for a, b in ((corners[0], corners[1]), (corners[2], corners[3])):  # people across the field
                 self.walkways.append(Walkway((a, b), int(self.rng.integers(2, 6)), 0.0, 2.0))
             self._school_building(frame, field_l, field_w)
@@ -130,7 +151,12 @@ class SuburbSites(SuburbPlan):
         """A flat-roofed building with a parapet and a few roof units, its forecourt and its car park."""
         v0 = -(field_w + SCHOOL_STRIP_M) / 2 + field_w + 3.0
         v1 = v0 + SCHOOL_STRIP_M - 6.0
-        self._fill(*self._site_box(frame, -site_l / 2, site_l / 2, v0, v1), 0.05, SurfaceClass.GROUND, Material.CONCRETE)
+        self._fill(
+            *self._site_box(frame, -site_l / 2, site_l / 2, v0, v1),
+            0.05,
+            SurfaceClass.GROUND,
+            Material.CONCRETE,
+        )
         bl = min(self._u((45.0, 70.0)), 0.55 * site_l)
         bw = self._u((16.0, 24.0))
         h = self._u((7.0, 10.0))
@@ -138,7 +164,13 @@ class SuburbSites(SuburbPlan):
         self.n_buildings += 1
         b_lo = -site_l / 2 + 4.0
         bv0 = v0 + 6.0
-        self._fill(*self._site_box(frame, b_lo, b_lo + bl, bv0, bv0 + bw), h + 0.8, SurfaceClass.PARAPET, Material.CONCRETE, rid)
+        self._fill(
+            *self._site_box(frame, b_lo, b_lo + bl, bv0, bv0 + bw),
+            h + 0.8,
+            SurfaceClass.PARAPET,
+            Material.CONCRETE,
+            rid,
+        )
         self._fill(*self._site_box(frame, b_lo + 0.4, b_lo + bl - 0.4, bv0 + 0.4, bv0 + bw - 0.4), h,
                    SurfaceClass.ROOF_FLAT, Material.MEMBRANE, rid)  # fmt: skip
         for _ in range(int(self.rng.integers(2, 5))):
@@ -179,7 +211,10 @@ class SuburbSites(SuburbPlan):
             u, v = self._u((-length / 2 + r, length / 2 - r)), side * (width / 2 - r)
             self.grid.fill_disc(self._local(frame, u, v), r, height_m=self._u((6.0, 12.0)), dome=True,
                                 cls=SurfaceClass.TREE, mat=Material.FOLIAGE, mode="max")  # fmt: skip
-        ends = [(-length / 2 + 2.0, self._u((-0.4, 0.4)) * width), (length / 2 - 2.0, self._u((-0.4, 0.4)) * width)]
+        ends = [
+            (-length / 2 + 2.0, self._u((-0.4, 0.4)) * width),
+            (length / 2 - 2.0, self._u((-0.4, 0.4)) * width),
+        ]
         if self.rng.random() < 0.5:
             ends = [(u, -v) for u, v in ends]
         pts = tuple(as_pts(np.array([self._local(frame, u, v) for u, v in ends])))
