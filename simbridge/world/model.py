@@ -338,14 +338,18 @@ class WorldGrid:
         *,
         region: int | None = None,
         mat: Material = Material.TILES,
+        mode: str = "set",
     ) -> None:
-        """A gable roof: eaves at ``eave_m``, ridge along the length at ``ridge_m`` (absolute)."""
+        """A gable roof: eaves at ``eave_m``, ridge along the length at ``ridge_m`` (absolute).
+
+        ``mode`` "max" joins it to a roof already painted (the wings of an L-shaped house meet in valleys).
+        """
         got = self.rect_mask(centre_ne, length_m, width_m, yaw_rad)
         if got is None:
             return
         win, mask, _, v = got
         heights = eave_m + (ridge_m - eave_m) * (1.0 - np.abs(v) / (width_m / 2))
-        self.paint(win, mask, heights.astype(np.float32), SurfaceClass.ROOF_PITCHED, mat, region)
+        self.paint(win, mask, heights.astype(np.float32), SurfaceClass.ROOF_PITCHED, mat, region, mode)
 
     def fill_polyline(
         self,
