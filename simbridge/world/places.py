@@ -6,8 +6,9 @@ whatever the episode's seed. ``downtown`` (the street grid of flat-roofed blocks
 elevated highway, :mod:`simbridge.world.city`) is the default; ``suburb`` is curving streets and
 cul-de-sacs of detached houses under pitched roofs, with lawns, pools, driveways, a school's sports
 field and a park (:mod:`simbridge.world.suburb`); ``industrial`` is an estate of big flat-roofed sheds,
-yards with lorries and container stacks, car parks and a railway (:mod:`simbridge.world.industrial`). The builders are imported when a place is built, so
-that naming the kinds (command-line choices) costs nothing.
+yards with lorries and container stacks, car parks and a railway (:mod:`simbridge.world.industrial`).
+The builders are imported when a place is built, so that naming the kinds (command-line choices)
+costs nothing.
 """
 
 from __future__ import annotations

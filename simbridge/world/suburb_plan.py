@@ -189,17 +189,17 @@ class SuburbPlan(Props):
 
     def _cul_de_sac(self, parent: Road, at_m: float, side: float) -> Road | None:
         """Out from the parent at right angles, bending gently, to a turning circle 60-170 m on."""
-        pts, nrm = parent.at(np.array([at_m]))
-        p0, n0 = pts[0], nrm[0]
+        at, nrm = parent.at(np.array([at_m]))
+        p0, n0 = at[0], nrm[0]
         heading = math.atan2(side * n0[1], side * n0[0])
         turn = self._u((-1.0, 1.0)) / 110.0  # radians per metre
         steps = round(self._u((60.0, 170.0)) / STEP_M)
-        pts = [p0]
+        path = [p0]
         for _ in range(steps):
             heading += turn * STEP_M
-            pts.append(pts[-1] + STEP_M * np.array([math.cos(heading), math.sin(heading)]))
-        arr = np.array(pts)
-        d = np.arange(len(pts)) * STEP_M
+            path.append(path[-1] + STEP_M * np.array([math.cos(heading), math.sin(heading)]))
+        arr = np.array(path)
+        d = np.arange(len(path)) * STEP_M
         return self._accept(parent, arr, d, self._u(LOCAL_W_M), self._u(TURN_R_M))
 
     def _crescent(self, parent: Road, at_m: float, side: float) -> Road | None:
