@@ -1,9 +1,12 @@
-"""Sensor rendering cost on one core: camera frame, LiDAR sweep, rangefinder; city memory.
+"""Sensor rendering cost on one core: camera frame, LiDAR sweep, rangefinder; memory of each kind of place.
 
 Prints medians over several repetitions at several poses per world, with an empty flat grid of the
 same size as the baseline measured in the same run (the cost floor of ray setup and shading).
 
-Usage: python benchmarks/bench_world.py [--reps 5] [--skip-city]
+Every kind of procedural place (simbridge ``--place``: downtown, suburb, industrial ...) is timed at
+three poses of its seed 0, after the curated scenarios.
+
+Usage: python benchmarks/bench_world.py [--reps 5] [--skip-city] [--places downtown,suburb,...]
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ import numpy as np
 from simbridge.geo import euler_to_quat
 from simbridge.world.live import LiveWorld
 from simbridge.world.model import WorldGrid
+from simbridge.world.places import PLACES, generate_place
 from simbridge.world.world import World
 
 
@@ -65,8 +69,12 @@ def bench(
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0] if __doc__ else None)
     ap.add_argument("--reps", type=int, default=5)
-    ap.add_argument("--skip-city", action="store_true")
+    ap.add_argument("--skip-city", action="store_true", help="no procedural place")
+    ap.add_argument("--places", default=",".join(PLACES), help="the kinds of place to time (default all)")
     args = ap.parse_args()
+    unknown = set(args.places.split(",")) - set(PLACES)
+    if unknown:
+        ap.error(f"--places: unknown {', '.join(sorted(unknown))}; known: {', '.join(PLACES)}")
     _pin()
     from simbridge.world.scenario_file import BUILTIN_SCENARIO_DIR, load_scenario_file
 
@@ -80,23 +88,21 @@ def main() -> int:
         live = LiveWorld(load_scenario_file(BUILTIN_SCENARIO_DIR / f"{name}.toml", 0))
         rows.append((name, bench(live, poses, args.reps), live.grid.memory_bytes(), len(live.actors.poses())))
         print(f"{name}: done", flush=True)
-    if not args.skip_city:
-        from simbridge.world.city import generate_city
-
+    for place in [] if args.skip_city else args.places.split(","):
         t0 = time.perf_counter()
-        world = generate_city(0)
+        world = generate_place(place, 0)
         gen_s = time.perf_counter() - t0
         live = LiveWorld(world)
         city_poses = [(0.0, 0.0, 110.0, 0.0), (150.0, -200.0, 100.0, 45.0), (-300.0, 250.0, 120.0, 180.0)]
         rows.append(
             (
-                "city 1.2 km (seed 0)",
+                f"{place} 1.2 km (seed 0)",
                 bench(live, city_poses, args.reps),
                 live.grid.memory_bytes(),
                 len(live.actors.poses()),
             )
         )
-        print(f"city: generated in {gen_s:.1f} s", flush=True)
+        print(f"{place}: generated in {gen_s:.1f} s", flush=True)
     print(f"\nmedians of {args.reps} repetitions x 3 poses, one core; 960x540 camera, 100x512 LiDAR rays")
     print(
         f"{'world':<30} {'camera ms':>10} {'ratio':>6} {'LiDAR ms':>9} {'ratio':>6} "

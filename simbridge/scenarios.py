@@ -1,10 +1,11 @@
 """Named scenarios: the world, where the vehicle starts, and where home is.
 
 ``flat`` is open ground; ``scenario1`` and ``scenario2`` are the curated city blocks (TOML files in
-simbridge/world/scenarios/); ``city`` is the procedural place of ``city_seed``, of the kind ``place``
-names (:mod:`simbridge.world.places`: ``downtown``, the default, or ``suburb``); any path ending in
-``.toml`` is loaded as a scenario file. Scenario coordinates are NED metres from the scenario origin;
-the launch point is above the origin unless the scenario (or ``launch``) says otherwise.
+simbridge/world/scenarios/); ``city`` is the procedural place of ``city_seed``, of the kind
+``place`` names (:mod:`simbridge.world.places`: ``downtown``, the default, ``suburb``,
+``industrial``); any path ending in ``.toml`` is loaded as a scenario file. Scenario coordinates are
+NED metres from the scenario origin; the launch point is above the origin unless the scenario (or
+``launch``) says otherwise.
 
 Two seeds (DESIGN.md section 7): the episode's ``seed`` drives the traffic and pedestrians (and, in
 simbridge, the sensor noise and the wind); the city's own ``city_seed`` draws the city, so one campaign

@@ -6,9 +6,7 @@ tests/test_landnet_e.py."""
 
 from __future__ import annotations
 
-import dataclasses
 import json
-import math
 import shutil
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -19,7 +17,7 @@ import pytest
 from companion.config import ConfigError
 from companion.config_schema import ReasonerConfig
 from companion.perception.surface_id import Candidate
-from companion.reasoning.base import ConfirmRequest, Ranking, RankRequest
+from companion.reasoning.base import ConfirmRequest, RankRequest
 from companion.reasoning.landnet import (
     DEFAULT_MODEL,
     OUTPUTS,
@@ -35,23 +33,10 @@ from companion.reasoning.landnet import (
 )
 from companion.reasoning.onboard import OnboardReasoner
 from companion.reasoning.tiers import build_cascade
-from simbridge.world.camera import Frame
 from simbridge.world.live import LiveWorld
-from simbridge.world.model import SurfaceClass as C
 from tests.views import (
-    CLEAR_ROOF,
-    CLUTTERED_ROOF,
-    HIGHWAY,
-    LAUNCH,
-    ROAD,
-    WATER,
-    WEATHERS,
     close_up,
-    crop,
-    ground_box,
     open_field_toml,
-    render,
-    share,
     site_cut,
 )
 
@@ -491,155 +476,6 @@ def test_landnet_confirm_rejects_the_cluttered_roof(judge: OnboardReasoner, city
     assert not accept, why
 
 
-# --- training (landfall_train) --------------------------------------------------------------------------
-@pytest.mark.slow
-def test_landfall_train_smoke_renders_trains_and_exports(tmp_path: Path) -> None:
-    pytest.importorskip("torch", reason="training needs torch: pip install -e '.[train]'")
-    pytest.importorskip("onnx", reason="ONNX export needs onnx: pip install -e '.[train]'")
-    from landfall_train.train import main
-
-    out = tmp_path / "tiny"
-    argv = [
-        "--out", str(out), "--cache", str(tmp_path / "cache"), "--steps", "2", "--batch", "4", "--workers",
-        "1", "--train-cities", "1", "--per-city", "4", "--val-cities", "1", "--val-per-city", "4",
-        "--vignettes", "1", "--per-vignette", "3", "--val-vignettes", "1",
-    ]  # fmt: skip
-    assert main(argv) == 0
-    tiny = LandNet.load(out.with_suffix(".onnx"))
-    meta = json.loads(out.with_suffix(".json").read_text())
-    assert meta["training"]["steps_done"] == 2
-    assert meta["data"]["train_city_seeds"] == [100]
-    assert meta["data"]["train_patches"] == 4 + 3
-    assert meta["parity_max_abs_diff"] < 1e-3
-    assert tiny.read(_image(64, 64)).grid == (16, 16)
-    assert meta["input"]["views"] == 4  # calibrated as the companion reads: with the mirror images
-    assert meta["input"]["confirm_short_side_px"] == 128  # --confirm-side's default: the input's side
-    assert meta["input"]["rank_short_side_px"] == 128  # --rank-side's too
-    assert tiny.views == 4
-    # --recalibrate through OpenCV's DNN module gives the thresholds training gave through torch
-    thresholds = meta["thresholds"]
-    meta["thresholds"] = {"clear": 0.5, "cells": dict.fromkeys(thresholds["cells"], 0.5)}
-    out.with_suffix(".json").write_text(json.dumps(meta))
-    assert main([*argv, "--recalibrate"]) == 0
-    again = json.loads(out.with_suffix(".json").read_text())
-    assert again["thresholds"]["clear"] == pytest.approx(thresholds["clear"], abs=2e-4)
-    assert again["calibration"]["views"] == 4
-    assert again["sha256"] == meta["sha256"]  # the weights are untouched
-    from landfall_train.patches import generate
-
-    with pytest.raises(ValueError, match="reserved for evaluation"):
-        generate(tmp_path / "x", [0], 1, 0)
-
-    # a second seed, merged with the first: one ONNX model whose logits are the members' mean
-    from landfall_train import compare, ensemble
-
-    other = tmp_path / "tiny1"
-    assert main([*argv, "--out", str(other), "--seed", "1"]) == 0
-    merged = tmp_path / "both"
-    assert (
-        ensemble.main([str(out.with_suffix(".onnx")), str(other.with_suffix(".onnx")), "--out", str(merged)])
-        == 0
-    )
-    both = LandNet.load(merged.with_suffix(".onnx"))
-    side = json.loads(merged.with_suffix(".json").read_text())
-    assert [m["seed"] for m in side["members"]] == [0, 1]
-    assert side["parity_max_abs_diff"] < 1e-4
-    img = _image(96, 128)
-    logit = [
-        math.log(r.clear_p / (1 - r.clear_p))
-        for r in (tiny.read(img), LandNet.load(other.with_suffix(".onnx")).read(img))
-    ]
-    got = both.read(img).clear_p
-    assert math.log(got / (1 - got)) == pytest.approx(sum(logit) / 2, abs=1e-4)
-    assert main([*argv, "--out", str(merged), "--recalibrate"]) == 0
-    assert json.loads(merged.with_suffix(".json").read_text())["calibration"]["views"] == 4
-    tiny_val = [
-        "--cache", str(tmp_path / "cache"), "--val-cities", "1", "--val-per-city", "4", "--per-vignette", "3",
-        "--val-vignettes", "1", "--workers", "1",
-    ]  # fmt: skip
-    assert compare.main([str(merged.with_suffix(".onnx")), *tiny_val, "--views", "1,4"]) == 0
-    with pytest.raises(SystemExit):
-        ensemble.main([str(out.with_suffix(".onnx")), "--out", str(tmp_path / "alone")])  # one member: no
-
-    # the bare head (landfall_train.bare) on each net, then merged: its logit is the members' mean too
-    pytest.importorskip("sklearn", reason="the bare head needs scikit-learn: pip install -e '.[train]'")
-    from landfall_train import bare
-
-    data = [
-        "--train-cities", "1", "--per-city", "4", "--vignettes", "4", "--samples", "80", "--rank-views", "2",
-        *tiny_val,
-    ]  # fmt: skip
-    before = {0: tiny.read(img), 1: LandNet.load(other.with_suffix(".onnx")).read(img)}
-    for seed, model in ((0, out), (1, other)):
-        assert bare.main(["--out", str(model), "--seed", str(seed), *data]) == 0
-        with_head = LandNet.load(model.with_suffix(".onnx"))
-        assert with_head.has_bare
-        side = json.loads(model.with_suffix(".json").read_text())
-        assert side["format"] == "landfall-landnet/2"
-        assert side["bare"]["samples"] == 80
-        assert side["bare"]["fitted_views"] > 0
-        assert 0.0 <= side["bare"]["held_out"]["auc_rank_all"] <= 1.0
-        assert side["parity_max_abs_diff"] < 1e-3
-        got = with_head.read(img)
-        assert got.bare_p is not None
-        assert 0.0 <= got.bare_p <= 1.0
-        # the head adds an output and changes none of the others
-        assert got.clear_p == pytest.approx(before[seed].clear_p, abs=1e-6)
-        assert got.shares == before[seed].shares
-    with pytest.raises(SystemExit):  # a second head on the same net: refused
-        bare.main(["--out", str(out), "--seed", "0", *data])
-    with pytest.raises(SystemExit):  # members with and without the head: refused
-        ensemble.main([str(merged.with_suffix(".onnx")), str(out.with_suffix(".onnx")), "--out",
-                       str(tmp_path / "mixed")])  # fmt: skip
-    headed = tmp_path / "both-bare"
-    assert (
-        ensemble.main([str(out.with_suffix(".onnx")), str(other.with_suffix(".onnx")), "--out", str(headed)])
-        == 0
-    )
-    both_bare = LandNet.load(headed.with_suffix(".onnx"))
-    assert both_bare.has_bare
-    assert json.loads(headed.with_suffix(".json").read_text())["format"] == "landfall-landnet/2"
-    member_logits = [
-        math.log(r.bare_p / (1 - r.bare_p))  # type: ignore[operator]
-        for r in (LandNet.load(m.with_suffix(".onnx")).read(img, views=1) for m in (out, other))
-    ]
-    merged_p = both_bare.read(img, views=1).bare_p
-    assert merged_p is not None
-    assert math.log(merged_p / (1 - merged_p)) == pytest.approx(sum(member_logits) / 2, abs=1e-4)
-    assert compare.main([str(headed.with_suffix(".onnx")), *tiny_val, "--views", "2", "--rank",
-                         "--rank-weights", "0.5"]) == 0  # fmt: skip
-
-
-def test_vignette_shards_asked_for_more_worlds_later_render_them(tmp_path: Path) -> None:
-    """A cached shorter shard is not taken for a longer one (the bare head's data once were 1 vignette
-    where 4 were asked)."""
-    from landfall_train.patches import generate_vignettes, load_shards
-
-    one = generate_vignettes(tmp_path, 0, 1, 2, seed=0)
-    three = generate_vignettes(tmp_path, 0, 3, 2, seed=0)
-    assert len(load_shards(one)[0]) == 2
-    assert len(load_shards(three)[0]) == 6
-    assert len(load_shards(generate_vignettes(tmp_path, 0, 1, 2, seed=0))[0]) == 2
-
-
-def test_vignette_patches_are_labelled_varied_and_the_same_for_the_same_seed() -> None:
-    from landfall_train.labels import CLASSES, IGNORE
-    from landfall_train.patches import PATCH_PX, render_vignettes
-
-    rgb, labels, meta = render_vignettes(3, 2, 4, seed=5)
-    assert rgb.shape == (8, PATCH_PX, PATCH_PX, 3)
-    assert labels.shape == (8, PATCH_PX, PATCH_PX)
-    assert [m["vignette"] for m in meta] == [3] * 4 + [4] * 4
-    assert all(0.015 <= m["gsd_m"] <= 0.15 for m in meta)
-    assert set(np.unique(labels).tolist()) <= set(range(len(CLASSES))) | {IGNORE}
-    assert all(float(img.std()) > 2.0 for img in rgb)  # a scene, not a blank
-    again, labels_again, _ = render_vignettes(3, 2, 4, seed=5)
-    assert np.array_equal(rgb, again)
-    assert np.array_equal(labels, labels_again)
-    other, _, _ = render_vignettes(3, 2, 4, seed=6)
-    assert not np.array_equal(rgb, other)
-
-
 def test_landnet_confirm_open_country_field_passes_but_not_among_buildings(
     judge: OnboardReasoner, tmp_path: Path
 ) -> None:
@@ -689,103 +525,3 @@ def test_landnet_confirm_refuses_a_plain_road_at_street_level_in_open_country(
     assert "street_asphalt" in d.hazards, d.rationale
     assert d.binding  # street level: no remote tier's yes overrules it
     assert "a road or a car park" in d.rationale or "paving" in d.rationale
-
-
-# --- rank with Surface ID's geometry: the net's reading in place of the cues' hazard terms ------------
-def _geometry_rank(
-    judge: OnboardReasoner, crops: list[np.ndarray], cands: list[Candidate], reverse: bool
-) -> tuple[int, Ranking, list[dict[str, object]]]:
-    idx = [1, 0] if reverse else [0, 1]
-    transcript: list[dict[str, object]] = []
-    request = RankRequest(
-        tuple(crops[k] for k in idx),
-        tuple(dataclasses.replace(cands[k], index=j) for j, k in enumerate(idx)),
-        transcript=transcript,
-    )
-    ranking = judge.rank_sync(request)
-    assert sorted(ranking.order) == [0, 1]
-    return idx[ranking.order[0]], ranking, transcript
-
-
-RIVALS = {  # name: (ground rectangle, its geometry as Surface ID would see it)
-    "cluttered roof": (CLUTTERED_ROOF, {"up_m": 18.0, "edge_m": 3.0}),
-    "road": (ROAD, {"up_m": 0.0, "edge_m": 5.0}),
-    "highway": (HIGHWAY, {"up_m": 9.0, "edge_m": 6.0}),  # a deck 9 m up: geometrically a roof
-    "water": (WATER, {"up_m": 0.0, "edge_m": 8.0}),
-}
-
-
-@pytest.mark.parametrize("rival", list(RIVALS))
-@pytest.mark.parametrize("weather", WEATHERS)
-@pytest.mark.parametrize("reverse", [False, True])
-def test_landnet_rank_with_geometry_reads_the_crops_with_the_net(
-    judge: OnboardReasoner, city: LiveWorld, launch: dict[str, Frame], rival: str, weather: str, reverse: bool
-) -> None:
-    """With the net as judge, the rank with geometry scores each candidate by its geometry less the
-    net's hazard (not the image cues'): scenario1's clear roof still beats the cluttered roof, the road,
-    the highway deck and the river, and the rationale and transcript carry the net's reading."""
-    from tests.test_onboard_reasoner import truth_candidate
-
-    frame = launch[weather]
-    rect, geo = RIVALS[rival]
-    roof_box, other_box = ground_box(city, LAUNCH, *CLEAR_ROOF), ground_box(city, LAUNCH, *rect)
-    cands = [
-        truth_candidate(roof_box, CLEAR_ROOF, up_m=22.0, edge_m=13.0),
-        truth_candidate(other_box, rect, **geo),
-    ]
-    best, ranking, transcript = _geometry_rank(
-        judge, [crop(frame, roof_box), crop(frame, other_box)], cands, reverse
-    )
-    assert best == 0, ranking.rationale
-    chosen = ranking.rationale.split(";")[0]
-    assert "elevated flat roof 22 m up" in chosen
-    assert "[landnet-s]" in chosen  # the net's confidence, not a cue
-    assert "no geometry" not in ranking.rationale
-    assert transcript[0]["judge"] == "landnet"
-    readings = transcript[0]["readings"]
-    assert isinstance(readings, list)
-    assert len(readings) == 2
-    assert "cues" not in transcript[0]
-
-
-def test_landnet_rank_with_geometry_a_roof_with_a_person_on_it_comes_second(
-    judge: OnboardReasoner, scene: LiveWorld
-) -> None:
-    from tests.test_onboard_reasoner import truth_candidate
-
-    cam = (0.0, 0.0, -80.0)
-    frame = render(scene, cam, "clear")
-    clear_rect = ((-13.0, 13.0), (-48.0, -22.0), 20.0)
-    walked_rect = ((-13.0, 13.0), (22.0, 48.0), 20.0)
-    boxes = [ground_box(scene, cam, *clear_rect), ground_box(scene, cam, *walked_rect)]
-    assert share(frame, boxes[1], [C.PEDESTRIAN]) > 0.0
-    cands = [
-        truth_candidate(b, r, up_m=20.0, edge_m=13.0, margin_m=0.0)
-        for b, r in zip(boxes, (clear_rect, walked_rect), strict=True)
-    ]
-    for reverse in (False, True):
-        best, ranking, _t = _geometry_rank(judge, [crop(frame, b) for b in boxes], cands, reverse)
-        assert best == 0, ranking.rationale
-
-
-def test_a_roof_the_net_is_sure_is_not_clear_is_not_a_soft_doubt() -> None:
-    """Refused under the clear-site threshold with nothing counted: a soft doubt ("hazard", a roof the
-    search may settle for) unless the net is sure (clear-site confidence under 0.2: "not_clear", which
-    the least-bad ranking counts as obstructed: city 0 on real ArduCopter landed on such a site, a
-    parapet 1.9 m away, once the round budget was spent)."""
-    from companion.reasoning.net_judge import FIRM_NOT_CLEAR_P, _not_clear
-    from companion.site_ledger import Hazard, hazard_of
-
-    def reading(clear_p: float) -> SceneReading:
-        shares = (("roof", 0.93), ("edge", 0.26), ("ground", 0.65))
-        return SceneReading("landnet-s", (64, 64), (16, 16), clear_p, shares, (), (), 0.3)
-
-    soft, text = _not_clear(reading(0.45), 0.6, 0, 0.0, 0.1)
-    assert soft == "hazard"
-    assert "clear-site confidence 0.45 under 0.60" in text
-    firm, text = _not_clear(reading(FIRM_NOT_CLEAR_P - 0.09), 0.6, 0, 0.0, 0.1)
-    assert firm == "not_clear"
-    assert "edges or walls" in text
-    assert hazard_of([soft], accepted=False, street_level=False, strip=False) is Hazard.DOUBTED
-    assert hazard_of([firm], accepted=False, street_level=False, strip=False) is Hazard.OBSTRUCTED
-    assert _not_clear(reading(0.05), 0.6, 2, 0.0, 0.1)[0] == "raised"  # counted things come first

@@ -16,15 +16,16 @@ from companion.reasoning.landnet import PACKAGED, LandNet
 from companion.reasoning.onboard import OnboardReasoner
 from simbridge.world.camera import Frame
 from simbridge.world.live import LiveWorld
-from tests.test_landnet import RIVALS, _cut_decision, _geometry_rank
-from tests.views import CLEAR_ROOF, LAUNCH, crop, ground_box
+from tests.test_landnet import _cut_decision
+from tests.test_landnet_rank import RIVALS, rank_against_rival
+from tests.views import landnet_judge
 
 E = PACKAGED["landnet-e"]
 
 
 @pytest.fixture(scope="module")
 def judge() -> OnboardReasoner:
-    return OnboardReasoner(judge="landnet", landnet=LandNet.load(E))
+    return landnet_judge("landnet-e")
 
 
 @pytest.fixture
@@ -102,17 +103,6 @@ def test_with_geometry_the_clear_roof_beats_every_rival(
 ) -> None:
     """The rank a flight makes from 110 m: each candidate's geometry less the net's hazard puts
     scenario1's clear roof before the cluttered roof, the road, the highway deck and the river."""
-    from tests.test_onboard_reasoner import truth_candidate
-
-    frame = launch["clear"]
-    rect, geo = RIVALS[rival]
-    roof_box, other_box = ground_box(city, LAUNCH, *CLEAR_ROOF), ground_box(city, LAUNCH, *rect)
-    cands = [
-        truth_candidate(roof_box, CLEAR_ROOF, up_m=22.0, edge_m=13.0),
-        truth_candidate(other_box, rect, **geo),
-    ]
-    best, ranking, _transcript = _geometry_rank(
-        judge, [crop(frame, roof_box), crop(frame, other_box)], cands, reverse
-    )
+    best, ranking, _transcript = rank_against_rival(judge, city, launch["clear"], rival, reverse)
     assert best == 0, ranking.rationale
     assert "[landnet-e]" in ranking.rationale.split(";")[0]

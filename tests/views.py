@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -17,6 +18,9 @@ from simbridge.scenarios import load_scenario
 from simbridge.world.camera import Frame
 from simbridge.world.live import LiveWorld
 from simbridge.world.model import SurfaceClass as C
+
+if TYPE_CHECKING:
+    from companion.reasoning.onboard import OnboardReasoner
 
 SCENE = Path(__file__).with_name("onboard_scene.toml")
 LEVEL = euler_to_quat(0.0, 0.0, 0.0)
@@ -113,3 +117,11 @@ resolution_m = 0.5
 ground = "soil"
 launch = {{ north = 0.0, east = 0.0, height_m = {launch_height_m}, yaw_deg = 0.0 }}
 """
+
+
+def landnet_judge(model: str) -> OnboardReasoner:
+    """The onboard tier judging with the packaged LandNet ``model`` (``landnet-s``, ``landnet-e``)."""
+    from companion.reasoning.landnet import PACKAGED, LandNet
+    from companion.reasoning.onboard import OnboardReasoner
+
+    return OnboardReasoner(judge="landnet", landnet=LandNet.load(PACKAGED[model]))
