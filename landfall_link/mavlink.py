@@ -17,11 +17,8 @@ a link without a socket, the way httpx's client takes a transport.
 from __future__ import annotations
 
 import asyncio
-import logging
 import time
-from typing import Any, Protocol
-
-from pymavlink.dialects.v20 import common as mavlink2
+from typing import Any, Protocol, Unpack
 
 from landfall_link.mavlink_base import (
     DEFAULT_BAUD,
@@ -29,6 +26,7 @@ from landfall_link.mavlink_base import (
     UDP_MODES,
     URL_FORMS,
     Address,
+    LinkOptions,
     LinkStats,
     LinkUrl,
     LinkUrlError,
@@ -44,6 +42,7 @@ __all__ = [
     "UDP_MODES",
     "URL_FORMS",
     "Address",
+    "LinkOptions",
     "LinkStats",
     "LinkUrl",
     "LinkUrlError",
@@ -108,15 +107,10 @@ class MavlinkUdpLink(MavlinkEndpoint, asyncio.DatagramProtocol):
         system_id: int,
         component_id: int,
         handler: MessageHandler | None = None,
-        *,
-        signing_key: bytes | None = None,
-        logger: logging.Logger | None = None,
-        dialect: Any = mavlink2,
+        **options: Unpack[LinkOptions],
     ) -> None:
         self.url = LinkUrl.parse(url, allowed=UDP_MODES)
-        super().__init__(
-            system_id, component_id, handler, signing_key=signing_key, logger=logger, dialect=dialect
-        )
+        super().__init__(system_id, component_id, handler, **options)
         self._transport: asyncio.DatagramTransport | None = None
         self._fixed: Address | None = None
         self._peers: dict[Address, float] = {}
@@ -207,9 +201,7 @@ def open_link(
     system_id: int,
     component_id: int,
     handler: MessageHandler | None = None,
-    *,
-    signing_key: bytes | None = None,
-    logger: logging.Logger | None = None,
+    **options: Unpack[LinkOptions],
 ) -> MavlinkUdpLink | MavlinkStreamLink:
     """The link a ``--mavlink`` URL names (UDP, TCP or serial), not yet open: use it as ``async with``.
 
@@ -217,5 +209,5 @@ def open_link(
         LinkUrlError: ``url`` is none of :data:`URL_FORMS`.
     """
     if LinkUrl.parse(url).mode in UDP_MODES:
-        return MavlinkUdpLink(url, system_id, component_id, handler, signing_key=signing_key, logger=logger)
-    return MavlinkStreamLink(url, system_id, component_id, handler, signing_key=signing_key, logger=logger)
+        return MavlinkUdpLink(url, system_id, component_id, handler, **options)
+    return MavlinkStreamLink(url, system_id, component_id, handler, **options)

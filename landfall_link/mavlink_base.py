@@ -12,7 +12,7 @@ import logging
 import time
 from collections.abc import Callable, Collection
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypedDict, Unpack
 
 from pymavlink.dialects.v20 import common as mavlink2
 
@@ -146,6 +146,14 @@ class LinkStats:
     dropped: int = 0  # frames not sent: no connection, or the write buffer full (a stalled peer)
 
 
+class LinkOptions(TypedDict, total=False):
+    """What every link takes beyond its URL, ids and handler, whatever its transport."""
+
+    signing_key: bytes | None  # 32 bytes: sign what we send, refuse unsigned and badly signed frames
+    logger: logging.Logger | None  # default: the "landfall_link.mavlink" logger
+    dialect: Any  # the pymavlink dialect module; default: common, MAVLink 2
+
+
 class MavlinkEndpoint(abc.ABC):
     """A MAVLink 2 endpoint as (``system_id``, ``component_id``), whatever its transport: the codec
     (``mav``, pymavlink's ``MAVLink`` fed with ``parse_buffer``), signing, counters and the handler.
@@ -159,16 +167,15 @@ class MavlinkEndpoint(abc.ABC):
         system_id: int,
         component_id: int,
         handler: MessageHandler | None,
-        *,
-        signing_key: bytes | None,
-        logger: logging.Logger | None,
-        dialect: Any = mavlink2,
+        **options: Unpack[LinkOptions],
     ) -> None:
+        dialect = options.get("dialect", mavlink2)
         self.mav = dialect.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
         self.mav.robust_parsing = True  # bad input becomes BAD_DATA messages, never an exception
         self.stats = LinkStats()
         self._handler = handler
-        self._log = logger or logging.getLogger("landfall_link.mavlink")
+        self._log = options.get("logger") or logging.getLogger("landfall_link.mavlink")
+        signing_key = options.get("signing_key")
         if signing_key is not None:
             sig = self.mav.signing
             sig.secret_key = signing_key

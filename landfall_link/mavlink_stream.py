@@ -14,14 +14,19 @@ next peer. Meanwhile :meth:`MavlinkStreamLink.send` goes on being called and dro
 from __future__ import annotations
 
 import asyncio
-import logging
 import os
-from typing import Any
+from typing import Any, Unpack
 
 import serial
-from pymavlink.dialects.v20 import common as mavlink2
 
-from landfall_link.mavlink_base import STREAM_MODES, Address, LinkUrl, MavlinkEndpoint, MessageHandler
+from landfall_link.mavlink_base import (
+    STREAM_MODES,
+    Address,
+    LinkOptions,
+    LinkUrl,
+    MavlinkEndpoint,
+    MessageHandler,
+)
 
 RETRY_S = 1.0  # between attempts to (re)open a connection or a device
 OPEN_TIMEOUT_S = 5.0  # a connect to a host that never answers gives up after this, then retries
@@ -96,15 +101,11 @@ class MavlinkStreamLink(MavlinkEndpoint):
         component_id: int,
         handler: MessageHandler | None = None,
         *,
-        signing_key: bytes | None = None,
-        logger: logging.Logger | None = None,
-        dialect: Any = mavlink2,
         retry_s: float = RETRY_S,
+        **options: Unpack[LinkOptions],
     ) -> None:
         self.url = LinkUrl.parse(url, allowed=STREAM_MODES)
-        super().__init__(
-            system_id, component_id, handler, signing_key=signing_key, logger=logger, dialect=dialect
-        )
+        super().__init__(system_id, component_id, handler, **options)
         self._retry_s = retry_s
         self._conn: _Connection | None = None
         self._ever_connected = False
