@@ -13,7 +13,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from companion.alarms import ALARM_TEXT_PREFIX, MAV_CMD_USER_1, Criticality, ReasonCode
-from landfall_link.mavlink import LinkUrl, LinkUrlError, MavlinkUdpLink, parse_signing_key
+from landfall_link.mavlink import URL_FORMS, LinkUrl, LinkUrlError, open_link, parse_signing_key
 
 RESULTS = {
     0: "accepted: recovery started",
@@ -29,7 +29,11 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="trigger_alarm.py", description=__doc__.splitlines()[0] if __doc__ else None
     )
-    p.add_argument("--mavlink", default="udpout:127.0.0.1:14550", help="where the companion listens")
+    p.add_argument(
+        "--mavlink",
+        default="udpout:127.0.0.1:14550",
+        help=f"where the companion listens (default %(default)s): {URL_FORMS}",
+    )
     p.add_argument("--reason", required=True, help="free-text reason, e.g. 'GPS spoofing detected'")
     p.add_argument("--criticality", default="high", choices=("low", "high", "critical"))
     p.add_argument("--code", default="other", choices=[c.name.lower() for c in ReasonCode])
@@ -54,7 +58,7 @@ async def send_alarm(args: argparse.Namespace, key: bytes | None) -> int | None:
 
     crit = Criticality.parse(args.criticality)
     code = ReasonCode[args.code.upper()]
-    async with MavlinkUdpLink(args.mavlink, args.source_system, 25, on_message, signing_key=key) as link:
+    async with open_link(args.mavlink, args.source_system, 25, on_message, signing_key=key) as link:
         text = (ALARM_TEXT_PREFIX + args.reason)[:50]
         loop = asyncio.get_running_loop()
         deadline = loop.time() + args.timeout

@@ -22,13 +22,18 @@ from companion.perception.depth import DepthError
 from companion.reasoning.tiers import BUILTIN_PROFILES, ONBOARD, build_cascade, secrets
 from companion.recovery import RecoveryParams
 from companion.redact import redact_logs
+from landfall_link.mavlink import URL_FORMS
 
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="companion", description="Landfall: land the drone safely when an alarm fires."
     )
-    p.add_argument("--mavlink", help="MAVLink endpoint, e.g. udp:14550 (default from the config: udp:14550)")
+    p.add_argument(
+        "--mavlink",
+        help="MAVLink endpoint, e.g. udp:14550, tcp:127.0.0.1:5760 or serial:/dev/ttyAMA0:921600 "
+        f"(default from the config: udp:14550); forms: {URL_FORMS}",
+    )
     p.add_argument("--config", type=Path, help="TOML configuration file (deploy/companion.toml documents it)")
     p.add_argument(
         "--reasoner",

@@ -44,6 +44,7 @@ from pydantic import (
 )
 
 from companion.alarms import Criticality
+from landfall_link.mavlink import LinkUrl, LinkUrlError
 
 __all__ = [
     "DEFAULTS",
@@ -116,11 +117,11 @@ class MavlinkConfig(_Section):
     @field_validator("url")
     @classmethod
     def _check_url(cls, url: str) -> str:
-        scheme, sep, rest = url.partition(":")
-        _, _, port_text = rest.rpartition(":")
-        if not sep or scheme not in ("udp", "udpin", "udpout") or not port_text.isdigit():
-            raise ValueError(f"must be udp:PORT, udpin:HOST:PORT or udpout:HOST:PORT (got {url!r})")
-        if not 0 < int(port_text) < 65536:
+        try:
+            parsed = LinkUrl.parse(url)
+        except LinkUrlError as exc:
+            raise ValueError(f"{exc.problem} (got {url!r})") from None
+        if parsed.mode != "serial" and parsed.port == 0:  # any free port: for a test's link, not a daemon
             raise ValueError(f"port must be in 1..65535 (got {url!r})")
         return url
 

@@ -25,7 +25,7 @@ from companion.recovery import Outcome, Record, Recovery, RecoveryParams
 from companion.recovery.looking import warm_up
 from companion.supervise import supervised
 from companion.telemetry import TelemetryCache
-from landfall_link.mavlink import MavlinkLink, MavlinkUdpLink
+from landfall_link.mavlink import MavlinkLink, open_link
 
 MAV_TYPE_ONBOARD_CONTROLLER = 18
 MAV_AUTOPILOT_INVALID = 8
@@ -57,8 +57,8 @@ MAV_CMD_SET_MESSAGE_INTERVAL = 511
 class Companion:
     """Build, then ``await run()``; ``stop()`` ends it.
 
-    The MAVLink endpoint is ``link`` when given (``signing_key`` is then the link's business), else a
-    UDP link on ``mavlink_url``."""
+    The MAVLink endpoint is ``link`` when given (``signing_key`` is then the link's business), else the
+    UDP, TCP or serial link ``mavlink_url`` names (:func:`landfall_link.mavlink.open_link`)."""
 
     def __init__(
         self,
@@ -92,7 +92,7 @@ class Companion:
         if link is None:
             if mavlink_url is None:
                 raise ValueError("a Companion needs a mavlink_url or a link, got neither")
-            link = MavlinkUdpLink(
+            link = open_link(
                 mavlink_url,
                 vehicle_system_id or 1,
                 component_id,
@@ -474,12 +474,15 @@ class Companion:
                 st = self.link.stats
                 self.log.info(
                     "companion stopped: %d frames in, %d bad, %d unsigned and %d badly signed refused, "
-                    "%d alarms refused",
+                    "%d alarms refused; link: %d reconnects, %d errors, %d frames dropped while down",
                     st.received,
                     st.bad_frames,
                     st.rejected_unsigned,
                     st.rejected_bad_signature,
                     self.alarms_refused,
+                    st.reconnects,
+                    st.link_errors,
+                    st.dropped,
                 )
                 if self.ground is not None:
                     g = self.ground

@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from landfall_link.boot_clock import BootClock
-from landfall_link.mavlink import MavlinkUdpLink
+from landfall_link.mavlink import URL_FORMS, open_link
 from landfall_link.sensorstream import SensorFrame, SensorStreamServer, parse_endpoint
 
 __all__ = ["LidarBridge", "LidarBridgeError", "LidarMount", "body_rotation", "main"]
@@ -106,7 +106,7 @@ def nadir_distance(points_frd: np.ndarray, cone_deg: float = NADIR_CONE_DEG) -> 
 
 class LidarBridge:
     """Serves the newest sweep pushed to it on the sensor stream at ``endpoint`` (``HOST:PORT``), dated on
-    the boot clock of the autopilot heard on ``mavlink_url`` (``udpin:HOST:PORT`` or ``udpout:...``)."""
+    the boot clock of the autopilot heard on ``mavlink_url`` (UDP, TCP or serial: ``URL_FORMS``)."""
 
     def __init__(
         self,
@@ -122,7 +122,7 @@ class LidarBridge:
         self._host, self._port = parse_endpoint(endpoint)
         self._vehicle = vehicle_system_id
         self._max_age_s = max_sweep_age_s
-        self._link = MavlinkUdpLink(mavlink_url, 1, MAV_COMP_ID_PERIPHERAL, self._on_message, logger=log)
+        self._link = open_link(mavlink_url, 1, MAV_COMP_ID_PERIPHERAL, self._on_message, logger=log)
         self._server: SensorStreamServer | None = None
         self._sweep: tuple[np.ndarray, float] | None = None  # body FRD points, taken (monotonic s)
         self._pos = (0.0, 0.0, 0.0)
@@ -154,7 +154,7 @@ class LidarBridge:
                 await self._beat
         if self._server is not None:
             await self._server.__aexit__(None, None, None)
-        self._link.close()
+        await self._link.__aexit__(None, None, None)
 
     @property
     def port(self) -> int:
@@ -250,7 +250,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         description="Serve LiDAR sweeps to the companion on the sensor stream, dated on the autopilot's "
         "clock (docs/sensor-stream.md). This command replays recorded sweeps; a driver uses LidarBridge.",
     )
-    p.add_argument("--mavlink", required=True, help="the autopilot's MAVLink, e.g. udpin:127.0.0.1:14551")
+    p.add_argument(
+        "--mavlink",
+        required=True,
+        help="the autopilot's MAVLink, e.g. udpin:127.0.0.1:14551 or serial:/dev/ttyAMA0:921600; "
+        f"forms: {URL_FORMS}",
+    )
     p.add_argument("--sensors", default="127.0.0.1:5601", help="HOST:PORT served (the companion's --sensors)")
     p.add_argument("--replay", type=Path, required=True, help="folder of .npy sweeps, (N, 3|4) float32")
     p.add_argument("--rate", type=float, default=10.0, help="sweeps a second (default 10)")

@@ -11,7 +11,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from landfall_link.mavlink import LinkUrl, LinkUrlError, parse_signing_key
+from landfall_link.mavlink import UDP_MODES, LinkUrl, LinkUrlError, parse_signing_key
 from simbridge.args import non_negative_seed
 from simbridge.estimate import PRESETS, GpsFaultConfig
 from simbridge.geo import GeoOrigin
@@ -208,7 +208,7 @@ def build_parser() -> argparse.ArgumentParser:
 def config_from_args(args: argparse.Namespace) -> SimConfig:
     """Turn parsed flags into a validated config; raises ValueError naming the flag."""
     try:
-        LinkUrl.parse(args.mavlink)
+        LinkUrl.parse(args.mavlink, allowed=UDP_MODES)  # simbridge speaks UDP only
     except LinkUrlError as exc:
         raise ValueError(f"--mavlink: {exc}") from None
     key = None

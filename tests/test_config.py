@@ -13,6 +13,7 @@ from pydantic import ValidationError
 
 from companion.config import ConfigError, env_var_name, load_config
 from companion.config_schema import CompanionConfig, RoundsByCriticality, SearchWindow
+from landfall_link.mavlink import URL_FORMS
 
 REPO = Path(__file__).resolve().parents[1]
 KEY_HEX = "0123456789abcdef" * 4
@@ -234,7 +235,7 @@ def test_env_var_name_upper_cases_section_and_key() -> None:
         ("[mavlink]\ncomponent_id = 256", "companion.toml: mavlink.component_id: must be <= 255 (got 256)"),
         (
             "[mavlink]\nurl = 'tcp:5760'",
-            "companion.toml: mavlink.url: must be udp:PORT, udpin:HOST:PORT or udpout:HOST:PORT "
+            "companion.toml: mavlink.url: a tcp link needs HOST:PORT, e.g. tcp:127.0.0.1:5760 "
             "(got 'tcp:5760')",
         ),
         (
@@ -393,7 +394,7 @@ def test_load_config_env_error_beats_valid_file(in_tmp: Path) -> None:
         (
             {"mavlink__url": "14550"},
             "--mavlink",
-            "must be udp:PORT, udpin:HOST:PORT or udpout:HOST:PORT (got '14550')",
+            f"unknown form; expected {URL_FORMS} (got '14550')",
         ),
         ({"mavlink__url": "udp:0"}, "--mavlink", "port must be in 1..65535 (got 'udp:0')"),
         ({"reasoner__name": "two words"}, "--reasoner", "must be one word (no spaces) (got 'two words')"),
