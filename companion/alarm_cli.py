@@ -2,14 +2,22 @@
 
 Exit status: 0 when the companion accepted the alarm (a new recovery, or merged into the running
 one), 1 when it refused it, 2 on a usage error, 3 when no acknowledgement came back in time.
+
+The MAVLink 2 signing key (64 hex digits) comes from ``--signing-key-file`` (a file holding it, which
+should be readable by its owner only), else from the environment variable ``LANDFALL_SIGNING_KEY``
+(``--signing-key-env`` names another: the companion's own default), else from ``--signing-key``: on
+the command line a key is visible to every user of the machine (``ps``), so that form is for tests.
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import os
+import stat
 import sys
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 from companion.alarms import ALARM_TEXT_PREFIX, MAV_CMD_USER_1, Criticality, ReasonCode
@@ -25,6 +33,40 @@ RESULTS = {
 }
 
 
+KEY_ENV = "LANDFALL_SIGNING_KEY"  # the companion's default (mavlink.signing_key_env)
+
+
+def signing_key(args: argparse.Namespace, environ: Mapping[str, str]) -> tuple[bytes | None, str | None]:
+    """The signing key by the module docstring's order, and a warning to print (a key file others can
+    read), if any.
+
+    Raises:
+        ValueError: a key that is not 64 hex digits, or a key file that cannot be read (the message
+            names where the key came from and never echoes it).
+    """
+    warning = None
+    if args.signing_key_file is not None:
+        path = args.signing_key_file
+        try:
+            text = path.read_text(encoding="ascii").strip()
+            mode = path.stat().st_mode
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ValueError(f"--signing-key-file {path}: cannot read it ({type(exc).__name__})") from None
+        if mode & (stat.S_IRWXG | stat.S_IRWXO):
+            warning = f"{path} can be read by others than its owner: chmod 600 {path}"
+        source = f"--signing-key-file {path}"
+    elif args.signing_key:
+        text, source = args.signing_key, "--signing-key"
+    elif environ.get(args.signing_key_env):
+        text, source = environ[args.signing_key_env], f"${args.signing_key_env}"
+    else:
+        return None, None
+    try:
+        return parse_signing_key(text), warning
+    except ValueError as exc:
+        raise ValueError(f"{source}: {exc}") from None
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="trigger_alarm.py", description=__doc__.splitlines()[0] if __doc__ else None
@@ -37,7 +79,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--reason", required=True, help="free-text reason, e.g. 'GPS spoofing detected'")
     p.add_argument("--criticality", default="high", choices=("low", "high", "critical"))
     p.add_argument("--code", default="other", choices=[c.name.lower() for c in ReasonCode])
-    p.add_argument("--signing-key", help="MAVLink 2 signing key, 64 hex digits")
+    keys = p.add_mutually_exclusive_group()
+    keys.add_argument(
+        "--signing-key-file", type=Path, metavar="PATH", help="a file holding the MAVLink 2 signing key"
+    )
+    keys.add_argument(
+        "--signing-key",
+        help="the key itself, 64 hex digits (visible in ps: prefer the file or the environment)",
+    )
+    p.add_argument(
+        "--signing-key-env",
+        default=KEY_ENV,
+        metavar="NAME",
+        help="the environment variable holding the key when no file is given (default %(default)s)",
+    )
     p.add_argument(
         "--source-system", type=int, default=255, help="our own MAVLink system id (255: a ground station)"
     )
@@ -97,9 +152,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         LinkUrl.parse(args.mavlink)
         if not 1 <= args.source_system <= 255:
             raise ValueError(f"--source-system must be 1..255 (got {args.source_system})")
-        key = parse_signing_key(args.signing_key) if args.signing_key else None
+        key, warning = signing_key(args, os.environ)
     except (LinkUrlError, ValueError) as exc:
         parser.error(str(exc))
+    if warning is not None:
+        print(f"trigger_alarm.py: warning: {warning}", file=sys.stderr)
     result = asyncio.run(send_alarm(args, key))
     if result is None:
         print(
