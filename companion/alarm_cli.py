@@ -1,7 +1,11 @@
 """``trigger_alarm.py`` / ``trigger-alarm``: send an alarm to the companion and print its answer.
 
+``--cancel`` sends the operator's cancel instead (MAV_CMD_USER_2: companion/operator.py): the running
+recovery stops and the vehicle is left in the companion's ``alarms.cancel_mode``.
+
 Exit status: 0 when the companion accepted the alarm (a new recovery, or merged into the running
-one), 1 when it refused it, 2 on a usage error, 3 when no acknowledgement came back in time.
+one) or the cancel, 1 when it refused it, 2 on a usage error, 3 when no acknowledgement came back in
+time.
 
 The MAVLink 2 signing key (64 hex digits) comes from ``--signing-key-file`` (a file holding it, which
 should be readable by its owner only), else from the environment variable ``LANDFALL_SIGNING_KEY``
@@ -21,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from companion.alarms import ALARM_TEXT_PREFIX, MAV_CMD_USER_1, Criticality, ReasonCode
+from companion.operator import MAV_CMD_USER_2
 from landfall_link.mavlink import URL_FORMS, LinkUrl, LinkUrlError, open_link, parse_signing_key
 
 RESULTS = {
@@ -31,6 +36,7 @@ RESULTS = {
     3: "refused (unsupported)",
     4: "refused (failed)",
 }
+CANCEL_RESULTS = {0: "accepted: recovery cancelled", 2: "refused: no recovery to cancel, or not allowed"}
 
 
 KEY_ENV = "LANDFALL_SIGNING_KEY"  # the companion's default (mavlink.signing_key_env)
@@ -76,7 +82,9 @@ def build_parser() -> argparse.ArgumentParser:
         default="udpout:127.0.0.1:14550",
         help=f"where the companion listens (default %(default)s): {URL_FORMS}",
     )
-    p.add_argument("--reason", required=True, help="free-text reason, e.g. 'GPS spoofing detected'")
+    what = p.add_mutually_exclusive_group(required=True)
+    what.add_argument("--reason", help="free-text reason, e.g. 'GPS spoofing detected'")
+    what.add_argument("--cancel", action="store_true", help="cancel the running recovery instead")
     p.add_argument("--criticality", default="high", choices=("low", "high", "critical"))
     p.add_argument("--code", default="other", choices=[c.name.lower() for c in ReasonCode])
     keys = p.add_mutually_exclusive_group()
@@ -108,26 +116,28 @@ async def send_alarm(args: argparse.Namespace, key: bytes | None) -> int | None:
     def on_message(msg: Any, addr: tuple[str, int]) -> None:
         companion = (args.target_system, args.target_component)
         from_companion = (msg.get_srcSystem(), msg.get_srcComponent()) == companion
-        if msg.get_type() == "COMMAND_ACK" and msg.command == MAV_CMD_USER_1 and from_companion:
+        if msg.get_type() == "COMMAND_ACK" and msg.command == command and from_companion:
             acks.put_nowait(msg)
 
     crit = Criticality.parse(args.criticality)
     code = ReasonCode[args.code.upper()]
+    command = MAV_CMD_USER_2 if args.cancel else MAV_CMD_USER_1
+    params = (0.0, 0.0) if args.cancel else (float(code), float(crit))
     async with open_link(args.mavlink, args.source_system, 25, on_message, signing_key=key) as link:
-        text = (ALARM_TEXT_PREFIX + args.reason)[:50]
+        text = (ALARM_TEXT_PREFIX + (args.reason or ""))[:50]
         loop = asyncio.get_running_loop()
         deadline = loop.time() + args.timeout
         attempt = 0
         while loop.time() < deadline:
-            link.send(link.mav.statustext_encode(4, text.encode(), 0, 0))
+            if not args.cancel:
+                link.send(link.mav.statustext_encode(4, text.encode(), 0, 0))
             link.send(
                 link.mav.command_long_encode(
                     args.target_system,
                     args.target_component,
-                    MAV_CMD_USER_1,
+                    command,
                     attempt,
-                    float(code),
-                    float(crit),
+                    *params,
                     0,
                     0,
                     0,
@@ -165,6 +175,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 3
+    if args.cancel:
+        print(f"cancel: {CANCEL_RESULTS.get(result, f'MAV_RESULT {result}')}")
+        return 0 if result == 0 else 1
     print(f"alarm '{args.reason}' ({args.criticality}): {RESULTS.get(result, f'MAV_RESULT {result}')}")
     return 0 if result in (0, 5) else 1
 

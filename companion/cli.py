@@ -18,6 +18,7 @@ from companion.config import ConfigError, load_config
 from companion.config_schema import CompanionConfig
 from companion.daemon import Companion
 from companion.ground import GroundFeed, GroundParams
+from companion.operator import InhibitSwitch
 from companion.perception.depth import DepthError
 from companion.reasoning.tiers import BUILTIN_PROFILES, ONBOARD, build_cascade, secrets
 from companion.recovery import RecoveryParams
@@ -142,6 +143,10 @@ def build_companion(cfg: CompanionConfig) -> Companion:
         watch_failsafe_text=a.watch_failsafe_text,
         watch_gps=a.watch_gps,
         accept_from=tuple(a.accept_from_system_ids),
+        cancel_to=a.cancel_mode,
+        inhibit=InhibitSwitch(a.inhibit_rc_channel, (a.inhibit_pwm_us[0], a.inhibit_pwm_us[1]))
+        if a.inhibit_rc_channel
+        else None,
         heartbeat_hz=cfg.mavlink.heartbeat_hz,
     )
 

@@ -290,6 +290,20 @@ class AlarmsConfig(_Section):
     accept_from_system_ids: tuple[Annotated[int, Strict(), Field(ge=1, le=255)], ...] = Field(
         default=(), strict=False
     )
+    # the operator's controls (companion/operator.py): the mode a cancelled recovery leaves the vehicle
+    # in, and an RC switch that inhibits every alarm (channel 0: none)
+    cancel_mode: Literal["hold", "land", "rtl"] = "hold"
+    inhibit_rc_channel: int = Field(default=0, ge=0, le=18)
+    inhibit_pwm_us: tuple[Annotated[int, Strict(), Field(ge=800, le=2200)], ...] = Field(
+        default=(1800, 2200), strict=False, min_length=2, max_length=2
+    )
+
+    @field_validator("inhibit_pwm_us")
+    @classmethod
+    def _check_band(cls, band: tuple[int, ...]) -> tuple[int, ...]:
+        if band[0] > band[1]:
+            raise ValueError(f"must be [low, high] with low <= high (got {list(band)})")
+        return band
 
 
 class LvlmProfileConfig(_Section):

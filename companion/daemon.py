@@ -17,6 +17,7 @@ from companion.alarms import ALARM_TEXT_PREFIX, MAV_CMD_USER_1, Alarm, Criticali
 from companion.control import VehicleController
 from companion.frame_source import FrameSource
 from companion.ground import GroundFeed, TeeRecord, telemetry_snapshot
+from companion.operator import MAV_CMD_USER_2, InhibitSwitch, cancel_mode
 from companion.precision import check_precision_landing
 from companion.reasoning.base import Reasoner
 from companion.reasoning.cascade import Cascade
@@ -83,6 +84,8 @@ class Companion:
         watch_failsafe_text: bool = True,
         watch_gps: bool = True,
         accept_from: tuple[int, ...] = (),
+        cancel_to: str = "hold",
+        inhibit: InhibitSwitch | None = None,
         heartbeat_hz: float = 1.0,
         logger: logging.Logger | None = None,
     ) -> None:
@@ -131,6 +134,11 @@ class Companion:
         self._watch_failsafe = watch_failsafe_text
         self._watch_gps = watch_gps
         self._accept_from = accept_from
+        self._cancel_mode = cancel_mode(cancel_to)  # ValueError for a name that is none
+        self._inhibit = inhibit
+        self._inhibited = False  # what the switch said at the last look (announced on each change)
+        self._cancelling: asyncio.Task[None] | None = None
+        self.alarms_inhibited = 0
         self._heartbeat_period = 1.0 / heartbeat_hz
         self._alarm_texts: dict[tuple[int, int], str] = {}
         self.recovery: Recovery | None = None
@@ -171,10 +179,13 @@ class Companion:
         ours = msg.target_component == self.component_id and msg.target_system in (0, self.link.mav.srcSystem)
         if not ours:
             return
+        src = (msg.get_srcSystem(), msg.get_srcComponent())
+        if int(msg.command) == MAV_CMD_USER_2:
+            self._ack(msg, self.cancel(src))
+            return
         if int(msg.command) != MAV_CMD_USER_1:
             self._ack(msg, RESULT_UNSUPPORTED)
             return
-        src = (msg.get_srcSystem(), msg.get_srcComponent())
         try:
             alarm = Alarm.from_command(msg.param1, msg.param2, self._alarm_texts.pop(src, ""), src)
         except ValueError as exc:
@@ -223,6 +234,11 @@ class Companion:
         if self._accept_from and alarm.source[0] not in self._accept_from and alarm.source != (0, 0):
             self.alarms_refused += 1
             self.log.warning("alarm from system %d refused: not in accept_from_system_ids", alarm.source[0])
+            return RESULT_DENIED
+        if self.inhibited():
+            self.alarms_refused += 1
+            self.alarms_inhibited += 1
+            self.log.warning("alarm %r refused: Landfall is inhibited by the RC switch", alarm.reason)
             return RESULT_DENIED
         if self.recovery is not None and self._recovery_task is not None and not self._recovery_task.done():
             self.recovery.raise_criticality(alarm.criticality)
@@ -283,6 +299,56 @@ class Companion:
             outcome.reason,
             1000 * self.ctl.longest_stream_gap_s,
         )
+
+    # ------------------------------------------------------------------ the operator's controls
+    def inhibited(self) -> bool:
+        """Whether the RC inhibit switch (companion/operator.py) says no to alarms now."""
+        if self._inhibit is None:
+            return False
+        return self._inhibit.inhibits(self.tm.state.rc_pwm_us, self.tm.age_s("rc"))
+
+    def cancel(self, source: tuple[int, int]) -> int:
+        """The operator's cancel (companion/operator.py): ACCEPTED and the running recovery stopped,
+        or DENIED (a sender that may not raise alarms, or no recovery to cancel)."""
+        if self._accept_from and source[0] not in self._accept_from:
+            self.alarms_refused += 1
+            self.log.warning("cancel from system %d refused: not in accept_from_system_ids", source[0])
+            return RESULT_DENIED
+        task = self._recovery_task
+        if task is None or task.done() or (self._cancelling is not None and not self._cancelling.done()):
+            self.log.info("cancel from system %d: no recovery to cancel", source[0])
+            return RESULT_DENIED
+        self._cancelling = asyncio.get_running_loop().create_task(self._cancel(task, source), name="cancel")
+        return RESULT_ACCEPTED
+
+    async def _cancel(self, task: asyncio.Task[Outcome], source: tuple[int, int]) -> None:
+        """Stop ``task``, release the vehicle and put it in the cancel mode; say so."""
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError, Exception):  # its own failure is logged already
+            await task
+        await self.ctl.release()
+        mode = self._cancel_mode
+        try:
+            await self.ctl.set_mode(mode)
+            done, said = f"vehicle in {mode.value.upper()}", f"Landfall cancelled: {mode.value.upper()}"
+        except Exception as exc:  # the autopilot refused or did not answer: the pilot must act
+            self.log.error("after the cancel the autopilot did not take %s: %s", mode.value, exc)
+            done = f"{mode.value.upper()} not taken ({exc}): fly it"
+            said = f"Landfall cancelled: {mode.value.upper()} refused, fly it"
+        self.log.warning("recovery cancelled by system %d: %s", source[0], done)
+        self.announce(4, said)  # one STATUSTEXT (50 characters)
+        if self.record is not None:
+            self.record.record_event("cancelled", {"by": list(source), "mode": mode.value, "result": done})
+
+    def _watch_inhibit(self) -> None:
+        """Say each change of the RC inhibit switch (STATUSTEXT and log)."""
+        now = self.inhibited()
+        if now != self._inhibited:
+            self._inhibited = now
+            ch = self._inhibit.channel if self._inhibit is not None else 0
+            text = f"Landfall inhibited (RC channel {ch})" if now else f"Landfall enabled (RC channel {ch})"
+            self.log.warning(text)
+            self.announce(5, text)
 
     # ------------------------------------------------------------------ MAVLink out
     def announce(self, severity: int, text: str) -> None:
@@ -346,6 +412,7 @@ class Companion:
 
     def watch_once(self) -> None:
         """One look at the autopilot's signals (every second in flight)."""
+        self._watch_inhibit()
         s = self.tm.state
         # texts counted by a running total: ``tm.texts`` keeps only the last 50 (an index into it
         # would stop seeing new ones after the 50th); what came while on the ground is passed over

@@ -14,6 +14,7 @@ class Mode(enum.Enum):
     HOLD = "hold"  # PX4 AUTO.LOITER, ArduPilot LOITER
     LAND = "land"  # PX4 AUTO.LAND, ArduPilot LAND
     PRECLAND = "precland"  # PX4 AUTO.PRECLAND; ArduPilot lands on a target in LAND
+    RTL = "rtl"  # PX4 AUTO.RTL, ArduPilot RTL: home by itself (a cancelled recovery's choice)
 
 
 @dataclass(frozen=True, slots=True)
@@ -48,8 +49,15 @@ PX4 = Flavour(
         Mode.HOLD: (4 << 16) | (3 << 24),
         Mode.LAND: (4 << 16) | (6 << 24),
         Mode.PRECLAND: (4 << 16) | (9 << 24),
+        Mode.RTL: (4 << 16) | (5 << 24),
     },
-    set_mode={Mode.GUIDED: (1, 6, 0), Mode.HOLD: (1, 4, 3), Mode.LAND: (1, 4, 6), Mode.PRECLAND: (1, 4, 9)},
+    set_mode={
+        Mode.GUIDED: (1, 6, 0),
+        Mode.HOLD: (1, 4, 3),
+        Mode.LAND: (1, 4, 6),
+        Mode.PRECLAND: (1, 4, 9),
+        Mode.RTL: (1, 4, 5),
+    },
     needs_stream=True,
     comes_down={
         (4 << 16) | (5 << 24): "AUTO.RTL",
@@ -84,8 +92,14 @@ PX4 = Flavour(
 )
 ARDUPILOT = Flavour(
     name="ardupilot",
-    modes={Mode.GUIDED: 4, Mode.HOLD: 5, Mode.LAND: 9, Mode.PRECLAND: 9},
-    set_mode={Mode.GUIDED: (1, 4, 0), Mode.HOLD: (1, 5, 0), Mode.LAND: (1, 9, 0), Mode.PRECLAND: (1, 9, 0)},
+    modes={Mode.GUIDED: 4, Mode.HOLD: 5, Mode.LAND: 9, Mode.PRECLAND: 9, Mode.RTL: 6},
+    set_mode={
+        Mode.GUIDED: (1, 4, 0),
+        Mode.HOLD: (1, 5, 0),
+        Mode.LAND: (1, 9, 0),
+        Mode.PRECLAND: (1, 9, 0),
+        Mode.RTL: (1, 6, 0),
+    },
     needs_stream=False,
     comes_down={6: "RTL", 9: "LAND", 21: "SMART_RTL", 27: "AUTO_RTL"},
     names={

@@ -51,6 +51,7 @@ class VehicleState:
     landed_state: int = 0
     battery_pct: float = math.nan
     gps_fix: int = -1
+    rc_pwm_us: tuple[int, ...] = ()  # RC_CHANNELS' chan1_raw ... chan18_raw (0 or 65535: unused)
     t_boot_s: float = 0.0
     stamps: dict[str, float] = field(default_factory=dict)  # part -> monotonic time of last update
 
@@ -284,6 +285,9 @@ class TelemetryCache:
         elif kind == "GPS_RAW_INT":
             s.gps_fix = int(msg.fix_type)
             self._stamp("gps")
+        elif kind == "RC_CHANNELS":
+            s.rc_pwm_us = tuple(int(getattr(msg, f"chan{k}_raw")) for k in range(1, 19))
+            self._stamp("rc")
         elif kind == "STATUSTEXT":
             self.texts.append((time.monotonic(), int(msg.severity), str(msg.text)))
             del self.texts[:-50]
