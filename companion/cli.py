@@ -147,6 +147,7 @@ def build_companion(cfg: CompanionConfig) -> Companion:
         inhibit=InhibitSwitch(a.inhibit_rc_channel, (a.inhibit_pwm_us[0], a.inhibit_pwm_us[1]))
         if a.inhibit_rc_channel
         else None,
+        params_file=Path(cfg.mavlink.params_file) if cfg.mavlink.params_file else None,
         heartbeat_hz=cfg.mavlink.heartbeat_hz,
     )
 

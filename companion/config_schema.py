@@ -113,6 +113,8 @@ class MavlinkConfig(_Section):
     signing_key_env: EnvName = "LANDFALL_SIGNING_KEY"
     signing_key: SecretStr | None = None  # hex text; resolved from signing_key_env when that is set
     heartbeat_hz: float = Field(default=1.0, gt=0, le=50)
+    # where settings changed over MAVLink's parameter protocol are kept (companion/params.py); "": not
+    params_file: str = ""
 
     @field_validator("url")
     @classmethod

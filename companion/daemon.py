@@ -11,13 +11,15 @@ import dataclasses
 import logging
 import time
 from collections.abc import Awaitable, Callable
+from pathlib import Path
 from typing import Any
 
 from companion.alarms import ALARM_TEXT_PREFIX, MAV_CMD_USER_1, Alarm, Criticality, ReasonCode
 from companion.control import VehicleController
 from companion.frame_source import FrameSource
 from companion.ground import GroundFeed, TeeRecord, telemetry_snapshot
-from companion.operator import MAV_CMD_USER_2, InhibitSwitch, cancel_mode
+from companion.operator import MAV_CMD_USER_2, InhibitSwitch, OperatorControls
+from companion.params import Binding, ParamServer
 from companion.precision import check_precision_landing
 from companion.reasoning.base import Reasoner
 from companion.reasoning.cascade import Cascade
@@ -86,6 +88,7 @@ class Companion:
         accept_from: tuple[int, ...] = (),
         cancel_to: str = "hold",
         inhibit: InhibitSwitch | None = None,
+        params_file: Path | None = None,
         heartbeat_hz: float = 1.0,
         logger: logging.Logger | None = None,
     ) -> None:
@@ -134,11 +137,19 @@ class Companion:
         self._watch_failsafe = watch_failsafe_text
         self._watch_gps = watch_gps
         self._accept_from = accept_from
-        self._cancel_mode = cancel_mode(cancel_to)  # ValueError for a name that is none
-        self._inhibit = inhibit
-        self._inhibited = False  # what the switch said at the last look (announced on each change)
-        self._cancelling: asyncio.Task[None] | None = None
+        self.operator = OperatorControls(  # ValueError for a cancel mode that is none
+            self.tm,
+            self.ctl,
+            self.announce,
+            self._record_event,
+            self.log,
+            cancel_to=cancel_to,
+            inhibit=inhibit,
+        )
         self.alarms_inhibited = 0
+        bindings, log = self._param_bindings(), logging.getLogger("companion.params")
+        self.param_server = ParamServer(self.link, bindings, self._may_command, params_file, log)
+        self.param_server.load()  # values set over MAVLink before a restart, over the configuration's
         self._heartbeat_period = 1.0 / heartbeat_hz
         self._alarm_texts: dict[tuple[int, int], str] = {}
         self.recovery: Recovery | None = None
@@ -165,6 +176,8 @@ class Companion:
             self.ctl.on_param_value(msg)
         elif kind == "COMMAND_LONG":
             self._on_command(msg)
+        elif kind in ("PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET"):
+            self.param_server.on_message(msg, self._addressed)
         elif kind == "STATUSTEXT" and str(msg.text).startswith(ALARM_TEXT_PREFIX):
             self._alarm_texts[(msg.get_srcSystem(), msg.get_srcComponent())] = str(msg.text)[
                 len(ALARM_TEXT_PREFIX) :
@@ -174,6 +187,15 @@ class Companion:
         src = (msg.get_srcSystem(), msg.get_srcComponent())
         ack = self.link.mav.command_ack_encode(int(msg.command), result, 0, 0, src[0], src[1])
         self.link.send_to(ack, *src)
+
+    def _addressed(self, msg: Any) -> bool:
+        """A request to this component: ours or every component (0), of this system or every one (0)."""
+        component_ok = msg.target_component in (0, self.component_id)
+        return bool(component_ok and msg.target_system in (0, self.link.mav.srcSystem))
+
+    def _may_command(self, system_id: int) -> bool:
+        """Whether ``system_id`` may raise an alarm, cancel or change a setting."""
+        return not self._accept_from or system_id in self._accept_from
 
     def _on_command(self, msg: Any) -> None:
         ours = msg.target_component == self.component_id and msg.target_system in (0, self.link.mav.srcSystem)
@@ -303,57 +325,42 @@ class Companion:
     # ------------------------------------------------------------------ the operator's controls
     def inhibited(self) -> bool:
         """Whether the RC inhibit switch (companion/operator.py) says no to alarms now."""
-        if self._inhibit is None:
-            return False
-        return self._inhibit.inhibits(self.tm.state.rc_pwm_us, self.tm.age_s("rc"))
+        return self.operator.inhibited()
 
     def cancel(self, source: tuple[int, int]) -> int:
         """The operator's cancel (companion/operator.py): ACCEPTED and the running recovery stopped,
         or DENIED (a sender that may not raise alarms, or no recovery to cancel)."""
-        if self._accept_from and source[0] not in self._accept_from:
+        if not self._may_command(source[0]):
             self.alarms_refused += 1
             self.log.warning("cancel from system %d refused: not in accept_from_system_ids", source[0])
             return RESULT_DENIED
-        task = self._recovery_task
-        if task is None or task.done() or (self._cancelling is not None and not self._cancelling.done()):
-            self.log.info("cancel from system %d: no recovery to cancel", source[0])
-            return RESULT_DENIED
-        self._cancelling = asyncio.get_running_loop().create_task(self._cancel(task, source), name="cancel")
-        return RESULT_ACCEPTED
+        return self.operator.cancel(self._recovery_task, source)
 
-    async def _cancel(self, task: asyncio.Task[Outcome], source: tuple[int, int]) -> None:
-        """Stop ``task``, release the vehicle and put it in the cancel mode; say so."""
-        task.cancel()
-        with contextlib.suppress(asyncio.CancelledError, Exception):  # its own failure is logged already
-            await task
-        await self.ctl.release()
-        mode = self._cancel_mode
-        try:
-            await self.ctl.set_mode(mode)
-            done, said = f"vehicle in {mode.value.upper()}", f"Landfall cancelled: {mode.value.upper()}"
-        except Exception as exc:  # the autopilot refused or did not answer: the pilot must act
-            self.log.error("after the cancel the autopilot did not take %s: %s", mode.value, exc)
-            done = f"{mode.value.upper()} not taken ({exc}): fly it"
-            said = f"Landfall cancelled: {mode.value.upper()} refused, fly it"
-        self.log.warning("recovery cancelled by system %d: %s", source[0], done)
-        self.announce(4, said)  # one STATUSTEXT (50 characters)
-        if self.record is not None:
-            self.record.record_event("cancelled", {"by": list(source), "mode": mode.value, "result": done})
+    def _param_bindings(self) -> dict[str, Binding]:
+        """The daemon's side of every MAVLink parameter (companion/params.py): the operator's controls'
+        own, and the alarm watchers'."""
 
-    def _watch_inhibit(self) -> None:
-        """Say each change of the RC inhibit switch (STATUSTEXT and log)."""
-        now = self.inhibited()
-        if now != self._inhibited:
-            self._inhibited = now
-            ch = self._inhibit.channel if self._inhibit is not None else 0
-            text = f"Landfall inhibited (RC channel {ch})" if now else f"Landfall enabled (RC channel {ch})"
-            self.log.warning(text)
-            self.announce(5, text)
+        def set_battery(v: float) -> None:
+            self._watch_battery_pct = v or None
+
+        def flag(name: str) -> Binding:
+            return Binding(lambda: float(getattr(self, name)), lambda v: setattr(self, name, bool(v)))
+
+        return {
+            **self.operator.bindings(),
+            "LF_BATT_CRIT": Binding(lambda: float(self._watch_battery_pct or 0.0), set_battery),
+            "LF_WATCH_FS": flag("_watch_failsafe"),
+            "LF_WATCH_GPS": flag("_watch_gps"),
+        }
 
     # ------------------------------------------------------------------ MAVLink out
     def announce(self, severity: int, text: str) -> None:
         """STATUSTEXT to every peer (ground stations show severity <= notice)."""
         self.link.send_statustext(severity, text)
+
+    def _record_event(self, kind: str, data: dict[str, Any]) -> None:
+        if self.record is not None:
+            self.record.record_event(kind, data)
 
     async def _heartbeats(self) -> None:
         while True:
@@ -412,7 +419,7 @@ class Companion:
 
     def watch_once(self) -> None:
         """One look at the autopilot's signals (every second in flight)."""
-        self._watch_inhibit()
+        self.operator.watch()
         s = self.tm.state
         # texts counted by a running total: ``tm.texts`` keeps only the last 50 (an index into it
         # would stop seeing new ones after the 50th); what came while on the ground is passed over

@@ -104,8 +104,8 @@ def test_cancel_stops_the_recovery_releases_the_vehicle_into_the_mode_and_says_s
         c._recovery_task = running  # type: ignore[assignment]  # a recovery in flight, at the daemon's seam
         assert c.cancel((42, 190)) == RESULT_DENIED  # a system that may not raise alarms
         assert c.cancel((255, 190)) == RESULT_ACCEPTED
-        assert c._cancelling is not None
-        await asyncio.wait_for(c._cancelling, 5.0)
+        assert c.operator.cancelling is not None
+        await asyncio.wait_for(c.operator.cancelling, 5.0)
         assert running.cancelled()
         assert modes == [Mode.LAND]
         said = [_text(m) for m in link.sent_of("STATUSTEXT")]
