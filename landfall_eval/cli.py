@@ -7,6 +7,7 @@
                          [--weather W[,W...]] [--context C] [--reasoner NAME] --out DIR
     ... [--executor local|ray [--ray-address ADDR] [--cpus-per-episode C]] [--resume]
     companion-bench images DIR [--context crop|full] [--reasoner NAME] --out OUT
+    companion-bench compare A B          # two campaigns' safe rates: do they differ beyond chance?
 
 Every command writes DIR/results.json (schema: docs/bench.md) and DIR/report.html with its figures.
 ``images`` judges a labelled photograph folder instead (landfall_eval/images.py: no simulator, its
@@ -245,6 +246,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--place", choices=PLACES, default=DEFAULT_PLACE,
         help=f"the kind of place the cities are (simbridge --place; default {DEFAULT_PLACE})",
     )  # fmt: skip
+    k = sub.add_parser("compare", help="whether two campaigns' safe rates differ beyond chance")
+    k.add_argument("a", type=Path, metavar="A", help="a results.json, or the folder holding it")
+    k.add_argument("b", type=Path, metavar="B", help="another")
     g = sub.add_parser(
         "images", parents=[common], help="the image judgement on a labelled folder of photographs"
     )
@@ -406,6 +410,10 @@ def _interrupt(signum: int, _frame: object) -> None:
 def main(argv: Sequence[str] | None = None) -> int:
     ap = build_parser()
     args = ap.parse_args(argv)
+    if args.command == "compare":
+        from landfall_eval.compare import run_compare
+
+        return run_compare(args.a, args.b)
     if args.command == "images":
         from landfall_eval.images import run_images
 

@@ -24,6 +24,7 @@ from collections import Counter
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
+from landfall_eval.stats import safe_interval
 from simbridge.control import ControlLimits
 
 __all__ = [
@@ -149,6 +150,21 @@ def summarise(episodes: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     def rate(items: Sequence[Mapping[str, Any]]) -> float | None:
         return round(sum(bool(e.get("safe")) for e in items) / len(items), 4) if items else None
 
+    def interval(items: Sequence[Mapping[str, Any]]) -> list[float] | None:
+        got = safe_interval(sum(bool(e.get("safe")) for e in items), len(items))
+        return None if got is None else [round(got[0], 4), round(got[1], 4)]
+
+    def by(key: str) -> dict[str, dict[str, Any]]:
+        """The safe rate and its interval for each value ``key`` takes among the episodes."""
+        split: dict[str, list[Mapping[str, Any]]] = {}
+        for e in episodes:
+            split.setdefault(str(e.get(key)), []).append(e)
+        return {
+            value: {"episodes": len(items), "safe": sum(bool(e.get("safe")) for e in items),
+                    "safe_rate": rate(items), "safe_rate_interval_95": interval(items)}
+            for value, items in sorted(split.items())
+        }  # fmt: skip
+
     def mean_rounds(items: Sequence[Mapping[str, Any]]) -> float | None:
         got = [int(e["rounds"]) for e in items if e.get("safe")]
         return round(statistics.fmean(got), 3) if got else None
@@ -163,6 +179,8 @@ def summarise(episodes: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         "episodes": n,
         "safe": len(safe),
         "safe_rate": rate(episodes),
+        "safe_rate_interval_95": interval(episodes),
+        "by": {key: by(key) for key in ("place", "weather", "autopilot", "criticality")},
         "mean_rounds_safe": mean_rounds(episodes),
         "within_2_rounds_safe": (
             round(sum(int(e["rounds"]) <= 2 for e in safe) / len(safe), 4) if safe else None
@@ -198,6 +216,7 @@ def summarise(episodes: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
                 "episodes": len(items),
                 "safe": sum(bool(e.get("safe")) for e in items),
                 "safe_rate": rate(items),
+                "safe_rate_interval_95": interval(items),
                 "mean_rounds_safe": mean_rounds(items),
                 "median_kinematic_ratio": _median(e.get("kinematic_ratio") for e in items),
             }

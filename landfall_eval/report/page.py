@@ -22,6 +22,7 @@ import numpy as np
 
 from landfall_eval.basemap import BaseMap
 from landfall_eval.rationales import EmbeddingsUnavailable, cluster_rationales
+from landfall_eval.stats import safe_interval
 from landfall_eval.study import (
     STUDY_JACCARD,
     STUDY_LANDING_DISTANCE_M,
@@ -163,21 +164,29 @@ def write_episode_report(entry: Mapping[str, Any], out_dir: Path, record_dir: Pa
 
 def _summary(results: Mapping[str, Any], eps: list[Episode]) -> str:
     given = as_mapping(results.get("summary"))
+    interval: tuple[float, float] | None = None
     if eps:
         n = len(eps)
         safe = [e for e in eps if e.verdict == "safe"]
         safe_rate: float | None = len(safe) / n
         rounds_safe = mean_of(None if e.rounds is None else float(e.rounds) for e in safe)
+        interval = safe_interval(len(safe), n)
     elif given:
         n = int(as_number(given.get("episodes")) or 0)  # 0 where the count is missing
         safe_rate, rounds_safe = as_number(given.get("safe_rate")), as_number(given.get("mean_rounds_safe"))
+        got = given.get("safe_rate_interval_95")
+        if isinstance(got, list) and len(got) == 2 and all(as_number(v) is not None for v in got):
+            interval = (float(got[0]), float(got[1]))
     else:
         return ""
+    safe_text = pct(safe_rate)
+    if interval is not None:
+        safe_text += f" (95 % interval {100 * interval[0]:.1f}-{100 * interval[1]:.1f} %)"
     rss = [e.peak_rss_mb for e in eps if e.peak_rss_mb is not None]
     outcomes = Counter(e.outcome for e in eps)
     rows = [
         ("episodes", str(n), NA),
-        ("safe landings", pct(safe_rate), f"{pct(STUDY_SAFE_RATE)} (city-wide, its best model)"),
+        ("safe landings", safe_text, f"{pct(STUDY_SAFE_RATE)} (city-wide, its best model)"),
         ("mean reasoning rounds per safe landing", fmt(rounds_safe), f"{STUDY_ROUNDS_PER_SAFE}"),
         ("median time to touchdown", fmt(median_of(e.time_to_touchdown_s for e in eps), 1, " s"), NA),
         ("median time / kinematic lower bound", fmt(median_of(e.kinematic_ratio for e in eps), 2, " x"), NA),
