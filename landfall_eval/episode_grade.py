@@ -258,6 +258,8 @@ def grade(
         "sim_surface": None,
         "safe": False,
         "reasons": ["no touchdown"],
+        "nearest_person_m": None,
+        "nearest_person_last_10m_m": None,
         "time_to_touchdown_s": None,
         "kinematic_lower_bound_s": None,
         "kinematic_ratio": None,
@@ -271,6 +273,8 @@ def grade(
             sim_surface=touchdown.get("surface"),
             safe=bool(touchdown.get("safe")),
             reasons=list(touchdown.get("reasons", [])),
+            nearest_person_m=touchdown.get("nearest_person_m"),
+            nearest_person_last_10m_m=touchdown.get("nearest_person_last_10m_m"),
         )
         if t0 is not None and start is not None:
             took = float(touchdown["t_s"]) - t0

@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import math
 import signal
 import time
 from dataclasses import dataclass, field
@@ -29,6 +30,8 @@ from simbridge.vehicle import Vehicle
 from simbridge.wind import WindConfig, WindModel
 from simbridge.world.places import PLACES
 
+NEAR_GROUND_M = 10.0  # the last metres of a descent, where a person nearby matters most
+PEOPLE_EVERY_S = 0.25  # simulated seconds between two looks for the nearest person there
 _MAX_BATCH_STEPS = 6  # physics steps between two looks at the socket (50 ms simulated)
 SITL_AUTOPILOT = "ardupilot-sitl"  # real ArduCopter firmware (simbridge.sitl_bridge)
 PX4_SITL_AUTOPILOT = "px4-sitl"  # real PX4 firmware (simbridge.px4_bridge)
@@ -137,6 +140,10 @@ class SimBridge:
         self._stop = asyncio.Event()
         self._sensor_rng = np.random.default_rng(config.seed + 1)
         self.wall_elapsed_s = 0.0
+        # the nearest person during the last NEAR_GROUND_M of a descent (a regulator's question)
+        self._people = getattr(self.scenario.terrain, "nearest_person_m", None)
+        self._nearest_low_m: float | None = None
+        self._next_person_t_s = 0.0
         self.episode.event(
             0.0,
             "start",
@@ -215,6 +222,18 @@ class SimBridge:
             "time_boot_ms": self.time_boot_ms(s.t_s),  # ties the autopilot's clock to the log's t_s
         }
 
+    def _watch_people(self, pos_ned_m: tuple[float, float, float], t_s: float, armed: bool) -> None:
+        """Every ``PEOPLE_EVERY_S`` of simulated time: within ``NEAR_GROUND_M`` of the ground under
+        the vehicle, armed, the nearest person's distance, the least kept for the touchdown event."""
+        assert self._people is not None
+        self._next_person_t_s = t_s + PEOPLE_EVERY_S
+        above_m = -pos_ned_m[2] - self.scenario.terrain.height_m(pos_ned_m[0], pos_ned_m[1])
+        if not armed or above_m > NEAR_GROUND_M:
+            return
+        d = self._people(pos_ned_m, t_s)
+        if d is not None and (self._nearest_low_m is None or d < self._nearest_low_m):
+            self._nearest_low_m = d
+
     # ------------------------------------------------------------------ callbacks
     def _on_message(self, msg: Any, addr: tuple[str, int]) -> None:
         self.server.handle(msg, addr)
@@ -224,6 +243,11 @@ class SimBridge:
         if name == "touchdown":
             grade = self.scenario.terrain.grade_touchdown(s.pos_ned_m[0], s.pos_ned_m[1], s.t_s)
             fields = {**fields, "surface": grade.surface, "safe": grade.safe, "reasons": list(grade.reasons)}
+            if self._people is not None:
+                now = self._people(s.pos_ned_m, s.t_s)
+                low = now if self._nearest_low_m is None else min(self._nearest_low_m, now or math.inf)
+                fields["nearest_person_m"] = None if now is None else round(now, 2)
+                fields["nearest_person_last_10m_m"] = None if low is None else round(low, 2)
         self.episode.event(s.t_s, name, fields)
         self.log.info("t=%.2f %s %s", s.t_s, name, fields)
 
@@ -237,6 +261,8 @@ class SimBridge:
         ap = self.autopilot
         sp = ap.tick(self.vehicle.state)
         s = self.vehicle.step(sp, ap.armed)
+        if self._people is not None and s.t_s >= self._next_person_t_s:
+            self._watch_people(s.pos_ned_m, s.t_s, ap.armed)
         for msg in self.telemetry.due(s.t_s):
             self.link.send(msg)
         est = ap.estimated_state.pos_ned_m if ap.estimate is not None else None

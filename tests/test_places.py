@@ -60,3 +60,29 @@ def test_a_city_campaign_flies_its_place_in_every_simbridge_and_names_its_episod
         cmd = simbridge_command(spec, udp_port=1, sensors_port=2, episode_log=tmp_path / "e.jsonl", speed=4.0)
         assert cmd[cmd.index("--place") + 1] == place
         assert cmd[cmd.index("--city-seed") + 1] == str(spec.city_seed)
+
+
+def test_the_nearest_person_is_measured_without_moving_anyone() -> None:
+    """LiveWorld.nearest_person_m: the straight-line distance to the nearest pedestrian's feet; asking
+    leaves the actors as the sensors will find them (the traffic stays the episode's)."""
+    import numpy as np
+
+    from simbridge.world.live import LiveWorld
+    from simbridge.world.suburb import generate_suburb
+
+    live = LiveWorld(generate_suburb(1, 400.0), actor_seed=0)
+    people = live.actors.people_at(5.0)
+    assert people.shape[1] == 3
+    assert len(people) > 0
+    n, e, base = (float(v) for v in people[0])
+    assert live.nearest_person_m((n, e, -(base + 10.0)), 5.0) <= 10.0 + 1e-6  # 10 m above that one
+    before = live.actors.poses()
+    far = live.nearest_person_m((n + 1000.0, e, -base), 5.0)
+    assert far is not None
+    assert far > 500.0
+    assert live.actors.poses() == before  # nobody moved
+    live.sync(5.0)
+    after = np.array(
+        [[p.centre_ne[0], p.centre_ne[1]] for p in live.actors.poses() if p.kind.name == "PEDESTRIAN"]
+    )
+    assert np.allclose(after, people[:, :2], atol=1e-6)  # where people_at said they would be

@@ -247,6 +247,19 @@ class Actors:
         e[cars:] += p.cos[seg[cars:]] * self._person_offset
         return path, n, e, seg
 
+    def people_at(self, t_s: float) -> np.ndarray:
+        """(people, 3) north, east and the height of the surface under each pedestrian at ``t_s`` (not
+        before now), without moving anyone: what an observer measures, leaving the episode's actors
+        exactly as the sensors will find them."""
+        p = self._paths
+        dt = max(t_s - self.t_s, 0.0)
+        end = p.length[self._person_path]
+        s = np.clip(self._person_s + self._person_speed * dt, 0.0, end)  # at an end, as advance turns there
+        n, e, seg = _points_at(p.start, p.points, p.cum, self._person_path, s)
+        n = n - p.sin[seg] * self._person_offset
+        e = e + p.cos[seg] * self._person_offset
+        return np.stack([n, e, p.base[self._person_path]], axis=1) if len(s) else np.zeros((0, 3))
+
     def poses(self) -> list[ActorPose]:
         """Every actor now: the cars lane by lane (front first), then the pedestrians."""
         path, n, e, seg = self._place()

@@ -96,6 +96,17 @@ class LiveWorld:
     def height_m(self, north_m: float, east_m: float) -> float:
         return self.grid.height_at(north_m, east_m)
 
+    def nearest_person_m(self, pos_ned_m: tuple[float, float, float], t_s: float) -> float | None:
+        """The straight-line distance from ``pos_ned_m`` to the nearest pedestrian at ``t_s`` (their
+        feet, on the surface they walk), metres; None when the world has none."""
+        with self._lock:
+            people = self.actors.people_at(t_s)
+        if not len(people):
+            return None
+        n, e, d = pos_ned_m
+        gaps = np.hypot(np.hypot(people[:, 0] - n, people[:, 1] - e), people[:, 2] + d)
+        return float(gaps.min())
+
     def grade_touchdown(self, north_m: float, east_m: float, t_s: float) -> TouchdownGrade:
         with self._lock:
             self._sync(t_s, (north_m, east_m, SEEN_MARGIN_M))
