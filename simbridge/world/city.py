@@ -19,15 +19,11 @@ painting helpers they share).
 
 from __future__ import annotations
 
-import math
-
-import numpy as np
-
 from simbridge.world.city_buildings import Buildings
-from simbridge.world.city_parts import FRONTAGE_W, CityError, CityParams
+from simbridge.world.city_parts import FRONTAGE_W, CityError, CityParams, check_place_request
 from simbridge.world.city_plan import CityPlan
 from simbridge.world.city_props import Props
-from simbridge.world.world import Sun, Walkway, World
+from simbridge.world.world import Walkway, World
 
 __all__ = ["CityError", "CityParams", "generate_city"]
 
@@ -74,10 +70,7 @@ class _CityBuilder(CityPlan, Props, Buildings):
                 pts = ((cn, r.e_lo + m), (cn, r.e_hi - m))
             pts = (self._clip_pt(pts[0], 1.0), self._clip_pt(pts[1], 1.0))
             self.walkways.append(Walkway(pts, int(self.rng.integers(1, 3)), r.height, 1.5))
-        sun = Sun(
-            azimuth_deg=float(self.rng.uniform(90.0, 270.0)),
-            elevation_deg=float(self.rng.uniform(35.0, 65.0)),
-        )
+        sun = self._sun((35.0, 65.0))
         desc = (
             f"procedural city {self.size:.0f} m square, seed {seed}: {self.n_buildings} buildings, "
             f"{len(ew) + len(ns)} streets, a river and an elevated highway"
@@ -107,9 +100,6 @@ def generate_city(
     Raises:
         CityError: a negative seed, a city smaller than 300 m, or bad ``params``.
     """
-    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
-        raise CityError(f"city seed must be a non-negative integer, got {seed!r}")
-    if not math.isfinite(size_m) or size_m < 300.0:
-        raise CityError(f"city size_m must be at least 300 m (room for the river and highway), got {size_m}")
+    check_place_request("city", seed, size_m, " (room for the river and highway)")
     builder = _CityBuilder(int(seed), float(size_m), res, params if params is not None else CityParams())
     return builder.build(int(seed))

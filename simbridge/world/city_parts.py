@@ -10,7 +10,7 @@ from typing import Literal
 import numpy as np
 
 from simbridge.world.model import Material, SurfaceClass, WorldError, WorldGrid
-from simbridge.world.world import Lane, Walkway
+from simbridge.world.world import Lane, Sun, Walkway
 
 Window = tuple[int, int, int, int]
 Range = tuple[float, float]
@@ -28,6 +28,15 @@ RAIL_W, RAIL_H = 0.3, 0.9
 
 class CityError(WorldError):
     """City parameters or a city request that cannot be built."""
+
+
+def check_place_request(what: str, seed: object, size_m: float, why: str = "") -> None:
+    """A procedural place's seed (a non-negative integer) and size (at least 300 m), or ``CityError``
+    naming the place ``what`` (and ``why`` the size matters, when given)."""
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise CityError(f"{what} seed must be a non-negative integer, got {seed!r}")
+    if not math.isfinite(size_m) or size_m < 300.0:
+        raise CityError(f"{what} size_m must be at least 300 m{why}, got {size_m}")
 
 
 @dataclass(frozen=True, slots=True)
@@ -250,6 +259,13 @@ class CityParts:
         rid = self.next_region
         self.next_region += 1
         return rid
+
+    def _sun(self, elevation_deg: Range) -> Sun:
+        """The sun from this place's generator: azimuth 90-270 deg (the south half), ``elevation_deg``."""
+        return Sun(
+            azimuth_deg=float(self.rng.uniform(90.0, 270.0)),
+            elevation_deg=float(self.rng.uniform(*elevation_deg)),
+        )
 
     def _clip_pt(self, pt: tuple[float, float], margin: float) -> tuple[float, float]:
         lo, hi = -self.half + margin, self.half - margin

@@ -28,10 +28,10 @@ import math
 import numpy as np
 
 from simbridge.world.city_buildings import Buildings
-from simbridge.world.city_parts import CityError, CityParams, Range, Roof
+from simbridge.world.city_parts import CityParams, Range, Roof, check_place_request
 from simbridge.world.city_props import Props
 from simbridge.world.model import Material, SurfaceClass
-from simbridge.world.world import Lane, Sun, Walkway, World
+from simbridge.world.world import Lane, Walkway, World
 
 __all__ = ["generate_industrial"]
 
@@ -67,10 +67,7 @@ class _EstateBuilder(Props, Buildings):
                 self._road((centre, e0), (centre, e1), width)
             for n0, n1 in self._gaps(access, []):
                 self._plot(n0, n1, e0, e1)
-        sun = Sun(
-            azimuth_deg=float(self.rng.uniform(90.0, 270.0)),
-            elevation_deg=float(self.rng.uniform(30.0, 65.0)),
-        )
+        sun = self._sun((30.0, 65.0))
         desc = (
             f"procedural industrial estate (seed {seed}): {n_roads} roads, a railway, "
             f"{self.n_buildings} sheds, {len(self.clear_roofs)} clear roofs"
@@ -291,9 +288,6 @@ def generate_industrial(seed: int, size_m: float = 1200.0, res: float = 0.2) -> 
     Raises:
         CityError: a negative seed or an estate smaller than 300 m.
     """
-    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
-        raise CityError(f"estate seed must be a non-negative integer, got {seed!r}")
-    if not math.isfinite(size_m) or size_m < 300.0:
-        raise CityError(f"estate size_m must be at least 300 m, got {size_m}")
+    check_place_request("estate", seed, size_m)
     params = CityParams(parked_occupancy=(0.3, 0.7))
     return _EstateBuilder(int(seed), float(size_m), res, params).build(int(seed))

@@ -28,15 +28,11 @@ painter (:class:`~simbridge.world.city_props.Props`).
 
 from __future__ import annotations
 
-import math
-
-import numpy as np
-
-from simbridge.world.city_parts import CityError
+from simbridge.world.city_parts import CityError, check_place_request
 from simbridge.world.model import Material, SurfaceClass
 from simbridge.world.suburb_lots import SuburbLots
 from simbridge.world.suburb_sites import SuburbSites
-from simbridge.world.world import Sun, World
+from simbridge.world.world import World
 
 __all__ = ["CityError", "generate_suburb"]
 
@@ -55,10 +51,7 @@ class _SuburbBuilder(SuburbSites, SuburbLots):
         self._tree_clumps()
         for road in collectors:
             self._collector_traffic(road)
-        sun = Sun(
-            azimuth_deg=float(self.rng.uniform(90.0, 270.0)),
-            elevation_deg=float(self.rng.uniform(35.0, 65.0)),
-        )
+        sun = self._sun((35.0, 65.0))
         school = (
             "no school"
             if pitch is None
@@ -105,8 +98,5 @@ def generate_suburb(seed: int, size_m: float = 1200.0, res: float = 0.2) -> Worl
     Raises:
         CityError: a negative or non-integer seed, or a suburb smaller than 300 m.
     """
-    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
-        raise CityError(f"suburb seed must be a non-negative integer, got {seed!r}")
-    if not math.isfinite(size_m) or size_m < 300.0:
-        raise CityError(f"suburb size_m must be at least 300 m, got {size_m}")
+    check_place_request("suburb", seed, size_m)
     return _SuburbBuilder(int(seed), float(size_m), res).build(int(seed))
