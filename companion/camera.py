@@ -3,13 +3,20 @@
 What a real vehicle's camera sends, decoded by FFmpeg through PyAV (the ``camera`` extra) or, for a
 V4L2 device, by OpenCV:
 
-- ``udp://[HOST]:PORT``: H.264 over RTP on UDP (payload type 96), what PX4's and ArduPilot's Gazebo
-  cameras, many gimbal cameras and QGroundControl use (port 5600 by convention; ``HOST`` is the address
-  to listen on, any when left out). FFmpeg reads raw RTP through a session description, which is written
-  for the port given.
+- ``udp://[HOST]:PORT``: H.264 on UDP, either in RTP (payload type 96), what PX4's and ArduPilot's
+  Gazebo cameras, many gimbal cameras and QGroundControl use (port 5600 by convention), or raw (an
+  Annex B byte stream cut into datagrams, what ``rpicam-vid --inline -o udp://HOST:PORT`` sends from a
+  Raspberry Pi camera); ``HOST`` is the address to listen on, any when left out. Which one is told
+  from the first datagrams each time the stream is opened (RTP: version 2 headers of one source with
+  consecutive sequence numbers). FFmpeg reads RTP through a session description, written for the port.
+- ``tcp://HOST:PORT``: raw H.264 from a TCP server (``rpicam-vid --inline --listen -o
+  tcp://0.0.0.0:PORT``).
 - ``rtsp://...``: an IP camera or gimbal (RTP over TCP, the most robust over a radio link).
 - ``/dev/videoN``: a V4L2 device on the onboard computer.
 - any other path: a video file, replayed at its own frame rate (for tests and replays).
+
+Raw H.264 carries no presentation times: its frames are dated by when they were decoded, and the
+decoder's one-frame hold is the median step between decodes.
 
 A thread decodes; the newest frame is kept with the moment it was decoded (this computer's monotonic
 clock). The daemon maps that moment to the autopilot's boot clock (``landfall_link.boot_clock.BootClock``)
@@ -65,7 +72,8 @@ class CameraError(ValueError):
 
 @dataclass(frozen=True, slots=True)
 class CameraSpec:
-    """A parsed ``--camera`` URL. ``kind``: ``rtp``, ``rtsp``, ``v4l2`` or ``file``."""
+    """A parsed ``--camera`` URL. ``kind``: ``rtp`` (``udp://``: RTP or raw H.264, told when opened),
+    ``tcp`` (raw H.264), ``rtsp``, ``v4l2`` or ``file``."""
 
     kind: str
     url: str
@@ -74,13 +82,23 @@ class CameraSpec:
 
 
 def parse_camera_url(text: str) -> CameraSpec:
-    """``udp://[HOST]:PORT``, ``rtsp://...``, ``/dev/videoN`` or a video file; a clear error otherwise."""
+    """``udp://[HOST]:PORT``, ``tcp://HOST:PORT``, ``rtsp://...``, ``/dev/videoN`` or a video file; a
+    clear error otherwise."""
     text = text.strip()
     if text.startswith("udp://"):
         m = re.fullmatch(r"udp://(?:\[?([^\]/@]*?)\]?)?:(\d{1,5})/?", text)
         if m is None or not 1 <= int(m.group(2)) <= 65535:
-            raise CameraError(f"camera {text!r}: expected udp://[HOST]:PORT (RTP/H.264), e.g. udp://:5600")
+            raise CameraError(
+                f"camera {text!r}: expected udp://[HOST]:PORT (H.264, RTP or raw), e.g. udp://:5600"
+            )
         return CameraSpec("rtp", text, m.group(1) or "0.0.0.0", int(m.group(2)))
+    if text.startswith("tcp://"):
+        m = re.fullmatch(r"tcp://([^:/\s]+):(\d{1,5})/?", text)
+        if m is None or not 1 <= int(m.group(2)) <= 65535:
+            raise CameraError(
+                f"camera {text!r}: expected tcp://HOST:PORT (raw H.264), e.g. tcp://raspberrypi:8888"
+            )
+        return CameraSpec("tcp", text, m.group(1), int(m.group(2)))
     if text.startswith(("rtsp://", "rtsps://")):
         if len(text.split("://", 1)[1]) < 1:
             raise CameraError(f"camera {text!r}: expected rtsp://HOST[:PORT]/PATH")
@@ -89,8 +107,8 @@ def parse_camera_url(text: str) -> CameraSpec:
         return CameraSpec("v4l2", text)
     if "://" in text:
         raise CameraError(
-            f"camera {text!r}: unsupported scheme; use udp://[HOST]:PORT (RTP/H.264), rtsp://..., "
-            "/dev/videoN or a video file"
+            f"camera {text!r}: unsupported scheme; use udp://[HOST]:PORT (H.264, RTP or raw), "
+            "tcp://HOST:PORT (raw H.264), rtsp://..., /dev/videoN or a video file"
         )
     if not Path(text).is_file():
         raise CameraError(f"camera {text!r}: no such video file (or use udp://, rtsp:// or /dev/videoN)")
@@ -168,6 +186,33 @@ def _sdp(host: str, port: int) -> str:
     )
 
 
+def _udp_framing(host: str, port: int, datagrams: int = 4) -> str:
+    """``rtp`` or ``raw``: what the H.264 arriving on ``port`` is framed in, from its first
+    ``datagrams`` (fewer when no more come within a second after the first). RTP: every one a version 2
+    header (the first two bits 10) of one source (SSRC) with consecutive sequence numbers; a raw stream's
+    datagrams are cut anywhere in the byte stream, so one alone could look like a header by chance.
+
+    Raises:
+        TimeoutError: nothing arrived within ``READ_TIMEOUT_S``."""
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind((host or "0.0.0.0", port))
+        sock.settimeout(READ_TIMEOUT_S)
+        got = [sock.recv(65536)]
+        sock.settimeout(1.0)
+        with contextlib.suppress(TimeoutError):
+            while len(got) < datagrams:
+                got.append(sock.recv(65536))
+    if any(len(d) < 12 or d[0] >> 6 != 2 for d in got):
+        return "raw"
+    if len({d[8:12] for d in got}) != 1:
+        return "raw"
+    seqs = [int.from_bytes(d[2:4], "big") for d in got]
+    return "rtp" if all((b - a) % 65536 == 1 for a, b in itertools.pairwise(seqs)) else "raw"
+
+
 class CameraStream:
     """Decodes ``spec`` in a thread and keeps the newest frame (:meth:`latest`)."""
 
@@ -193,6 +238,10 @@ class CameraStream:
         self.errors = 0
         self.last_error: str | None = None
         self._tmp: tempfile.TemporaryDirectory[str] | None = None
+        self.raw = (
+            spec.kind == "tcp"
+        )  # raw H.264 (no presentation times); a udp:// stream's is told when opened
+        self._decodes: collections.deque[float] = collections.deque(maxlen=PTS_STEPS_KEPT + 1)
 
     def start(self) -> None:
         # The decoder thread takes the interpreter lock many times a frame (every packet read, the
@@ -222,10 +271,13 @@ class CameraStream:
         (the median step of the presentation times), which the H.264 parser holds each frame for; None
         until two frames with presentation times have come; 0 for a file (replayed by its own times)
         and a V4L2 device."""
-        if self.spec.kind not in ("rtp", "rtsp"):
+        if self.spec.kind not in ("rtp", "rtsp", "tcp"):
             return 0.0
         with self._lock:
-            recent = [p for p, _d in list(self._arrivals)[-PTS_STEPS_KEPT - 1 :]]
+            if self.raw:  # no presentation times: the steps between decodes
+                recent = list(self._decodes)
+            else:
+                recent = [p for p, _d in list(self._arrivals)[-PTS_STEPS_KEPT - 1 :]]
         steps = sorted(b - a for a, b in itertools.pairwise(recent) if 0 < b - a < 5)
         return steps[len(steps) // 2] if steps else None
 
@@ -242,6 +294,7 @@ class CameraStream:
             self.frames += 1
             if pts_s is not None:
                 self._arrivals.append((pts_s, decoded_s))
+            self._decodes.append(decoded_s)
             self._latest = VideoFrame(image, decoded_s, self.frames, pts_s)
         if self.frames == 1:
             self.log.info("camera: first frame from %s (%d x %d)", self.spec.url, rgb.shape[1], rgb.shape[0])
@@ -272,7 +325,15 @@ class CameraStream:
     def _open_av(self) -> Any:
         import av
 
+        live, wait = {**LIVE_OPTIONS}, (READ_TIMEOUT_S, READ_TIMEOUT_S)
+        if self.spec.kind == "tcp":
+            return av.open(self.spec.url, format="h264", options=live, timeout=wait)
         if self.spec.kind == "rtp":
+            self.raw = _udp_framing(self.spec.host, self.spec.port) == "raw"
+            self.log.info("camera %s: %s", self.spec.url, "raw H.264" if self.raw else "H.264 over RTP")
+            if self.raw:
+                url = f"udp://{self.spec.host}:{self.spec.port}?overrun_nonfatal=1"
+                return av.open(url, format="h264", options=live, timeout=wait)
             if self._tmp is None:
                 self._tmp = tempfile.TemporaryDirectory(prefix="landfall-camera-")
             sdp = Path(self._tmp.name) / "camera.sdp"
@@ -290,9 +351,10 @@ class CameraStream:
         container = self._open_av()
         with self._lock:  # a stream opened again counts its presentation times from a new first packet
             self._arrivals.clear()
+            self._decodes.clear()
         try:
             stream = container.streams.video[0]
-            if self.spec.kind in ("rtp", "rtsp"):
+            if self.spec.kind in ("rtp", "rtsp", "tcp"):
                 # frame threads hold each frame back by one more per thread (seen: three frames late):
                 # slices only, and the decoder's low-delay mode
                 stream.thread_type = "SLICE"
@@ -307,7 +369,9 @@ class CameraStream:
                 if self._closed.is_set():
                     return
                 pts_s = (
-                    float(frame.pts * frame.time_base) if frame.pts is not None and frame.time_base else None
+                    float(frame.pts * frame.time_base)
+                    if frame.pts is not None and frame.time_base and not self.raw  # raw: the demuxer's guess
+                    else None
                 )
                 if self.spec.kind == "file" and pts_s is not None:  # replay at the file's own rate
                     t0 = time.monotonic() - pts_s if t0 is None else t0

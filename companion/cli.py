@@ -15,7 +15,7 @@ from typing import Any
 
 from companion.alarms import Alarm
 from companion.config import ConfigError, load_config
-from companion.config_schema import CompanionConfig
+from companion.config_schema import DEFAULTS, CompanionConfig
 from companion.daemon import Companion
 from companion.ground import GroundFeed, GroundParams
 from companion.operator import InhibitSwitch
@@ -33,7 +33,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--mavlink",
         help="MAVLink endpoint, e.g. udp:14550, tcp:127.0.0.1:5760 or serial:/dev/ttyAMA0:921600 "
-        f"(default from the config: udp:14550); forms: {URL_FORMS}",
+        f"(default from the config: {DEFAULTS.mavlink.url}); forms: {URL_FORMS}",
     )
     p.add_argument("--config", type=Path, help="TOML configuration file (deploy/companion.toml documents it)")
     p.add_argument(
@@ -44,7 +44,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--sensors",
         metavar="HOST:PORT",
-        help="sensor stream endpoint (simbridge --sensors, a LiDAR driver); 'none' with --camera: no LiDAR",
+        help="sensor stream endpoint (simbridge --sensors, a LiDAR driver; default from the config: "
+        f"{DEFAULTS.sensors.endpoint}); 'none' with --camera: no LiDAR",
     )
     p.add_argument(
         "--camera",

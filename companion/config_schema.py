@@ -149,7 +149,7 @@ class MavlinkConfig(_Section):
 class SensorsConfig(_Section):
     """The local sensor-stream socket (simbridge or the real sensor bridge)."""
 
-    endpoint: str = "127.0.0.1:5600"  # "none": no sensor stream (a camera alone, ``[camera]``)
+    endpoint: str = "127.0.0.1:5601"  # "none": no sensor stream (a camera alone, ``[camera]``)
     frame_timeout_s: float = Field(default=10.0, gt=0)
     max_frame_age_s: float = Field(default=2.0, gt=0)
 
@@ -250,6 +250,8 @@ class RecoveryConfig(_Section):
     search_window_s: SearchWindow = SearchWindow()
     search_agl_m: float = Field(default=75.0, gt=0)
     search_max_legs: int = Field(default=40, ge=0)
+    people_margin_m: float = Field(default=10.0, ge=0)
+    people_wait_s: float = Field(default=20.0, ge=0)
 
     def rounds(self) -> dict[Criticality, int]:
         """The round budget per criticality, each capped by ``max_rounds``."""
@@ -354,6 +356,10 @@ class ReasonerConfig(_Section):
     override_lone_no_after: int = Field(default=2, ge=1)
     onboard_judge: Literal["cues", "landnet"] = "landnet"
     onboard_model: str = Field(default="landnet-s", min_length=1)
+    # open ground among buildings (a lawn, a sports field, a pasture) is a site like a roof when its
+    # surface is at least this large and the site this far from its edge (docs/reasoning.md)
+    open_ground_area_m2: float = Field(default=600.0, ge=0)
+    open_ground_edge_m: float = Field(default=10.0, ge=0)
     profiles: dict[str, LvlmProfileConfig] = Field(default_factory=dict, strict=False)
 
 

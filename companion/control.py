@@ -15,6 +15,7 @@ from typing import Any
 
 from pymavlink.dialects.v20 import common as mavlink2
 
+from companion.fence import Fence
 from companion.flavour import Flavour, Mode, flavour_for
 from companion.precision import PrecisionLanding
 from companion.telemetry import TelemetryCache
@@ -105,6 +106,8 @@ class VehicleController:
         self.failsafe_modes: list[int] = []  # the modes the last failsafe went through (its grace period)
         # the autopilot's precision landing, read from its parameters once it is heard (the daemon)
         self.precision: PrecisionLanding | None = None
+        # the autopilot's circular fence, read likewise: legs and sites keep inside it
+        self.fence: Fence | None = None
         self.longest_stream_gap_s = 0.0  # wall seconds between two setpoints: the event loop's health
         self._failing: str | None = None  # the stream's failure last logged, until a send succeeds
 

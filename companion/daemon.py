@@ -16,6 +16,7 @@ from typing import Any
 
 from companion.alarms import ALARM_TEXT_PREFIX, MAV_CMD_USER_1, Alarm, Criticality, ReasonCode
 from companion.control import VehicleController
+from companion.fence import read_fence
 from companion.frame_source import FrameSource
 from companion.ground import GroundFeed, TeeRecord, telemetry_snapshot
 from companion.operator import MAV_CMD_USER_2, InhibitSwitch, OperatorControls
@@ -396,7 +397,8 @@ class Companion:
 
     async def _precision_check(self) -> None:
         """Once the autopilot is heard: read whether it will land on the companion's LANDING_TARGET
-        (:mod:`companion.precision`), and say so; a recovery reads ``ctl.precision``. Read again
+        (:mod:`companion.precision`) and its circular fence (:mod:`companion.fence`), and say so; a
+        recovery reads ``ctl.precision`` and ``ctl.fence``. Read again
         should the autopilot change (a reboot into another firmware)."""
         checked_for: int | None = None
         while True:
@@ -409,6 +411,8 @@ class Companion:
                 self.log.log(
                     level, "precision landing %s: %s", "ready" if setup.ready else "not used", setup.why
                 )
+                self.ctl.fence = await read_fence(self.ctl, autopilot)
+                self.log.info("fence: %s", self.ctl.fence.why)
             await asyncio.sleep(STREAM_CHECK_S)
 
     async def _watchers(self) -> None:

@@ -52,6 +52,7 @@ class VehicleState:
     battery_pct: float = math.nan
     gps_fix: int = -1
     rc_pwm_us: tuple[int, ...] = ()  # RC_CHANNELS' chan1_raw ... chan18_raw (0 or 65535: unused)
+    home_ned_m: tuple[float, float, float] | None = None  # HOME_POSITION's local x, y, z (None: not heard)
     t_boot_s: float = 0.0
     stamps: dict[str, float] = field(default_factory=dict)  # part -> monotonic time of last update
 
@@ -143,6 +144,20 @@ class PoseHistory:
             return None
         return Pose(t_s, pos, quat)
 
+    def turn_rate_at(self, t_s: float, half_s: float = 0.1) -> float:
+        """How fast the attitude turned about ``t_s`` (rad/s): the angle between the attitudes
+        ``half_s`` either side of it (the newest sample at most), over the time between them; NaN
+        where they are not known or less than ``half_s`` apart."""
+        ts = self._att.t
+        if not ts:
+            return math.nan
+        t0, t1 = t_s - half_s, min(t_s + half_s, ts[-1])
+        before, after = self._attitude_at(t0), self._attitude_at(t1)
+        if before is None or after is None or t1 - t0 < half_s:
+            return math.nan
+        dot = abs(sum(a * b for a, b in zip(before, after, strict=True)))
+        return 2.0 * math.acos(min(1.0, dot)) / (t1 - t0)
+
     def _position_at(self, t: float) -> Vec3 | None:
         found = self._pos.around(t, self.EXTRAPOLATE_S, self.MAX_GAP_S)
         if found is None:
@@ -152,7 +167,17 @@ class PoseHistory:
         if k == len(values):  # w is the time past the newest sample
             (n, e, d), (vn, ve, vd) = values[-1]
             return (n + vn * w, e + ve * w, d + vd * w)
-        p0, p1 = values[k - 1][0], values[k][0]
+        (p0, v0), (p1, v1) = values[k - 1], values[k]
+        t0, t1 = self._pos.t[k - 1], self._pos.t[k]
+        dt = t1 - t0
+        jump_n = p1[0] - (p0[0] + 0.5 * (v0[0] + v1[0]) * dt)
+        jump_e = p1[1] - (p0[1] + 0.5 * (v0[1] + v1[1]) * dt)
+        if math.hypot(jump_n, jump_e) >= ResetWatch.MIN_M:
+            # the estimate reset between the two: a time before the later sample is in the frame of
+            # reference before the reset (ResetWatch dates it at the later sample), carried on from the
+            # earlier one; a blend would put it part of the way, in neither (a site found 12 m off)
+            a = t - t0
+            return (p0[0] + v0[0] * a, p0[1] + v0[1] * a, p0[2] + v0[2] * a)
         return (p0[0] + w * (p1[0] - p0[0]), p0[1] + w * (p1[1] - p0[1]), p0[2] + w * (p1[2] - p0[2]))
 
     def _attitude_at(self, t: float) -> tuple[float, float, float, float] | None:
@@ -288,6 +313,10 @@ class TelemetryCache:
         elif kind == "RC_CHANNELS":
             s.rc_pwm_us = tuple(int(getattr(msg, f"chan{k}_raw")) for k in range(1, 19))
             self._stamp("rc")
+        elif kind == "HOME_POSITION":
+            home = (float(msg.x), float(msg.y), float(msg.z))
+            if all(math.isfinite(v) for v in home):
+                s.home_ned_m = home
         elif kind == "STATUSTEXT":
             self.texts.append((time.monotonic(), int(msg.severity), str(msg.text)))
             del self.texts[:-50]

@@ -4,18 +4,21 @@ The picture is north up, east right. Pixel ``(row, col)`` covers north
 ``[n_max - (row + 1) px_m, n_max - row px_m)`` and east ``[e_min + col px_m, e_min + (col + 1) px_m)``
 in scenario NED metres. A pixel stands for a square block of grid cells and takes the class most of
 them have (the mode), so thin features (lane markings, parapets, guard rails) give way to what they
-border when the map is coarser than the grid. Moving actors (traffic, pedestrians) are left out: the
-map shows the static world.
+border when the map is coarser than the grid. Overhead wires (power lines' conductors) are drawn over
+it as thin dark lines, whatever the scale. Moving actors (traffic, pedestrians) are left out: the map
+shows the static world.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
 from simbridge.world.model import SurfaceClass, WorldGrid
+from simbridge.world.world import Wire
 
 # One colour per class (RGB, 0-255): roofs light, clutter dark, roads dark grey, water blue, parks green.
 CLASS_RGB: dict[SurfaceClass, tuple[int, int, int]] = {
@@ -40,6 +43,7 @@ CLASS_RGB: dict[SurfaceClass, tuple[int, int, int]] = {
     SurfaceClass.PEDESTRIAN: (240, 140, 0),
     SurfaceClass.RAIL: (110, 84, 70),
     SurfaceClass.MACHINERY: (200, 90, 60),
+    SurfaceClass.CROP: (196, 186, 84),
 }
 
 CLASS_LABEL: dict[SurfaceClass, str] = {
@@ -64,12 +68,14 @@ CLASS_LABEL: dict[SurfaceClass, str] = {
     SurfaceClass.PEDESTRIAN: "pedestrian",
     SurfaceClass.RAIL: "railway",
     SurfaceClass.MACHINERY: "machinery",
+    SurfaceClass.CROP: "crops",
 }
 
 _N_CLASSES = 32  # > every SurfaceClass value; bincount bins per block
 _BAND_CELLS = 4_000_000  # grid cells per band when taking block modes (bounds the memory used)
 _FLAT_HALF_M = 100.0  # half side of the map of the flat scenario when no bounds are given
-_LIGHT_AZ_DEG, _LIGHT_EL_DEG = 315.0, 45.0  # hillshade light from the north-west
+_LIGHT_AZ_DEG, _LIGHT_EL_DEG = 315.0, 45.0
+_WIRE_RGB = (30, 30, 34)  # hillshade light from the north-west
 
 
 class BaseMapError(ValueError):
@@ -132,6 +138,7 @@ def basemap(
     bounds_ne_m: tuple[float, float, float, float] | None = None,
     max_px: int = 1600,
     place: str = "downtown",
+    world_cache: Path | None = None,
 ) -> BaseMap:
     """Draw a scenario's world from simbridge's ground truth.
 
@@ -144,6 +151,7 @@ def basemap(
             reach past the bounds by less than one pixel (never past the world's edge by more).
         max_px: the longest side of the picture in pixels; the grid is reduced by a whole stride.
         place: for ``city``, the kind of place (simbridge ``--place``).
+        world_cache: where built places are kept (simbridge ``--world-cache``); None: built here.
 
     Raises:
         BaseMapError: bad bounds or ``max_px``, or bounds that miss the world.
@@ -166,7 +174,7 @@ def basemap(
     from simbridge.world.live import LiveWorld
 
     if scenario == "city":  # the city of this seed; the episode seed only moves actors, left out below
-        terrain = load_scenario(scenario, 0, city_seed=seed, place=place).terrain
+        terrain = load_scenario(scenario, 0, city_seed=seed, place=place, world_cache=world_cache).terrain
     else:
         terrain = load_scenario(scenario, seed).terrain
     if not isinstance(terrain, LiveWorld):  # the flat scenario: open ground everywhere
@@ -176,14 +184,18 @@ def basemap(
         grid = WorldGrid.empty((n_min, n_max), (e_min, e_max), res)
     else:
         terrain.actors.unstamp(terrain.grid)  # the static world: no traffic or pedestrians
-        return replace(grid_basemap(terrain.grid, bounds_ne_m, max_px), world_digest=terrain.world_digest)
+        drawn = grid_basemap(terrain.grid, bounds_ne_m, max_px, terrain.world.wires)
+        return replace(drawn, world_digest=terrain.world_digest)
     return grid_basemap(grid, bounds_ne_m, max_px)
 
 
 def grid_basemap(
-    grid: WorldGrid, bounds_ne_m: tuple[float, float, float, float] | None = None, max_px: int = 1600
+    grid: WorldGrid,
+    bounds_ne_m: tuple[float, float, float, float] | None = None,
+    max_px: int = 1600,
+    wires: tuple[Wire, ...] = (),
 ) -> BaseMap:
-    """Draw a grid (see :func:`basemap` for the arguments)."""
+    """Draw a grid (see :func:`basemap` for the arguments), and ``wires`` over it as thin dark lines."""
     if bounds_ne_m is None:
         win: tuple[int, int, int, int] | None = (0, grid.shape[0], 0, grid.shape[1])
     else:
@@ -210,8 +222,15 @@ def grid_basemap(
         grid.e0 + j1 * grid.res,
     )
     # grid rows run north; picture rows run south from the top
+    picture = np.ascontiguousarray(rgb[::-1])
+    if wires:
+        import cv2  # drawing lines only: the map itself needs none of OpenCV
+    for wire in wires:
+        pts = np.asarray(wire.points_neh, np.float64)[:, :2]
+        xy = np.stack([(pts[:, 1] - extent[2]) / px_m, (extent[1] - pts[:, 0]) / px_m], axis=1)
+        cv2.polylines(picture, [np.round(xy * 16).astype(np.int32)], False, _WIRE_RGB, 1, cv2.LINE_AA, 4)
     return BaseMap(
-        rgb=np.ascontiguousarray(rgb[::-1]),
+        rgb=picture,
         cls=np.ascontiguousarray(block_cls[::-1]),
         extent_ne_m=extent,
         px_m=px_m,

@@ -55,6 +55,7 @@ class EpisodeJob:
     config_path: Path | None = None
     sitl: Path | None = None
     tries: int = 3
+    world_cache: Path | None = None  # built places kept here (simbridge --world-cache); None: none
 
     @property
     def wall_limit_s(self) -> float:
@@ -97,8 +98,9 @@ def fly(job: EpisodeJob) -> dict[str, Any]:
         t0 = time.monotonic()
         try:
             entry = run_episode(
-                job.spec, job.workdir, times=job.times, config_path=job.config_path, sitl=job.sitl
-            )
+                job.spec, job.workdir, times=job.times, config_path=job.config_path, sitl=job.sitl,
+                world_cache=job.world_cache,
+            )  # fmt: skip
         except Exception as exc:  # the harness failed (e.g. no port to bind), not the episode
             entry = error_entry(
                 job.spec, f"harness: {type(exc).__name__}: {exc}", infrastructure=True,

@@ -125,6 +125,14 @@ def _seeds(text: str) -> tuple[int, ...]:
     return tuple(out)
 
 
+def world_cache(args: argparse.Namespace) -> Path | None:
+    """The city command's place cache: ``--world-cache``, else OUT/world-cache; None for ``none``."""
+    given = getattr(args, "world_cache", None)
+    if given is None:
+        return Path(args.out).resolve() / "world-cache"
+    return None if given == "none" else Path(given).resolve()
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="companion-bench",
@@ -245,6 +253,12 @@ def build_parser() -> argparse.ArgumentParser:
     y.add_argument(
         "--place", choices=PLACES, default=DEFAULT_PLACE,
         help=f"the kind of place the cities are (simbridge --place; default {DEFAULT_PLACE})",
+    )  # fmt: skip
+    y.add_argument(
+        "--world-cache", metavar="DIR|none",
+        help="where each city is kept once built, for every episode and the grading to map instead of "
+        "building it again (simbridge --world-cache; about 0.4 GB a downtown city); default "
+        "OUT/world-cache; none: built by every process",
     )  # fmt: skip
     k = sub.add_parser("compare", help="whether two campaigns' safe rates differ beyond chance")
     k.add_argument("a", type=Path, metavar="A", help="a results.json, or the folder holding it")
@@ -374,8 +388,10 @@ def run_episodes(
     if skipped:
         print(f"resuming: {skipped} of {len(specs)} episodes already in {out / RESULTS}", file=sys.stderr)
     times = EpisodeTimes(speed=args.speed, sim_s=args.time_limit, wall_limit_s=args.wall_limit)
+    cache = world_cache(args) if args.command == "city" else None
+    tries = 1 + max(args.retries, 0)
     jobs = [
-        EpisodeJob(s, out / "episodes" / s.id, times, args.config, sitl, tries=1 + max(args.retries, 0))
+        EpisodeJob(s, out / "episodes" / s.id, times, args.config, sitl, tries=tries, world_cache=cache)
         for s in todo
     ]
     executor = make_executor(
@@ -458,6 +474,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command == "city":
         config["start_index"] = args.start_index
         config["place"] = args.place
+        cache = world_cache(args)
+        config["world_cache"] = str(cache) if cache is not None else None
         seeds = city_seeds(args)
         config["city_seeds"] = list(seeds)
         if len(seeds) == 1:

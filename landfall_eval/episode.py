@@ -27,11 +27,12 @@ alarm tool) in :mod:`landfall_eval.processes`, reading what they wrote into the 
 from __future__ import annotations
 
 import os
+import shutil
 import socket
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -158,12 +159,14 @@ def simbridge_command(
     sitl: Path | None = None,
     video_port: int | None = None,
     camera_info: Path | None = None,
+    world_cache: Path | None = None,
 ) -> list[str]:
     """The ``simbridge`` command line that flies ``spec``: MAVLink to ``udp_port`` on loopback, the
     sensor stream on ``sensors_port``, the episode log at ``episode_log``, ``speed`` x real time;
     ``sitl`` the firmware binary for ``ardupilot-sitl`` or ``px4-sitl`` (None: simbridge's own default).
     With ``spec.camera`` ``rtp``: the camera as H.264 over RTP to ``video_port``, ``RTP_WALL_FPS`` frames a
-    wall second, its calibration written to ``camera_info``."""
+    wall second, its calibration written to ``camera_info``. ``world_cache``: where a city's place is
+    kept between episodes (simbridge ``--world-cache``)."""
     cmd = [
         sys.executable, "-m", "simbridge", "--scenario", spec.scenario, "--seed", str(spec.seed),
         "--autopilot", spec.autopilot, "--weather", spec.weather, "--speed", f"{speed:g}",
@@ -176,6 +179,10 @@ def simbridge_command(
         cmd += ["--px4", str(sitl)]
     if spec.city_seed is not None:
         cmd += ["--city-seed", str(spec.city_seed), "--place", spec.place]
+        if world_cache is not None:
+            cmd += ["--world-cache", str(world_cache)]
+        if spec.autopilot in ("px4", "ardupilot"):  # the emulation's fence out to the map's edge
+            cmd += ["--fence", "map"]
     if spec.ekf_error != "off":
         cmd += ["--ekf-error", spec.ekf_error]
     if spec.gps_fault is not None:
@@ -200,6 +207,7 @@ def run_episode(
     config_path: Path | None = None,
     on_line: Callable[[str, str], None] | None = None,
     sitl: Path | None = None,
+    world_cache: Path | None = None,
 ) -> dict[str, Any]:
     """Fly one episode; returns its results.json entry (``episodes[]`` in docs/bench.md).
 
@@ -209,7 +217,8 @@ def run_episode(
     ``error`` or ``timeout`` with the ``error`` text, and ``last_state`` says where the companion and
     the vehicle stood at the end. ``city_seed`` and ``world_digest`` come from simbridge's episode log:
     the world it flew. ``sitl``: the firmware binary when ``spec.autopilot`` is ``ardupilot-sitl`` or
-    ``px4-sitl``.
+    ``px4-sitl``. ``world_cache``: where built places are kept, for simbridge and the grading
+    (:mod:`simbridge.world.cache`; None: each builds its own).
     """
     times = times or EpisodeTimes()
     workdir.mkdir(parents=True, exist_ok=True)
@@ -220,13 +229,16 @@ def run_episode(
     )
     for stale in (episode_log, comp_log):
         stale.unlink(missing_ok=True)
+    # a try before this one (a retry, a Ray task rerun after its node died) may have left a flight
+    # record: its events must not stand for this try's (its companion's "sensors up", its outcome)
+    shutil.rmtree(record_dir, ignore_errors=True)
     udp, tcp = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_STREAM)
     video = free_port(socket.SOCK_DGRAM) if spec.camera == "rtp" else None
     camera_info = workdir / "camera.yaml"
     camera_info.unlink(missing_ok=True)
     sim_cmd = simbridge_command(
         spec, udp_port=udp, sensors_port=tcp, episode_log=episode_log, speed=times.speed, sitl=sitl,
-        video_port=video, camera_info=camera_info,
+        video_port=video, camera_info=camera_info, world_cache=world_cache,
     )  # fmt: skip
     comp_cmd = [
         sys.executable, "-m", "companion", "--mavlink", f"udp:{udp}", "--sensors", f"127.0.0.1:{tcp}",
@@ -283,7 +295,8 @@ def run_episode(
         raise
     comp_lines = LineTail(comp_log)
     track(sim, comp)
-    usage = ProcessSample(comp.pid)
+    usage, sim_usage = ProcessSample(comp.pid), ProcessSample(sim.pid)
+    marks: dict[str, float] = {"start": t_wall}  # wall clock at each phase's end (wall_phases_s)
     tail = JsonlTail(episode_log)
     log = LogWatch()
     alarm_t_s: float | None = None  # the takeover where the vehicle already holds in GUIDED
@@ -306,23 +319,25 @@ def run_episode(
             if STOPPING.is_set():
                 raise _EpisodeError("stopped: the campaign was interrupted")
             time.sleep(0.2)
+        marks["ready"] = time.monotonic()
         res = send_alarm(udp, spec.reason, spec.criticality, time.monotonic() + 30.0)
         if on_line is not None:
             on_line("alarm", (res.stdout or res.stderr).strip())
         if res.returncode != 0:
             raise _EpisodeError(f"alarm not accepted: {(res.stdout or res.stderr).strip()[:200]}")
-        t_alarm = time.monotonic()
+        t_alarm = marks["alarm"] = time.monotonic()
         alarm_t_s = alarm_sim_time_s(log.ready, record_events(record_dir))
         ended = None
         while True:
             usage.sample()
+            sim_usage.sample()
             log.take(tail.lines())
             if on_line is not None:
                 for line in comp_lines.text_lines():
                     on_line("companion", line)
             if log.touchdown is not None:
                 if ended is None:
-                    ended = time.monotonic()
+                    ended = marks["touchdown"] = time.monotonic()
                 if recorded(record_dir, *RECOVERY_ENDED):
                     break
                 if time.monotonic() - ended > times.settle_wall_s:
@@ -346,6 +361,7 @@ def run_episode(
         outcome, error, infrastructure = "error", str(exc), exc.infrastructure
     finally:
         usage.sample()
+        sim_usage.sample()
         for proc in (comp, sim):
             stop_process(proc)
         untrack(sim, comp)
@@ -356,6 +372,7 @@ def run_episode(
         sim_err.close()
         log.take(tail.lines(), final=True)  # what simbridge wrote since the last look
         tail.close()
+        marks["stopped"] = time.monotonic()
     if log.header is not None:
         entry["city_seed"] = log.header.get("city_seed", entry["city_seed"])
         entry["world_digest"] = log.header.get("world_digest")
@@ -365,7 +382,7 @@ def run_episode(
     events = record_events(record_dir)
     entry.update(grade(log.states, takeover, log.touchdown, events))
     entry["touchdown_to_site_m"] = touchdown_to_site_m(log.touchdown, log.header, events)
-    entry.update(landing_distance(log, events, spec.launch, spec.camera))
+    entry.update(landing_distance(log, events, spec.launch, spec.camera, world_cache=world_cache))
     entry["precision_landing"] = precision_landing_summary(events)
     entry["outcome"] = outcome if log.touchdown is None or outcome != "timeout" else "landed"
     entry["error"] = error if log.touchdown is None else None
@@ -377,8 +394,32 @@ def run_episode(
         "peak_anon_mb": round(usage.peak_anon_mb, 1),
         "cpu_s": round(usage.cpu_s, 2),
     }
-    entry["wall_s"] = round(time.monotonic() - t_wall, 2)
+    entry["simbridge"] = {"cpu_s": round(sim_usage.cpu_s, 2)}
+    marks["graded"] = time.monotonic()
+    entry["wall_phases_s"] = wall_phases(marks)
+    entry["wall_s"] = round(marks["graded"] - t_wall, 2)
     return entry
+
+
+PHASES = ("ready", "alarm", "touchdown", "stopped", "graded")  # the phases of wall_phases_s, in order
+
+
+def wall_phases(marks: Mapping[str, float]) -> dict[str, float | None]:
+    """Wall seconds each phase of an episode took, from ``marks`` (the wall clock as each ended; the
+    ``start`` and the phases reached): ``ready`` from the start until the vehicle held and the sensor
+    stream was up, ``alarm`` until the alarm was accepted, ``touchdown`` the flight, ``stopped`` until
+    the recovery's end was recorded and the processes stopped, ``graded`` the grading. A phase never
+    reached is None, and the next one reached counts from the last mark before it."""
+    out: dict[str, float | None] = {}
+    last = marks["start"]
+    for name in PHASES:
+        at = marks.get(name)
+        if at is None:
+            out[name] = None
+            continue
+        out[name] = round(at - last, 2)
+        last = at
+    return out
 
 
 class _EpisodeError(Exception):

@@ -158,6 +158,8 @@ def landing_distance(
     events: list[dict[str, Any]],
     launch: tuple[float, float, float] | None,
     camera: str,
+    *,
+    world_cache: Path | None = None,
 ) -> dict[str, Any]:
     """``landing_distance_m`` and ``landing_target_ned_m`` of an entry (:mod:`landfall_eval.landing`):
     both None when the episode does not say (no touchdown, nothing confirmed) or the world built to
@@ -167,7 +169,9 @@ def landing_distance(
     out: dict[str, Any] = {"landing_distance_m": None, "landing_target_ned_m": None, "landing_error": None}
     frames = log.frames if camera == "socket" else video_frames_by_stamp(log.camera_frames, events)
     try:
-        got = landing_distance_m(log.touchdown, log.header, frames, events, launch=at)
+        got = landing_distance_m(
+            log.touchdown, log.header, frames, events, launch=at, world_cache=world_cache
+        )
     except ValueError as exc:
         return {**out, "landing_error": str(exc)}
     if got is not None:

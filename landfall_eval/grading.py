@@ -45,12 +45,16 @@ SURFACES = (
     "parking",
     "park",
     "water",
+    "pool",
     "pier",
     "ground",
     "rail",
     "machinery",
+    "crops",
+    "outside",
     "no_landing",
 )
+PERSON_MARGIN_M = 10.0  # the grader's person rule (simbridge GraderConfig.person_m)
 _OBSTRUCTION_WORDS = (
     "within", "rooftop object", "parapet", "person", "vehicle", "tree", "guard rail", "machinery",
 )  # fmt: skip
@@ -85,7 +89,8 @@ def failure_class(entry: Mapping[str, Any]) -> str | None:
         return "no touchdown"
     if surface in ("rooftop_clear", "ground", "park", "parking"):
         reasons = " ".join(str(r) for r in entry.get("reasons") or ())
-        why = next((w for w in ("edge", "slope", "rough", "outside") if w in reasons), None)
+        words = ("edge", "slope", "rough", "outside", "person", "vehicle", "machinery", "wire")
+        why = next((w for w in words if w in reasons), None)
         if why is not None:
             return f"unsafe: {surface} ({why})"
     return f"unsafe: {surface}"
@@ -169,6 +174,7 @@ def summarise(episodes: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         got = [int(e["rounds"]) for e in items if e.get("safe")]
         return round(statistics.fmean(got), 3) if got else None
 
+    near = [float(e["nearest_person_m"]) for e in episodes if e.get("nearest_person_m") is not None]
     rss = [float(e["companion"]["peak_rss_mb"]) for e in episodes if e.get("companion")]
     anon = [
         float(e["companion"]["peak_anon_mb"])
@@ -187,6 +193,9 @@ def summarise(episodes: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         ),
         "outcomes": dict(Counter(str(e.get("outcome")) for e in episodes)),
         "by_surface": {s: by_surface[s] for s in SURFACES if by_surface[s]},
+        # people: the nearest at touchdown over the touchdowns that had people in their world
+        "nearest_person_min_m": min(near) if near else None,
+        "touchdowns_within_10m_of_a_person": sum(d <= PERSON_MARGIN_M for d in near),
         "median_time_to_touchdown_s": _median(e.get("time_to_touchdown_s") for e in episodes),
         "median_kinematic_ratio": _median(e.get("kinematic_ratio") for e in episodes),
         "median_touchdown_to_site_m": _median(e.get("touchdown_to_site_m") for e in episodes),

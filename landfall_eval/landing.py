@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -124,6 +125,7 @@ def landing_target_ned(
     v: float,
     *,
     launch: tuple[float, ...] | None = None,
+    world_cache: Path | None = None,
 ) -> np.ndarray | None:
     """The world point pixel (u, v) truly showed from ``pose``: simbridge's world of the episode
     (``header``: the episode log's ``start`` line; ``launch`` as simbridge was given it), its actors
@@ -143,6 +145,7 @@ def landing_target_ned(
         launch,
         city_seed=int(city_seed) if isinstance(city_seed, int) else 0,
         place=str(header.get("place") or "downtown"),
+        world_cache=world_cache,
     )
     world = sc.terrain
     if not isinstance(world, LiveWorld):
@@ -164,6 +167,7 @@ def landing_distance_m(
     events: Sequence[Mapping[str, Any]],
     *,
     launch: tuple[float, ...] | None = None,
+    world_cache: Path | None = None,
 ) -> tuple[float, list[float]] | None:
     """Horizontal distance (m) from the true touchdown to what the chosen pixel of the last confirmed
     site truly shows, and that point (NED, the scenario frame). None without a touchdown, a confirmed
@@ -174,7 +178,7 @@ def landing_distance_m(
     pose = true_pose(frames, pick.time_boot_ms)
     if pose is None:
         return None
-    target = landing_target_ned(header, pose, pick.u, pick.v, launch=launch)
+    target = landing_target_ned(header, pose, pick.u, pick.v, launch=launch, world_cache=world_cache)
     if target is None:
         return None
     td = touchdown["pos_ned_m"]

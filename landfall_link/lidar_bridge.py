@@ -15,7 +15,9 @@ from the LiDAR's axes into the body's (its mounting) and serves the newest sweep
 Its frames carry the LiDAR and the rangefinder only (no image: the companion's camera is a video stream,
 docs/camera.md); the rangefinder is the autopilot's downward DISTANCE_SENSOR when fresh, else the
 sweep's nearest returns around the nadir. ``python -m landfall_link.lidar_bridge --replay DIR`` serves
-recorded sweeps (``.npy`` files) the same way, to try a set-up without the sensor.
+recorded sweeps (``.npy`` files) the same way, to try a set-up without the sensor; ``--ros2-bag BAG`` and
+``--ros2-topic TOPIC`` feed it a ROS 2 driver's ``sensor_msgs/msg/PointCloud2`` clouds, recorded or live
+(:mod:`landfall_link.lidar_ros2`).
 """
 
 from __future__ import annotations
@@ -35,11 +37,13 @@ from typing import Any
 
 import numpy as np
 
+from landfall_link import lidar_ros2
 from landfall_link.boot_clock import BootClock
 from landfall_link.mavlink import URL_FORMS, open_link
+from landfall_link.pointcloud2 import DEFAULT_INTENSITY_SCALE
 from landfall_link.sensorstream import SensorFrame, SensorStreamServer, parse_endpoint
 
-__all__ = ["LidarBridge", "LidarBridgeError", "LidarMount", "body_rotation", "main"]
+__all__ = ["LidarBridge", "LidarBridgeError", "LidarMount", "body_rotation", "build_parser", "main"]
 
 MAV_COMP_ID_PERIPHERAL = 158
 MAV_TYPE_ONBOARD_CONTROLLER = 18
@@ -230,25 +234,42 @@ async def _replay(bridge: LidarBridge, files: list[Path], rate_hz: float, stop: 
 
 
 async def _serve(args: argparse.Namespace) -> None:
-    files = _replay_files(args.replay)
     mount = LidarMount(tuple(args.mount_rpy_deg), tuple(args.offset_frd_m))
+    if args.replay is not None:
+        files = _replay_files(args.replay)
+        what = f"replaying {len(files)} files at {args.rate:g} Hz"
+    elif args.ros2_bag is not None:
+        topic, count = await asyncio.to_thread(lidar_ros2.bag_topic, args.ros2_bag, args.topic)
+        pace = "their header stamps" if args.rate is None else f"{args.rate:g} Hz"
+        what = f"replaying {count} clouds of {topic} from {args.ros2_bag} at {pace}"
+    else:
+        what = f"following the ROS 2 topic {args.ros2_topic}"
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
     bridge = LidarBridge(args.mavlink, args.sensors, mount, vehicle_system_id=args.vehicle_system_id)
     async with bridge:
-        log.info("serving LiDAR sweeps on %s (port %d), replaying %d files at %g Hz",
-                 args.sensors, bridge.port, len(files), args.rate)  # fmt: skip
+        log.info("serving LiDAR sweeps on %s (port %d), %s", args.sensors, bridge.port, what)
         print(f"lidar bridge: sensor stream on port {bridge.port}", flush=True)
-        await _replay(bridge, files, args.rate, stop)
+        if args.replay is not None:
+            await _replay(bridge, files, args.rate, stop)
+        elif args.ros2_bag is not None:
+            await lidar_ros2.replay_bag(bridge, args.ros2_bag, topic, stop, rate_hz=args.rate,
+                                        intensity_field=args.intensity_field,
+                                        intensity_scale=args.intensity_scale)  # fmt: skip
+        else:
+            await lidar_ros2.follow_topic(bridge, args.ros2_topic, stop, intensity_field=args.intensity_field,
+                                          intensity_scale=args.intensity_scale)  # fmt: skip
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The command line of ``landfall-lidar-bridge``."""
     p = argparse.ArgumentParser(
         prog="landfall-lidar-bridge",
         description="Serve LiDAR sweeps to the companion on the sensor stream, dated on the autopilot's "
-        "clock (docs/sensor-stream.md). This command replays recorded sweeps; a driver uses LidarBridge.",
+        "clock (docs/sensor-stream.md): recorded .npy sweeps, a recorded ROS 2 bag, or a live ROS 2 "
+        "PointCloud2 topic; any other driver uses LidarBridge.",
     )
     p.add_argument(
         "--mavlink",
@@ -256,16 +277,87 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="the autopilot's MAVLink, e.g. udpin:127.0.0.1:14551 or serial:/dev/ttyAMA0:921600; "
         f"forms: {URL_FORMS}",
     )
-    p.add_argument("--sensors", default="127.0.0.1:5601", help="HOST:PORT served (the companion's --sensors)")
-    p.add_argument("--replay", type=Path, required=True, help="folder of .npy sweeps, (N, 3|4) float32")
-    p.add_argument("--rate", type=float, default=10.0, help="sweeps a second (default 10)")
-    p.add_argument("--mount-rpy-deg", type=float, nargs=3, default=(0.0, 0.0, 0.0), metavar=("R", "P", "Y"))
-    p.add_argument("--offset-frd-m", type=float, nargs=3, default=(0.0, 0.0, 0.0), metavar=("X", "Y", "Z"))
-    p.add_argument("--vehicle-system-id", type=int, default=1)
+    p.add_argument(
+        "--sensors",
+        default="127.0.0.1:5601",
+        help="HOST:PORT served, the companion's --sensors (default %(default)s, the companion's too)",
+    )
+    source = p.add_mutually_exclusive_group(required=True)
+    source.add_argument("--replay", type=Path, metavar="DIR", help="folder of .npy sweeps, (N, 3|4) float32")
+    source.add_argument(
+        "--ros2-bag",
+        type=Path,
+        metavar="BAG",
+        help="a recorded ROS 2 bag (its folder, or a .db3 or .mcap file) of sensor_msgs/msg/PointCloud2, "
+        f"replayed in a loop (needs rosbags: {lidar_ros2.LIDAR_EXTRA_HINT})",
+    )
+    source.add_argument(
+        "--ros2-topic",
+        metavar="TOPIC",
+        help="a live sensor_msgs/msg/PointCloud2 topic, e.g. /livox/lidar (needs rclpy: a sourced ROS 2)",
+    )
+    p.add_argument("--topic", help="--ros2-bag's PointCloud2 topic (default: the bag's only one)")
+    p.add_argument(
+        "--rate",
+        type=float,
+        help="sweeps a second (default: 10 for --replay; --ros2-bag keeps its header stamps' pace)",
+    )
+    p.add_argument(
+        "--intensity-field",
+        default="intensity",
+        help="the PointCloud2 field read as intensity (default intensity; ouster-ros: reflectivity)",
+    )
+    p.add_argument(
+        "--intensity-scale",
+        type=float,
+        default=DEFAULT_INTENSITY_SCALE,
+        help="the intensity field's full scale, read as 1 (default 255)",
+    )
+    p.add_argument(
+        "--mount-rpy-deg",
+        type=float,
+        nargs=3,
+        default=(0.0, 0.0, 0.0),
+        metavar=("R", "P", "Y"),
+        help="the LiDAR's axes turned from the body's FRD, degrees (a ROS 2 cloud's FLU frame is taken to "
+        "FRD first: upside down, x forward, is 180 0 0)",
+    )
+    p.add_argument(
+        "--offset-frd-m",
+        type=float,
+        nargs=3,
+        default=(0.0, 0.0, 0.0),
+        metavar=("X", "Y", "Z"),
+        help="the LiDAR's origin from the autopilot's reference point, body FRD metres",
+    )
+    p.add_argument(
+        "--vehicle-system-id", type=int, default=1, help="the autopilot's MAVLink system id (default 1)"
+    )
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    p = build_parser()
     args = p.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(levelname)s %(name)s: %(message)s")
-    if not args.rate > 0:
+    if args.topic is not None and args.ros2_bag is None:
+        p.error("--topic names a topic of --ros2-bag (a live topic is --ros2-topic TOPIC)")
+    if args.rate is not None and args.ros2_topic is not None:
+        p.error("--rate paces a replay; a live --ros2-topic comes at the LiDAR's own rate")
+    if args.rate is None and args.replay is not None:
+        args.rate = 10.0
+    if args.rate is not None and not (math.isfinite(args.rate) and args.rate > 0):
         p.error(f"--rate must be > 0, got {args.rate}")
+    if not (math.isfinite(args.intensity_scale) and args.intensity_scale > 0):
+        p.error(f"--intensity-scale must be > 0, got {args.intensity_scale}")
+    missing = None
+    if args.ros2_bag is not None:
+        missing = lidar_ros2.rosbags_missing()
+    elif args.ros2_topic is not None:
+        missing = lidar_ros2.rclpy_missing()
+    if missing is not None:
+        print(f"lidar bridge: {missing}", file=sys.stderr)
+        return 2
+    logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(levelname)s %(name)s: %(message)s")
     try:
         asyncio.run(_serve(args))
     except (LidarBridgeError, ValueError, OSError) as exc:

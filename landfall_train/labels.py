@@ -55,6 +55,7 @@ for _c, _k in {
     C.PARKING_ROOF: 8,
     C.RAIL: 8,
     C.MACHINERY: 1,
+    C.CROP: 6,
 }.items():
     _TOP[int(_c)] = _k
 _WALL = np.full(256, 2, np.uint8)  # class of a wall hit: a wall, unless it is the side of an object

@@ -1,10 +1,13 @@
-"""simbridge's camera as a video stream: ``simbridge --camera-stream udp://HOST:PORT``.
+"""simbridge's camera as a video stream: ``simbridge --camera-stream URL``.
 
 The camera is rendered at ``--camera-fps`` frames per simulated second from the vehicle's true pose and
 sent as H.264 over RTP on UDP (payload type 96, 90 kHz clock), the way PX4's and ArduPilot's Gazebo
-cameras send theirs to port 5600: x264 through PyAV (the ``sim`` extra), tuned for latency (no
-B-frames, SPS/PPS repeated before every key frame so a receiver can join at any time, a key frame every
-second of simulated time). ``--camera-info-out FILE`` writes the camera's calibration as a ROS
+cameras send theirs to port 5600 (``udp://HOST:PORT``), or as raw H.264 the way a Raspberry Pi camera's
+``rpicam-vid --inline`` sends it: datagrams of the byte stream to ``raw+udp://HOST:PORT`` (its ``-o
+udp://``), or a TCP server on ``raw+tcp://HOST:PORT`` that the receiver connects to (its ``--listen -o
+tcp://``; simbridge waits for it before the first frame). x264 through PyAV (the ``sim`` extra), tuned
+for latency (no B-frames, SPS/PPS repeated before every key frame so a receiver can join at any time, a
+key frame every second of simulated time). ``--camera-info-out FILE`` writes the camera's calibration as a ROS
 ``camera_info`` YAML for ``companion --camera-info``.
 
 Each frame sent is in the episode log (``camera_frame``: its index, presentation time, the autopilot's
@@ -25,24 +28,42 @@ __all__ = ["CameraStreamer", "parse_stream_url"]
 RTP_CLOCK_HZ = 90_000
 
 
-def parse_stream_url(text: str) -> tuple[str, int]:
-    """``udp://HOST:PORT`` -> (host, port); ValueError naming the flag otherwise."""
-    m = re.fullmatch(r"udp://([^:/\s]+):(\d{1,5})/?", text.strip())
-    if m is None or not 1 <= int(m.group(2)) <= 65535:
-        raise ValueError(f"--camera-stream: expected udp://HOST:PORT (H.264 over RTP), got {text!r}")
-    return m.group(1), int(m.group(2))
+FRAMINGS = {"udp": "rtp", "raw+udp": "raw-udp", "raw+tcp": "raw-tcp"}  # URL scheme -> framing
+
+
+def parse_stream_url(text: str) -> tuple[str, int, str]:
+    """``udp://HOST:PORT``, ``raw+udp://HOST:PORT`` or ``raw+tcp://HOST:PORT`` -> (host, port, framing:
+    ``rtp``, ``raw-udp`` or ``raw-tcp``); ValueError naming the flag otherwise."""
+    m = re.fullmatch(r"(udp|raw\+udp|raw\+tcp)://([^:/\s]+):(\d{1,5})/?", text.strip())
+    if m is None or not 1 <= int(m.group(3)) <= 65535:
+        raise ValueError(
+            "--camera-stream: expected udp://HOST:PORT (H.264 over RTP), raw+udp://HOST:PORT or "
+            f"raw+tcp://HOST:PORT (raw H.264), got {text!r}"
+        )
+    return m.group(2), int(m.group(3)), FRAMINGS[m.group(1)]
 
 
 class CameraStreamer:
-    """An H.264 RTP sender for frames of one size."""
+    """An H.264 sender for frames of one size, in RTP or raw (``framing``: :func:`parse_stream_url`'s)."""
 
-    def __init__(self, host: str, port: int, width: int, height: int, fps: float) -> None:
+    def __init__(
+        self, host: str, port: int, width: int, height: int, fps: float, framing: str = "rtp"
+    ) -> None:
         try:
             import av
         except ImportError:
             raise ValueError("--camera-stream needs PyAV: pip install 'landfall[sim]'") from None
-        self.url = f"rtp://{host}:{port}"
-        self._out: Any = av.open(self.url, mode="w", format="rtp")
+        if framing == "rtp":
+            self.url = f"rtp://{host}:{port}"
+            self._out: Any = av.open(self.url, mode="w", format="rtp")
+        elif framing == "raw-udp":
+            self.url = f"udp://{host}:{port}?pkt_size=1316"
+            self._out = av.open(self.url, mode="w", format="h264")
+        elif framing == "raw-tcp":  # a server: blocks until the receiver connects
+            self.url = f"tcp://{host}:{port}?listen=1"
+            self._out = av.open(self.url, mode="w", format="h264")
+        else:
+            raise ValueError(f"unknown framing {framing!r}")
         stream = self._out.add_stream("libx264", rate=max(1, round(fps)))
         stream.width, stream.height, stream.pix_fmt = width, height, "yuv420p"
         keyint = max(1, round(fps))

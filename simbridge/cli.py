@@ -93,9 +93,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--camera-stream",
-        metavar="udp://HOST:PORT",
-        help="also send the camera as H.264 over RTP to this UDP endpoint, as Gazebo cameras do "
-        "(companion --camera udp://:PORT); the emulated autopilots only",
+        metavar="URL",
+        help="also send the camera as H.264: udp://HOST:PORT over RTP, as Gazebo cameras do; "
+        "raw+udp://HOST:PORT raw (rpicam-vid -o udp://); raw+tcp://HOST:PORT raw from a TCP server the "
+        "receiver connects to (rpicam-vid --listen -o tcp://); companion --camera udp://:PORT or "
+        "tcp://HOST:PORT takes each. The emulated autopilots only",
     )
     p.add_argument(
         "--camera-fps",
@@ -134,6 +136,14 @@ def build_parser() -> argparse.ArgumentParser:
         choices=PLACES,
         default=DEFAULT_PLACE,
         help=f"the kind of place --scenario city builds (default {DEFAULT_PLACE}; docs/simbridge.md)",
+    )
+    p.add_argument(
+        "--world-cache",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="keep the place --scenario city builds in DIR, and map it from there when built before "
+        "(copy-on-write; companion-bench's campaigns share one; default: build it every start)",
     )
     p.add_argument("--speed", type=float, default=1.0, help="simulated seconds per wall second")
     p.add_argument(
@@ -201,6 +211,14 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="PCT",
         help="the battery's charge at the start, percent (default 100): a low-battery flight",
     )
+    p.add_argument(
+        "--fence",
+        choices=("off", "map"),
+        default="off",
+        help="off (default): the emulated autopilot's fence as its parameters have it (disabled); map: "
+        "its circular fence enabled around home out to the map's nearest edge (FENCE_RADIUS / "
+        "GF_MAX_HOR_DIST), which the companion reads and keeps inside",
+    )
     p.add_argument("--log-level", default="INFO", choices=("DEBUG", "INFO", "WARNING", "ERROR"))
     return p
 
@@ -256,6 +274,7 @@ def config_from_args(args: argparse.Namespace) -> SimConfig:
         seed=args.seed,
         city_seed=args.city_seed,
         place=args.place,
+        world_cache=args.world_cache,
         speed=args.speed,
         start=args.start,
         episode_log=args.episode_log,
@@ -273,6 +292,7 @@ def config_from_args(args: argparse.Namespace) -> SimConfig:
         gps_fault=gps_fault,
         battery_pct=args.battery,
         camera_stream=camera_stream,
+        fence=args.fence,
         camera_fps=args.camera_fps,
         camera_info_out=args.camera_info_out,
     )

@@ -44,6 +44,7 @@ def load_scenario(
     *,
     city_seed: int = 0,
     place: str = "downtown",
+    world_cache: Path | None = None,
 ) -> Scenario:
     """Build a scenario; ``launch`` = (north, east[, height above ground]) overrides its launch point.
 
@@ -55,6 +56,8 @@ def load_scenario(
         city_seed: the procedural city's seed (``city`` only; ignored otherwise).
         place: the kind of place ``city`` builds (:data:`simbridge.world.places.PLACES`; ignored
             otherwise).
+        world_cache: a folder where ``city`` keeps the places it builds and finds those built before
+            (:mod:`simbridge.world.cache`); None: built here.
 
     Raises:
         ValueError: an unknown name or place (the message lists the known ones), a bad scenario file
@@ -66,9 +69,9 @@ def load_scenario(
         from simbridge.world.live import LiveWorld
 
         if name == "city":
-            from simbridge.world.places import generate_place
+            from simbridge.world.cache import cached_place
 
-            world = generate_place(place, city_seed)  # CityError (a ValueError) for a negative seed
+            world = cached_place(place, city_seed, world_cache)  # CityError (a ValueError): seed < 0
         else:
             from simbridge.world.scenario_file import BUILTIN_SCENARIO_DIR, load_scenario_file
 

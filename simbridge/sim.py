@@ -47,6 +47,7 @@ class SimConfig:
     seed: int = 0  # the episode: traffic, sensor noise, wind (and a scenario file's furniture)
     city_seed: int = 0  # the procedural city (scenario "city"): one campaign, one city
     place: str = "downtown"  # the kind of place the scenario "city" builds (simbridge.world.places)
+    world_cache: Path | None = None  # where built places are kept (simbridge.world.cache); None: none
     speed: float = 1.0
     start: str = "air"
     episode_log: Path | None = None
@@ -63,9 +64,11 @@ class SimConfig:
     ekf_error: str = "off"  # the emulation's estimator errors (simbridge.estimate.PRESETS)
     gps_fault: GpsFaultConfig | None = None  # the GPS lies during the descent (simbridge.estimate)
     battery_pct: float = 100.0  # the pack's charge at the start (a low-battery alarm's flight)
-    camera_stream: tuple[str, int] | None = None  # send the camera as H.264 over RTP to this UDP endpoint
+    # send the camera as H.264 to (host, port, framing: rtp, raw-udp, raw-tcp; simbridge.camera_stream)
+    camera_stream: tuple[str, int, str] | None = None
     camera_fps: float = 5.0  # the stream's frames per simulated second
     camera_info_out: Path | None = None  # write the camera's calibration (ROS camera_info YAML) here
+    fence: str = "off"  # "map": the emulated autopilot's circular fence reaches the map's nearest edge
 
     def __post_init__(self) -> None:
         if not 0.0 < self.battery_pct <= 100.0:
@@ -73,6 +76,13 @@ class SimConfig:
         if self.autopilot not in AUTOPILOTS:
             raise ValueError(f"--autopilot must be one of {', '.join(AUTOPILOTS)}, got {self.autopilot!r}")
         estimate_preset(self.ekf_error)  # raises ValueError naming the flag
+        if self.fence not in ("off", "map"):
+            raise ValueError(f"--fence must be off or map, got {self.fence!r}")
+        if self.fence == "map" and self.autopilot in FIRMWARE_AUTOPILOTS:
+            raise ValueError(
+                f"--fence map sets the emulated autopilot's fence; with --autopilot {self.autopilot} set "
+                "the firmware's own (FENCE_ENABLE, FENCE_RADIUS; GF_MAX_HOR_DIST) instead"
+            )
         if self.autopilot in FIRMWARE_AUTOPILOTS:
             name = self.autopilot
             if self.battery_pct != 100.0:
@@ -118,7 +128,12 @@ class SimBridge:
         self.config = config
         self.log = logger or logging.getLogger("simbridge")
         self.scenario: Scenario = load_scenario(
-            config.scenario, config.seed, config.launch, city_seed=config.city_seed, place=config.place
+            config.scenario,
+            config.seed,
+            config.launch,
+            city_seed=config.city_seed,
+            place=config.place,
+            world_cache=config.world_cache,
         )
         rng = np.random.default_rng(config.seed)
         wind = WindModel(config.wind, rng) if config.wind != WindConfig() else None
@@ -191,9 +206,24 @@ class SimBridge:
         self.server = AutopilotServer(
             self.autopilot, self.telemetry, self.link.send, config.system_id, 1, self.log
         )
+        if config.fence == "map":
+            self._fence_to_map()
         if config.start == "air":
             self.autopilot.spawn_in_air(self.vehicle.state)
         self.episode.event(0.0, "ready", self.ready_fields())
+
+    def _fence_to_map(self) -> None:
+        """``--fence map``: the emulated autopilot's circular fence around home, out to the modelled
+        area's nearest edge (what an operator sets around the area a flight may use), enabled."""
+        n0, n1, e0, e1 = self._live_world("--fence map").grid.extent_m
+        n, e, _d = self.home_ned_m
+        radius = float(max(30.0, min(n - n0, n1 - n, e - e0, e1 - e)))  # ArduPilot's least FENCE_RADIUS
+        names = ("GF_MAX_HOR_DIST",) if "GF_MAX_HOR_DIST" in self.autopilot.params else ("FENCE_RADIUS",)
+        for name, value in ((names[0], radius), ("FENCE_ENABLE", 1.0)):
+            if name in self.autopilot.params and not self.autopilot.set_param(name, value):
+                raise ValueError(f"--fence map: the emulated autopilot refused {name} {value:g}")
+        self.log.info("fence: %g m around home, to the map's nearest edge (%s)", radius, names[0])
+        self.episode.event(0.0, "fence", {"radius_m": round(radius, 1), "param": names[0]})
 
     def _gps_fault(self) -> GpsFault | None:
         """The configured GPS fault, its start written to the episode log and said in simbridge's log."""
@@ -320,7 +350,7 @@ class SimBridge:
         part.replace(path)  # whole or not at all: a companion may be waiting for the file to appear
         self.log.info("camera calibration written to %s", path)
 
-    async def _stream_camera(self, host: str, port: int) -> None:
+    async def _stream_camera(self, host: str, port: int, framing: str = "rtp") -> None:
         """Render the camera every 1 / camera_fps simulated seconds at the vehicle's pose then and send it
         (simbridge.camera_stream); a frame that would fall behind is skipped, not queued."""
         from simbridge.camera_stream import CameraStreamer
@@ -330,11 +360,9 @@ class SimBridge:
         fps = self.config.camera_fps
         loop = asyncio.get_running_loop()
         streamer = await loop.run_in_executor(
-            None, CameraStreamer, host, port, cam.width_px, cam.height_px, fps
+            None, CameraStreamer, host, port, cam.width_px, cam.height_px, fps, framing
         )
-        self.log.info(
-            "camera: H.264 over RTP to udp://%s:%d, %g frames per simulated second", host, port, fps
-        )
+        self.log.info("camera: H.264 (%s) to %s, %g frames per simulated second", framing, streamer.url, fps)
         rng = np.random.default_rng(
             self.config.seed + 2
         )  # its own: the sensor stream's noise stays as seeded

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from companion.alarms import Alarm, Criticality, ReasonCode
+from companion.fence import Fence
 from companion.flavour import PX4, Flavour, Mode
 from companion.guidance.frames import PinholeCamera
 from companion.perception.surface_id import Candidate
@@ -31,8 +32,10 @@ class FakeController:
         self.tm = tm
         self.gotos: list[tuple[float, float, float]] = []
         self.retargets: list[tuple[float, float]] = []
+        self.set_targets: list[tuple[float, float, float]] = []
         self.lands: list[Mode] = []
         self.precision: PrecisionLanding | None = None
+        self.fence: Fence | None = None
         self.released = 0
 
     async def goto(
@@ -43,6 +46,15 @@ class FakeController:
 
     def retarget(self, n: float, e: float) -> None:
         self.retargets.append((n, e))
+
+    @property
+    def target(self) -> tuple[float, float, float, float] | None:
+        """The last position asked for (a goto's or a set_target's), heading 0."""
+        asked = [*self.gotos, *self.set_targets]
+        return (*asked[-1], 0.0) if asked else None
+
+    def set_target(self, n: float, e: float, d: float, yaw: float | None = None) -> None:
+        self.set_targets.append((n, e, d))
 
     def check_interruption(self) -> None:
         return None

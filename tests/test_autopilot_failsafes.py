@@ -132,7 +132,9 @@ def test_an_offboard_loss_set_to_land_clears_when_the_link_returns_and_the_recov
     record = tmp_path / "record"
     try:
         rig = start_rig(
-            ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "8"],
+            # 4x, not 8x: PX4's 1 s offboard-loss timeout is 125 ms of wall time at 8x, which a loaded
+            # two-core machine running the suite beside it has missed mid-descent (a second failsafe)
+            ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "4"],
             ["--record", str(record)],
             mavlink_via=_via(relays, _clean_relay),
         )

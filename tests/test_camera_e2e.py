@@ -34,6 +34,20 @@ def _camera_info(tmp_path: Path) -> Path:
     return path
 
 
+def _alarm_lands_on_the_clear_roof(rig: Rig) -> str:
+    """Once the sensor stream is up: an alarm, and the landing on scenario1's clear roof, confirmed on
+    streamed frames ("descending N m, site clear"); the companion's log."""
+    rig.wait_log("sensor stream connected", timeout_s=60)
+    out = rig.alarm_accepted("--reason", "GPS spoofing detected", "--criticality", "high")
+    assert out.returncode == 0, out.stdout + out.stderr
+    td = _wait_event(rig.sim, "touchdown", 300)
+    log = rig.wait_log("recovery ended: landed", timeout_s=60)
+    assert td["surface"] == "rooftop_clear", (td, log[-3000:])
+    assert td["safe"] is True
+    assert "m, site clear" in log
+    return log
+
+
 def test_an_alarm_lands_on_the_clear_roof_with_the_camera_read_from_an_rtp_stream(
     start_rig: Callable[..., Rig], tmp_path: Path
 ) -> None:
@@ -50,14 +64,7 @@ def test_an_alarm_lands_on_the_clear_roof_with_the_camera_read_from_an_rtp_strea
         env={"LANDFALL_CAMERA_LATENCY_MS": "0", "LANDFALL_SENSORS_MAX_FRAME_AGE_S": "3"},
     )  # fmt: skip
     rig.wait_log("camera: first frame from", timeout_s=60)
-    rig.wait_log("sensor stream connected", timeout_s=60)
-    out = rig.alarm_accepted("--reason", "GPS spoofing detected", "--criticality", "high")
-    assert out.returncode == 0, out.stdout + out.stderr
-    td = _wait_event(rig.sim, "touchdown", 300)
-    log = rig.wait_log("recovery ended: landed", timeout_s=60)
-    assert td["surface"] == "rooftop_clear", (td, log[-3000:])
-    assert td["safe"] is True
-    assert "m, site clear" in log  # "descending N m, site clear": confirmed on streamed frames
+    _alarm_lands_on_the_clear_roof(rig)
 
     # every decision frame was a video frame, dated on the autopilot's clock: against the truth, the
     # boot clock at the pose simbridge rendered the frame with the same presentation time from
@@ -140,3 +147,32 @@ def test_a_camera_alone_lands_with_the_autopilots_rangefinder(
     assert len(used) >= 2, [e["kind"] for e in _events(record)]
     assert not any(e["lidar"] for e in used)
     print(json.dumps({"touchdown": td}))
+
+
+@pytest.mark.parametrize(
+    ("sends", "reads"),
+    [
+        ("raw+udp://127.0.0.1:{port}", "udp://127.0.0.1:{port}"),
+        ("raw+tcp://127.0.0.1:{port}", "tcp://127.0.0.1:{port}"),
+    ],
+    ids=["udp", "tcp"],
+)
+def test_raw_h264_as_a_raspberry_pi_camera_sends_it_lands_on_the_clear_roof(
+    start_rig: Callable[..., Rig], tmp_path: Path, sends: str, reads: str
+) -> None:
+    """simbridge sends its camera as ``rpicam-vid --inline`` does, raw H.264 without RTP: datagrams
+    (``-o udp://``), read as ``companion --camera udp://...``, which tells it from RTP by the first
+    datagrams; or a TCP server (``--listen -o tcp://``), read as ``--camera tcp://...``. Frames without
+    presentation times are dated by their decoding; the landing is on the clear roof."""
+    info = _camera_info(tmp_path)
+    port = free_udp_port()  # a free TCP port is as good
+    rig = start_rig(
+        ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "2",
+         "--camera-stream", sends.format(port=port), "--camera-fps", "1"],
+        ["--camera", reads.format(port=port), "--camera-info", str(info)],
+        env={"LANDFALL_CAMERA_LATENCY_MS": "0", "LANDFALL_SENSORS_MAX_FRAME_AGE_S": "3"},
+    )  # fmt: skip
+    rig.wait_log("camera: first frame from", timeout_s=60)
+    if reads.startswith("udp"):
+        rig.wait_log(f"camera {reads.format(port=port)}: raw H.264", timeout_s=5)
+    _alarm_lands_on_the_clear_roof(rig)

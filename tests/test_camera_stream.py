@@ -4,6 +4,8 @@ the decoder thread, the autopilot's clock fitted from telemetry."""
 from __future__ import annotations
 
 import fractions
+import socket
+import threading
 import time
 from pathlib import Path
 
@@ -20,7 +22,8 @@ from tests.conftest import free_udp_port
 @pytest.mark.parametrize(
     ("url", "kind", "host", "port"),
     [("udp://:5600", "rtp", "0.0.0.0", 5600), ("udp://127.0.0.1:5601", "rtp", "127.0.0.1", 5601),
-     ("rtsp://192.168.1.10:8554/main", "rtsp", "", 0), ("/dev/video2", "v4l2", "", 0)],
+     ("rtsp://192.168.1.10:8554/main", "rtsp", "", 0), ("/dev/video2", "v4l2", "", 0),
+     ("tcp://raspberrypi:8888", "tcp", "raspberrypi", 8888)],
 )  # fmt: skip
 def test_camera_urls_are_parsed(url: str, kind: str, host: str, port: int) -> None:
     spec = parse_camera_url(url)
@@ -30,7 +33,8 @@ def test_camera_urls_are_parsed(url: str, kind: str, host: str, port: int) -> No
 @pytest.mark.parametrize(
     ("url", "says"),
     [("udp://:0", "expected udp://[HOST]:PORT"), ("udp://host", "expected udp://[HOST]:PORT"),
-     ("http://cam/stream.mjpg", "unsupported scheme"), ("/no/such/video.mp4", "no such video file")],
+     ("http://cam/stream.mjpg", "unsupported scheme"), ("/no/such/video.mp4", "no such video file"),
+     ("tcp://:8888", "expected tcp://HOST:PORT")],
 )  # fmt: skip
 def test_bad_camera_urls_are_refused_saying_why(url: str, says: str) -> None:
     with pytest.raises(CameraError, match=says.replace("[", r"\[").replace("]", r"\]")):
@@ -136,8 +140,10 @@ def test_simbridge_refuses_a_bad_camera_stream_or_frame_rate() -> None:
     from simbridge.camera_stream import parse_stream_url
     from simbridge.sim import SimConfig
 
-    assert parse_stream_url("udp://127.0.0.1:5600") == ("127.0.0.1", 5600)
-    for bad in ("udp://:5600", "rtp://127.0.0.1:5600", "udp://host:99999"):
+    assert parse_stream_url("udp://127.0.0.1:5600") == ("127.0.0.1", 5600, "rtp")
+    assert parse_stream_url("raw+udp://10.0.0.2:5600") == ("10.0.0.2", 5600, "raw-udp")
+    assert parse_stream_url("raw+tcp://0.0.0.0:8888") == ("0.0.0.0", 8888, "raw-tcp")
+    for bad in ("udp://:5600", "rtp://127.0.0.1:5600", "udp://host:99999", "raw+tcp://:8888"):
         with pytest.raises(ValueError, match="--camera-stream: expected udp://HOST:PORT"):
             parse_stream_url(bad)
     with pytest.raises(ValueError, match="--camera-fps must be in"):
@@ -194,3 +200,40 @@ def test_a_frame_decoded_late_is_dated_by_its_presentation_time() -> None:
     first = stream_capture_time(*arrivals[0], [], boot_at)
     assert first == pytest.approx((capture_offset + 2.0, 0.0))
     assert stream_capture_time(pts, decoded, arrivals, lambda m: None) is None  # no autopilot clock yet
+
+
+def _send_later(port: int, datagrams: list[bytes]) -> threading.Thread:
+    def send() -> None:
+        time.sleep(0.2)  # after the receiver bound the port
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as out:
+            for d in datagrams:
+                out.sendto(d, ("127.0.0.1", port))
+                time.sleep(0.01)
+
+    t = threading.Thread(target=send, daemon=True)
+    t.start()
+    return t
+
+
+def _rtp(seq: int, ssrc: bytes = b"\x12\x34\x56\x78") -> bytes:
+    return bytes([0x80, 96]) + seq.to_bytes(2, "big") + b"\x00\x00\x00\x00" + ssrc + b"\x5c\x81payload"
+
+
+@pytest.mark.parametrize(
+    ("datagrams", "framing"),
+    [
+        ([_rtp(65534), _rtp(65535), _rtp(0), _rtp(1)], "rtp"),  # the sequence wraps
+        ([b"\x00\x00\x00\x01\x67" + bytes(40), bytes(40), bytes(40), bytes(40)], "raw"),
+        # a raw stream cut where each datagram happens to start like an RTP header: not one source's
+        ([bytes([0x80, 96, 0, k]) + bytes([k]) * 20 for k in range(4)], "raw"),
+        ([_rtp(5), _rtp(9), _rtp(10), _rtp(11)], "raw"),  # not consecutive
+    ],
+    ids=["rtp", "annex-b", "lookalike", "gaps"],
+)
+def test_h264_on_udp_is_told_rtp_or_raw_by_its_first_datagrams(datagrams: list[bytes], framing: str) -> None:
+    from companion.camera import _udp_framing
+
+    port = free_udp_port()
+    sender = _send_later(port, datagrams)
+    assert _udp_framing("127.0.0.1", port) == framing
+    sender.join()

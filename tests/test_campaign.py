@@ -94,6 +94,17 @@ def test_failure_classes() -> None:
     assert failure_class(edge) == "unsafe: rooftop_clear (edge)"
     steep = {"outcome": "landed", "surface": "ground", "safe": False, "reasons": ["slope 19 deg"]}
     assert failure_class(steep) == "unsafe: ground (slope)"
+    near = {
+        "outcome": "landed",
+        "surface": "park",
+        "safe": False,
+        "reasons": ["person 5.8 m away (at least 10 m)"],
+    }
+    assert failure_class(near) == "unsafe: park (person)"
+    wire = {"outcome": "landed", "surface": "ground", "safe": False,
+            "reasons": ["4.0 m from the line under an overhead wire (at least 5 m)"]}  # fmt: skip
+    assert failure_class(wire) == "unsafe: ground (wire)"
+    assert failure_class({"outcome": "landed", "surface": "crops", "safe": False}) == "unsafe: crops"
 
 
 def test_the_summary_groups_by_city_and_weather_and_lists_failures_by_class() -> None:
@@ -116,6 +127,10 @@ def test_the_summary_groups_by_city_and_weather_and_lists_failures_by_class() ->
     assert s["recoveries_with_defect"] == 1
     groups = {(g["city_seed"], g["weather"]): (g["episodes"], g["safe"]) for g in s["groups"]}
     assert groups == {(0, "clear"): (1, 1), (0, "fog"): (1, 0), (1, "clear"): (3, 1)}
+    assert (s["nearest_person_min_m"], s["touchdowns_within_10m_of_a_person"]) == (None, 0)
+    eps[0]["nearest_person_m"], eps[3]["nearest_person_m"], eps[4]["nearest_person_m"] = 42.0, 5.8, 10.0
+    s = summarise(eps)
+    assert (s["nearest_person_min_m"], s["touchdowns_within_10m_of_a_person"]) == (5.8, 2)
 
 
 # ------------------------------------------------------------------------------------------ retries

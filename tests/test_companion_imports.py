@@ -19,7 +19,7 @@ import companion.cli, companion.daemon, companion.alarm_cli, companion.eval_cli,
 import runpy
 runpy.run_path("trigger_alarm.py", run_name="not_main")
 from companion.cli import build_parser
-build_parser().parse_args(["--mavlink", "udp:14550", "--sensors", "127.0.0.1:5600"])
+build_parser().parse_args(["--mavlink", "udp:14550", "--sensors", "127.0.0.1:5601"])
 sim = ("simbridge", "landfall_eval", "jsbsim", "numba", "tqdm")
 loaded = sorted(m for m, mod in sys.modules.items() if mod is not None and m.split(".")[0] in sim)
 print("LOADED", loaded)

@@ -51,7 +51,7 @@ def test_load_config_defaults_match_the_brief() -> None:
     assert cfg.mavlink.signing_key is None
     assert cfg.mavlink.heartbeat_hz == 1.0
     assert (cfg.sensors.endpoint, cfg.sensors.frame_timeout_s, cfg.sensors.max_frame_age_s) == (
-        "127.0.0.1:5600",
+        "127.0.0.1:5601",
         10.0,
         2.0,
     )

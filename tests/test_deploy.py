@@ -98,6 +98,20 @@ def test_the_pieces_meet_on_the_companion_defaults() -> None:
     assert unit("simbridge.service")["Unit"]["Before"] == ["companion.service"]  # the companion finds it up
 
 
+def test_the_ground_router_leaves_qgroundcontrol_its_port_and_gives_the_alarm_tools_theirs() -> None:
+    """deploy/mavlink-router/ground.conf: the radio to QGroundControl's default UDP 14550, and a server
+    endpoint that trigger_alarm.py sends to, on the port docs/deploy.md gives it."""
+    router = configparser.ConfigParser()
+    router.read(DEPLOY / "mavlink-router" / "ground.conf")
+    assert router["UartEndpoint radio"]["Device"].startswith("/dev/")
+    qgc = router["UdpEndpoint qgroundcontrol"]
+    assert (qgc["Mode"], qgc["Address"], int(qgc["Port"])) == ("Normal", "127.0.0.1", 14550)
+    tools = router["UdpEndpoint alarmtools"]
+    assert (tools["Mode"], int(tools["Port"])) == ("Server", 14551)
+    doc = (DEPLOY.parent / "docs" / "deploy.md").read_text()
+    assert f"trigger_alarm.py --mavlink udpout:127.0.0.1:{tools['Port']}" in doc
+
+
 DEFAULT_WORDS = re.compile(r"Default:? (none|\"[^\"]*\"|\[[^\]]*\]|true|false|-?[0-9][0-9_.e+-]*)")
 
 

@@ -17,7 +17,7 @@ import pytest
 from companion.config import ConfigError
 from companion.config_schema import ReasonerConfig
 from companion.perception.surface_id import Candidate
-from companion.reasoning.base import ConfirmRequest, RankRequest
+from companion.reasoning.base import ConfirmRequest, Decision, RankRequest
 from companion.reasoning.landnet import (
     DEFAULT_MODEL,
     OUTPUTS,
@@ -409,6 +409,13 @@ def test_bare_head_fit_reads_the_parts_and_refuses_one_sided_data() -> None:
 
 
 # --- the onboard switch ---------------------------------------------------------------------------------
+def test_the_open_ground_keys_reach_the_onboard_confirmation() -> None:
+    default = build_cascade(ReasonerConfig()).onboard.confirm_params
+    assert (default.open_ground_area_m2, default.open_ground_edge_m) == (600.0, 10.0)
+    set_ = build_cascade(ReasonerConfig(open_ground_area_m2=900.0, open_ground_edge_m=12.5)).onboard
+    assert (set_.confirm_params.open_ground_area_m2, set_.confirm_params.open_ground_edge_m) == (900.0, 12.5)
+
+
 def test_companion_defaults_to_landnet_the_class_to_cues_and_unknown_is_refused() -> None:
     # The companion's configuration picks the learned judge; a bare OnboardReasoner (library use,
     # the cue tests) keeps the hand-written cues.
@@ -498,6 +505,63 @@ def test_landnet_confirm_open_country_field_passes_but_not_among_buildings(
     assert "street_level" in d.hazards
     d = judge.confirm_sync(ConfirmRequest(image))  # no geometry: the image alone, a clear roof or nothing
     assert not d.accept, d.rationale
+    # open country too keeps open ground's margins where Surface ID measured them: the field's edge is
+    # a road or a path, and a small field is all edge
+    for area_m2, edge_m, why in ((3000.0, 4.0, "4 m from its edge (at least 10 m)"),
+                                 (300.0, 12.0, "300 m2 of it (at least 600 m2)")):  # fmt: skip
+        d = judge.confirm_sync(
+            ConfirmRequest(image, check=check, site_up_m=0.0, site_area_m2=area_m2, site_edge_m=edge_m)
+        )
+        assert not d.accept
+        assert f"open ground, but {why}" in d.rationale
+    wide = ConfirmRequest(image, check=check, site_up_m=0.0, site_area_m2=3000.0, site_edge_m=12.0)
+    assert judge.confirm_sync(wide).accept
+
+
+def test_landnet_confirm_takes_a_wide_lawn_among_buildings_but_not_a_small_one_or_its_edge(
+    judge: OnboardReasoner, tmp_path: Path
+) -> None:
+    """Among buildings street level is a last resort, but for open ground: a grass surface Surface ID
+    measured large (``open_ground_area_m2``), the site far from its edge (``open_ground_edge_m``), is
+    judged as open country is. The same lawn measured small, or the site near its edge, stays a last
+    resort; a bare soil field among buildings too (not grass: a plaza or a yard reads so)."""
+    from simbridge.world.scenario_file import load_scenario_file
+
+    path = tmp_path / "lawn.toml"
+    path.write_text(open_field_toml(60.0, 60.0).replace('ground = "soil"', 'ground = "grass"'))
+    lawn = LiveWorld(load_scenario_file(path))
+    frame, check = close_up(lawn, (0.0, 0.0), 0.0, HEIGHT_M)
+    image = site_cut(lawn, frame, HEIGHT_M)
+
+    def confirm(area_m2: float | None, edge_m: float | None) -> Decision:
+        return judge.confirm_sync(
+            ConfirmRequest(
+                image, check=check, site_up_m=0.0, built_up=True, site_area_m2=area_m2, site_edge_m=edge_m
+            )
+        )
+
+    wide = confirm(3200.0, 16.0)
+    assert wide.accept, wide.rationale
+    assert "open ground among buildings: 3,200 m2 of it, 16 m from its edge" in wide.rationale
+    for area_m2, edge_m in ((400.0, 16.0), (3200.0, 6.0), (None, None)):
+        d = confirm(area_m2, edge_m)
+        assert not d.accept, (area_m2, edge_m, d.rationale)
+        assert "street_level" in d.hazards
+    soil = LiveWorld(load_scenario_file(_write(tmp_path / "soil.toml", open_field_toml(60.0, 60.0))))
+    frame, check = close_up(soil, (0.0, 0.0), 0.0, HEIGHT_M)
+    d = judge.confirm_sync(
+        ConfirmRequest(
+            site_cut(soil, frame, HEIGHT_M), check=check, site_up_m=0.0, built_up=True,
+            site_area_m2=3200.0, site_edge_m=16.0,
+        )
+    )  # fmt: skip
+    assert not d.accept
+    assert "street_level" in d.hazards
+
+
+def _write(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
 
 
 @pytest.mark.parametrize("ground", ["soil", "paving"])

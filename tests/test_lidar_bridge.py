@@ -7,6 +7,7 @@ simulator), so a dating that forgot the rate or the offset is off by seconds."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
 import os
 import signal
@@ -15,6 +16,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -65,6 +67,24 @@ class FakeAutopilot:
 @pytest.fixture
 def autopilot_port() -> int:
     return free_udp_port()
+
+
+@contextlib.contextmanager
+def running_bridge(cmd: list[str], pilot: FakeAutopilot) -> Iterator[int]:
+    """``landfall-lidar-bridge``'s command running against ``pilot``: the port it serves on (its first
+    line says it); on leaving, it must stop on SIGTERM with status 0. ``pilot`` is closed either way."""
+    with subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT) as proc:
+        try:
+            assert proc.stdout is not None
+            line = proc.stdout.readline()
+            assert line.startswith("lidar bridge: sensor stream on port "), line
+            yield int(line.rsplit(" ", 1)[1])
+            os.kill(proc.pid, signal.SIGTERM)
+            assert proc.wait(timeout=10) == 0
+        finally:
+            pilot.close()
+            if proc.poll() is None:
+                proc.kill()
 
 
 def _ground_sweep(depth_m: float, n: int = 400) -> np.ndarray:
@@ -158,34 +178,22 @@ def test_the_replay_command_serves_recorded_sweeps_and_stops_on_sigterm(
     link = f"udpin:127.0.0.1:{autopilot_port}"
     cmd = [sys.executable, "-m", "landfall_link.lidar_bridge", "--mavlink", link, "--sensors", "127.0.0.1:0",
            "--replay", str(tmp_path), "--rate", "20"]  # fmt: skip
-    pilot = FakeAutopilot(autopilot_port)
-    with subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT) as proc:
-        try:
-            assert proc.stdout is not None
-            line = proc.stdout.readline()
-            assert line.startswith("lidar bridge: sensor stream on port "), line
-            port = int(line.rsplit(" ", 1)[1])
+    with running_bridge(cmd, FakeAutopilot(autopilot_port)) as port:
 
-            async def ask() -> float:
-                async with SensorClient("127.0.0.1", port, timeout_s=5.0) as client:
-                    for _ in range(50):
-                        try:
-                            frame = await client.frame(want=("lidar",))
-                        except SensorStreamServerError:
-                            await asyncio.sleep(0.1)  # the clock fit needs its first stamps
-                            continue
-                        assert frame.lidar_frd is not None
-                        return frame.rangefinder_m
-                raise AssertionError("no frame from the replaying bridge")
+        async def ask() -> float:
+            async with SensorClient("127.0.0.1", port, timeout_s=5.0) as client:
+                for _ in range(50):
+                    try:
+                        frame = await client.frame(want=("lidar",))
+                    except SensorStreamServerError:
+                        await asyncio.sleep(0.1)  # the clock fit needs its first stamps
+                        continue
+                    assert frame.lidar_frd is not None
+                    return frame.rangefinder_m
+            raise AssertionError("no frame from the replaying bridge")
 
-            distance = asyncio.run(ask())
-            assert min(abs(distance - d) for d in (20.0, 21.0, 22.0)) < 1e-3, distance
-            os.kill(proc.pid, signal.SIGTERM)
-            assert proc.wait(timeout=10) == 0
-        finally:
-            pilot.close()
-            if proc.poll() is None:
-                proc.kill()
+        distance = asyncio.run(ask())
+        assert min(abs(distance - d) for d in (20.0, 21.0, 22.0)) < 1e-3, distance
     bad = subprocess.run([*cmd[:-4], "--replay", str(tmp_path / "absent")], capture_output=True, text=True,
                          cwd=ROOT, timeout=60)  # fmt: skip
     assert bad.returncode == 2

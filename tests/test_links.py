@@ -7,6 +7,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import os
+import select
 import socket
 import threading
 import time
@@ -387,6 +388,23 @@ async def test_stream_link_serial_device_that_cannot_be_opened_is_retried_and_co
 
 
 # ------------------------------------------------------------------------------------------- e2e
+def _alarm_through(start_rig: Callable[..., Rig], link: str, udp_port: int) -> Rig:
+    """scenario1 on the PX4 emulation at 4x, simbridge sending to ``udp_port`` (a relay's) and the
+    companion on ``link`` (the relay's other side); once it is up, an alarm through the relay too."""
+    from tests.test_companion_e2e import _wait_for_companion
+
+    rig = start_rig(
+        ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "4"],
+        ["--mavlink", link],  # the later --mavlink wins
+        mavlink_via=lambda _port: udp_port,
+    )
+    _wait_for_companion(rig)
+    to = f"udpout:127.0.0.1:{udp_port}"
+    out = rig.alarm_accepted("--mavlink", to, "--reason", "GPS spoofing", "--criticality", "high")
+    assert out.returncode == 0, out.stdout + out.stderr
+    return rig
+
+
 class UdpTcpRouter:
     """mavlink-router in miniature: datagrams from every UDP peer (simbridge, trigger_alarm.py) go down the
     one TCP connection it serves (the companion's ``tcp:`` link); what comes up goes to every UDP peer."""
@@ -448,26 +466,133 @@ def test_companion_on_a_tcp_link_lands_px4_emulation_on_the_clear_roof(
 ) -> None:
     """The companion speaks ``tcp:`` to a router that serves simbridge's UDP, as mavlink-router's TCP
     port 5760 would; the alarm reaches it through the router too. It lands on scenario1's clear roof."""
-    from tests.test_companion_e2e import _wait_for_companion, _wait_touchdown
+    from tests.test_companion_e2e import _wait_touchdown
 
-    rig = start_rig(
-        ["--scenario", "scenario1", "--autopilot", "px4", "--speed", "4"],
-        ["--mavlink", f"tcp:127.0.0.1:{router.tcp_port}"],  # the later --mavlink wins
-        mavlink_via=lambda _port: router.udp_port,
-    )
-    _wait_for_companion(rig)
-    out = rig.alarm_accepted(
-        "--mavlink",
-        f"udpout:127.0.0.1:{router.udp_port}",
-        "--reason",
-        "GPS spoofing",
-        "--criticality",
-        "high",
-    )
-    assert out.returncode == 0, out.stdout + out.stderr
+    rig = _alarm_through(start_rig, f"tcp:127.0.0.1:{router.tcp_port}", router.udp_port)
     td = _wait_touchdown(rig, timeout_s=240)
     assert td["surface"] == "rooftop_clear", (td, rig.log_text()[-3000:])
     assert td["safe"] is True
     log = rig.wait_log("recovery ended: landed", timeout_s=60)
     assert f"MAVLink tcp:127.0.0.1:{router.tcp_port}: connected to" in log
     assert router.connections == 1
+
+
+class UdpPtyBridge:
+    """A flight controller's UART in miniature: simbridge's UDP datagrams go out on the master of a
+    pseudo-terminal pair whose slave the companion opens as ``serial:``; what it writes goes back to
+    simbridge. :meth:`pull` closes the pair (the cable pulled), :meth:`replug` makes the same device
+    path again."""
+
+    def __init__(self) -> None:
+        self._udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._udp.bind(("127.0.0.1", 0))
+        self._udp.settimeout(0.2)
+        self.udp_port = int(self._udp.getsockname()[1])
+        self._peers: set[tuple[str, int]] = set()  # simbridge, and trigger_alarm.py while it runs
+        self._lock = threading.Lock()
+        self._fds: tuple[int, int] | None = None
+        self.path = self._open()
+        self._stop = threading.Event()
+        for target in (self._down, self._up):
+            threading.Thread(target=target, daemon=True).start()
+
+    def _open(self) -> str:
+        master, slave = os.openpty()
+        with self._lock:
+            self._fds = (master, slave)
+        return os.ttyname(slave)
+
+    def _down(self) -> None:
+        while not self._stop.is_set():
+            try:
+                data, peer = self._udp.recvfrom(65536)
+            except (TimeoutError, OSError):
+                continue
+            self._peers.add(peer)
+            with self._lock, suppress(OSError):
+                if self._fds is not None:
+                    os.write(self._fds[0], data)
+
+    def _up(self) -> None:
+        while not self._stop.is_set():
+            with self._lock:
+                master = self._fds[0] if self._fds is not None else None
+            if master is None:
+                time.sleep(0.02)
+                continue
+            ready, _, _ = select.select([master], [], [], 0.05)
+            if not ready:
+                continue
+            with suppress(OSError):  # EIO while the companion has the slave closed
+                data = os.read(master, 65536)
+                for peer in list(self._peers):
+                    self._udp.sendto(data, peer)
+
+    def pull(self) -> None:
+        with self._lock:
+            fds, self._fds = self._fds, None
+        if fds is not None:
+            for fd in fds:
+                os.close(fd)
+
+    def replug(self) -> bool:
+        """The same device path again (False: another process took it meanwhile)."""
+        held: list[tuple[int, int]] = []
+        try:
+            for _ in range(64):
+                master, slave = os.openpty()
+                if os.ttyname(slave) == self.path:
+                    with self._lock:
+                        self._fds = (master, slave)
+                    return True
+                held.append((master, slave))
+            return False
+        finally:
+            for fds in held:
+                for fd in fds:
+                    os.close(fd)
+
+    def close(self) -> None:
+        self._stop.set()
+        self.pull()
+        self._udp.close()
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(420)
+def test_companion_on_a_serial_line_lands_px4_emulation_through_the_line_pulled_mid_flight(
+    start_rig: Callable[..., Rig],
+) -> None:
+    """The companion speaks ``serial:`` on a pseudo-terminal whose other end carries simbridge's PX4
+    emulation. Mid-flight, descending toward scenario1's clear roof, the line is pulled for 2 s (PX4
+    takes over when the setpoints stop) and plugged back on the same device: the companion reopens it,
+    takes the vehicle back, and lands on the clear roof."""
+    from tests.test_companion_e2e import _wait_touchdown
+
+    bridge = UdpPtyBridge()
+    try:
+        rig = _alarm_through(start_rig, f"serial:{bridge.path}:921600", bridge.udp_port)
+        rig.wait_log("descending", timeout_s=120)
+        bridge.pull()
+        time.sleep(2.0)
+        if not bridge.replug():
+            pytest.skip(f"another process took {bridge.path} before the test could make it again")
+        td = _wait_touchdown(rig, timeout_s=300)
+        log = rig.log_text()
+        assert td["surface"] == "rooftop_clear", (td, log[-3000:])
+        assert td["safe"] is True
+        # the pull mattered: PX4 fell back when the setpoints stopped, and flew them again after. At 4x
+        # a stall of a quarter second in this test's relay threads (a loaded CI machine) is a second
+        # offboard loss; each such fallback must clear too, and none may be of another kind
+        timeline = [e for e in rig.sim.events() if str(e.get("event", "")).startswith("failsafe")]
+        why = f"{timeline}\n{log[-3000:]}"
+        lost = [e["reason"] for e in rig.sim.events("failsafe")]
+        assert lost, why
+        assert set(lost) == {"offboard_loss"}, why
+        assert [e["reason"] for e in rig.sim.events("failsafe_cleared")] == lost, why
+        rig.companion.terminate()
+        rig.companion.wait(timeout=30)
+        log = rig.log_text()
+        assert "link: 1 reconnects" in log, log[-3000:]
+    finally:
+        bridge.close()

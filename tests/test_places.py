@@ -16,11 +16,14 @@ from simbridge.scenarios import load_scenario
 from simbridge.sim import SimConfig
 from simbridge.world.places import DEFAULT_PLACE, PLACES, generate_place
 
+KNOWN = "downtown, suburb, industrial, farmland, waterfront, hillside, town"
+
 
 def test_the_kinds_of_place_and_the_default() -> None:
     assert PLACES[0] == DEFAULT_PLACE == "downtown"
-    assert "suburb" in PLACES
-    with pytest.raises(ValueError, match=r"unknown place 'moon'; known places: downtown, suburb, industrial"):
+    # every kind DESIGN.md section 4 names, in its order
+    assert PLACES == ("downtown", "suburb", "industrial", "farmland", "waterfront", "hillside", "town")
+    with pytest.raises(ValueError, match=rf"unknown place 'moon'; known places: {KNOWN}"):
         generate_place("moon", 0)
     with pytest.raises(ValueError, match="unknown place 'moon'"):
         load_scenario("city", 0, city_seed=0, place="moon")
@@ -37,7 +40,7 @@ def test_simbridge_and_its_renderer_take_a_place_and_refuse_an_unknown_one(
     assert "invalid choice: 'moon'" in capsys.readouterr().err
     pose = ["--scenario", "city", "--pose", "0,0,100,0", "--out", "x.png"]
     assert render_parser().parse_args([*pose, "--place", "suburb"]).place == "suburb"
-    with pytest.raises(ValueError, match=r"--place must be one of downtown, suburb, industrial, got 'moon'"):
+    with pytest.raises(ValueError, match=rf"--place must be one of {KNOWN}, got 'moon'"):
         SimConfig(scenario="city", place="moon")
 
 

@@ -82,9 +82,9 @@ async def test_the_companion_never_uses_the_pose_a_frame_claims() -> None:
     frame = make_frame()  # claims POS_NED_M / QUAT_WXYZ, captured at time_boot_ms 123 456 789
     t = frame.time_boot_ms
     _feed(c, t - 50, (10.0, 20.0, -60.0), 0.5)
-    _feed(c, t + 50, (12.0, 20.0, -60.0), 0.5)
+    _feed(c, t + 50, (11.0, 20.0, -60.0), 0.5)  # (2 m would be a reset for the zero velocity fed)
     posed = await c.view.posed(frame)
-    assert posed.pos_ned_m == pytest.approx((11.0, 20.0, -60.0))
+    assert posed.pos_ned_m == pytest.approx((10.5, 20.0, -60.0))
     assert posed.quat_wxyz == pytest.approx(_yaw_quat(0.5))
     assert posed.image_rgb is frame.image_rgb
     assert posed.time_boot_ms == t
@@ -122,3 +122,38 @@ def test_a_reset_of_the_estimate_is_a_step_its_velocity_does_not_explain() -> No
     assert len(watch.resets) == 1
     assert watch.since(t) == pytest.approx((15.0, 10.0))
     assert watch.since(t + 0.1) == (0.0, 0.0)
+
+
+def test_turn_rate_is_the_angle_turned_about_a_time_over_the_time_between() -> None:
+    """Yawing 1 rad/s: the rate about a time inside the history; the newest sample bounds the window
+    after it; NaN with too little history or none."""
+    h = PoseHistory()
+    assert math.isnan(h.turn_rate_at(10.0))
+    for k in range(11):  # 10.0 .. 11.0 s, a sample every 0.1 s
+        h.add_attitude(10.0 + 0.1 * k, _yaw_quat(0.1 * k))
+    assert h.turn_rate_at(10.5) == pytest.approx(1.0, rel=1e-3)
+    assert h.turn_rate_at(10.95) == pytest.approx(1.0, rel=1e-3)  # 10.85 .. 11.0
+    assert math.isnan(h.turn_rate_at(11.0))  # only 0.1 s of history after 10.9
+    assert math.isnan(h.turn_rate_at(9.0))  # before anything was heard
+    steady = PoseHistory()
+    for k in range(11):
+        steady.add_attitude(10.0 + 0.1 * k, _yaw_quat(0.3))
+    assert steady.turn_rate_at(10.5) == pytest.approx(0.0, abs=1e-6)
+
+
+def test_a_time_between_the_samples_either_side_of_a_reset_is_placed_before_it() -> None:
+    """The estimate resets 18 m between two samples: a frame taken between them is placed in the frame
+    of reference before the reset (carried on from the earlier sample), not part of the way (which
+    would put its site 12 m off in neither frame); between ordinary samples it is interpolated."""
+    h = PoseHistory()
+    h.add_attitude(10.0, _yaw_quat(0.0))
+    h.add_attitude(10.2, _yaw_quat(0.0))
+    h.add_position(10.0, (0.0, 0.0, -40.0), (1.0, 0.0, 0.0))
+    h.add_position(10.1, (15.1, 10.0, -40.0), (1.0, 0.0, 0.0))  # reset by (15, 10) on top of 0.1 m
+    h.add_position(10.2, (15.2, 10.0, -40.0), (1.0, 0.0, 0.0))
+    before = h.at(10.07)
+    assert before is not None
+    assert before.pos_ned_m == pytest.approx((0.07, 0.0, -40.0))
+    after = h.at(10.15)
+    assert after is not None
+    assert after.pos_ned_m == pytest.approx((15.15, 10.0, -40.0))

@@ -42,7 +42,7 @@ from simbridge.terrain import FlatTerrain
 from simbridge.vehicle import Vehicle
 from tests.conftest import Rig, SimProcess
 from tests.mavclient import MavClient
-from tests.test_sitl import _wait_event
+from tests.test_sitl import _alarm_when_ready, _wait_event
 
 M = mavlink2
 
@@ -366,35 +366,23 @@ def test_a_lost_companion_link_hands_real_px4_to_its_own_failsafe_then_the_compa
     it through PX4's precision land (AUTO.PRECLAND on its LANDING_TARGET; AUTO.LAND if none went out in
     time), PX4's land detector and disarm; the world grades the touchdown: the checks the emulation's
     PX4 passes in tests/test_companion_e2e.py."""
-    from tests.test_companion_e2e import _clean_relay, _events, _via
+    from tests.test_companion_e2e import _clean_relay, _events, _land_through_a_link_blackout, _via
 
     relays: list[Any] = []
     record = tmp_path / "record"
-    try:
+
+    def alarmed() -> Rig:
         rig = start_rig(
             ["--autopilot", "px4-sitl", "--px4", str(px4), "--scenario", "scenario1", "--speed", "4"],
             ["--record", str(record)],
             mavlink_via=_via(relays, _clean_relay),
         )
-        ready = _wait_event(rig.sim, "ready", 240)
-        assert ready["autopilot"] == "px4-sitl"
-        rig.wait_log("sensor stream connected", timeout_s=60)
-        out = rig.alarm_accepted("--reason", "GPS spoofing detected", "--criticality", "high")
-        assert out.returncode == 0, out.stdout + out.stderr
-        rig.wait_log("m, site clear", timeout_s=300)  # "descending 70 m, site clear: ...": the first step
-        relays[0].blackout()
-        time.sleep(5.0)
-        relays[0].restore()
-        td = _wait_event(rig.sim, "touchdown", 400)
-        log = rig.wait_log("recovery ended: landed", timeout_s=120)
-    finally:
-        for r in relays:
-            r.close()
-    assert td["surface"] == "rooftop_clear", (td, rig.log_text()[-3000:])
-    assert td["safe"] is True
-    assert relays[0].counts["blacked_out"] > 0
-    assert "link to the autopilot lost" in log
-    assert "link back after" in log
+        return _alarm_when_ready(rig, "px4-sitl")
+
+    # "descending 70 m, site clear: ...": the first step
+    rig, td, log = _land_through_a_link_blackout(
+        relays, alarmed, first_step="m, site clear", step_timeout_s=300, touchdown_timeout_s=400
+    )
     _wait_event(rig.sim, "disarmed", 60)
     timed = [(e["t_s"], e["mode"]) for e in rig.sim.events("mode")]
     modes = [m for _, m in timed]

@@ -5,6 +5,7 @@ then the machine that owns them, and the package docstring's list of them agains
 from __future__ import annotations
 
 import asyncio
+import math
 import re
 import threading
 from pathlib import Path
@@ -127,6 +128,30 @@ def test_follower_moves_the_target_with_an_estimate_reset_and_records_it() -> No
     assert follower.track is not None
     assert follower.track[1] == (7.0, 2.0, 0.0)
     assert _record(ctx).of("estimate_reset") == [{"round": 0, "t_boot_s": 11.0, "shift_m": [3.0, -1.0]}]
+
+
+def test_follower_does_not_look_in_a_frame_taken_while_the_vehicle_turned_fast() -> None:
+    """50 m over the site, rolling 20 degrees a second when the frame was taken: a pose 50 ms off
+    could place the site 0.9 m off, so the frame is not looked in, the target stays and the record
+    says why; the same frame taken while the vehicle was steady is looked in."""
+    ctx = context()
+    follower = SiteFollower(ctx)
+    follower.follow_from(frame(image=np.zeros((48, 64, 3), np.uint8), time_boot_ms=10_000), (4.0, 3.0, 0.0))
+    rate = math.radians(20.0)
+    for k in range(21):  # 11.0 .. 13.0 s, rolling
+        a = rate * 0.1 * k / 2
+        ctx.tm.poses.add_attitude(11.0 + 0.1 * k, (math.cos(a), math.sin(a), 0.0, 0.0))
+    texture = np.random.default_rng(0).integers(0, 255, (48, 64, 3), dtype=np.uint8)
+    target = asyncio.run(follower.follow(frame(image=texture, time_boot_ms=12_000), (4.0, 3.0, 0.0)))
+    assert target == (4.0, 3.0, 0.0)
+    (event,) = _record(ctx).of("site_track")
+    assert not event["found"]
+    assert event["reason"] == "the vehicle was turning 20 deg/s: its pose may place the site 0.9 m off"
+    for k in range(10):  # then steady from 13.1 s
+        ctx.tm.poses.add_attitude(13.1 + 0.1 * k, (math.cos(2 * rate / 2), math.sin(2 * rate / 2), 0.0, 0.0))
+    asyncio.run(follower.follow(frame(image=texture, time_boot_ms=13_500), (4.0, 3.0, 0.0)))
+    looked = _record(ctx).of("site_track")[-1]
+    assert "turning" not in looked["reason"]
 
 
 def test_follower_forgotten_lands_on_the_absolute_target_in_land_mode() -> None:

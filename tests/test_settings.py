@@ -45,6 +45,8 @@ NON_DEFAULT: dict[str, dict[str, str]] = {
         "search_window_s": "{ high = 200.0 }",
         "search_agl_m": "60.0",
         "search_max_legs": "20",
+        "people_margin_m": "6.0",
+        "people_wait_s": "8.0",
     },
     "perception": {
         "cell_px": "8",

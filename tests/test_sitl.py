@@ -261,6 +261,17 @@ def _wait_event(sim: SimProcess, name: str, timeout_s: float) -> dict[str, objec
     raise AssertionError(f"no {name!r} event in {timeout_s} s: {sim.stderr_path.read_text()[-3000:]}")
 
 
+def _alarm_when_ready(rig: Rig, autopilot: str) -> Rig:
+    """Once real firmware holds at the launch pose (simbridge's ``ready``, naming ``autopilot``) and the
+    companion's sensor stream is up, a high GPS-spoofing alarm, accepted."""
+    ready = _wait_event(rig.sim, "ready", 240)
+    assert ready["autopilot"] == autopilot
+    rig.wait_log("sensor stream connected", timeout_s=60)
+    out = rig.alarm_accepted("--reason", "GPS spoofing detected", "--criticality", "high")
+    assert out.returncode == 0, out.stdout + out.stderr
+    return rig
+
+
 def _sitl_children(pid: int) -> list[int]:
     out = subprocess.run(["ps", "-eo", "pid,ppid,comm"], capture_output=True, text=True).stdout
     return [int(line.split()[0]) for line in out.splitlines()[1:] if line.split()[2:3] == ["arducopter"]
@@ -325,38 +336,26 @@ def test_a_five_second_link_loss_on_real_arducopter_holds_then_lands_on_the_same
     GUIDED holds the last target (no failsafe of its own: the companion is no ground station); the
     companion notices the silence, keeps its target, and once the link is back confirms the same site
     again and lands on it through LAND; the firmware disarms; the world grades the touchdown."""
-    from tests.test_companion_e2e import _clean_relay, _via
+    from tests.test_companion_e2e import _clean_relay, _land_through_a_link_blackout, _via
 
     relays: list[Any] = []
-    via = _via(relays, _clean_relay)
-    try:
+
+    def alarmed() -> Rig:
         rig = start_rig(
             ["--autopilot", "ardupilot-sitl", "--sitl", str(arducopter), "--scenario", "scenario2",
              "--launch", "12,8", "--speed", "8"],
-            mavlink_via=via,
+            mavlink_via=_via(relays, _clean_relay),
         )  # fmt: skip
-        ready = _wait_event(rig.sim, "ready", 240)
-        assert ready["autopilot"] == "ardupilot-sitl"
+        _alarm_when_ready(rig, "ardupilot-sitl")
         home = rig.sim.events("start")[0]["home_ned_m"]
         assert isinstance(home, list)
         assert math.hypot(home[0], home[1]) > 5  # the EKF origin is the launch point, not the scenario's
-        rig.wait_log("sensor stream connected", timeout_s=60)
-        out = rig.alarm_accepted("--reason", "GPS spoofing detected", "--criticality", "high")
-        assert out.returncode == 0, out.stdout + out.stderr
-        rig.wait_log("m, site clear", timeout_s=300)  # "descending 62 m, site clear: ...": the first step
-        relays[0].blackout()
-        time.sleep(5.0)
-        relays[0].restore()
-        td = _wait_event(rig.sim, "touchdown", 400)
-        log = rig.wait_log("recovery ended: landed", timeout_s=120)
-    finally:
-        for r in relays:
-            r.close()
-    assert td["surface"] == "rooftop_clear", (td, rig.log_text()[-3000:])
-    assert td["safe"] is True
-    assert relays[0].counts["blacked_out"] > 0
-    assert "link to the autopilot lost" in log
-    assert "link back after" in log
+        return rig
+
+    # "descending 62 m, site clear: ...": the first step
+    rig, _td, _log = _land_through_a_link_blackout(
+        relays, alarmed, first_step="m, site clear", step_timeout_s=300, touchdown_timeout_s=400
+    )
     _wait_event(rig.sim, "disarmed", 60)
     modes = [e.get("mode") for e in rig.sim.events("mode")]
     assert "LAND" in modes, modes  # the end of the descent is the firmware's LAND

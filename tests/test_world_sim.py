@@ -105,3 +105,35 @@ def test_render_cli_writes_image_depth_and_lidar(tmp_path: Path) -> None:
     bad = subprocess.run([*cmd[:5], "--pose", "1,2,3"], capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2
     assert "--pose" in bad.stderr
+
+
+@pytest.mark.parametrize(("autopilot", "param"), [("ardupilot", "FENCE_RADIUS"), ("px4", "GF_MAX_HOR_DIST")])
+def test_fence_map_sets_the_emulated_autopilots_circle_to_the_maps_nearest_edge(
+    start_sim: Callable[..., SimProcess], client_for: Callable[..., MavClient], autopilot: str, param: str
+) -> None:
+    """``--fence map`` at scenario1's origin: the circle reaches the map's nearest edge, the parameter
+    a companion reads says so (ArduPilot's enabled), and the episode log records it."""
+    from simbridge.scenarios import load_scenario
+
+    world = load_scenario("scenario1", 0).terrain
+    n0, n1, e0, e1 = world.grid.extent_m  # type: ignore[attr-defined]
+    edge = min(-n0, n1, -e0, e1)  # the launch is at the origin
+    sim = start_sim("--scenario", "scenario1", "--autopilot", autopilot, "--fence", "map")
+    c = client_for(sim.port)
+    c.wait_heartbeat(timeout_s=60)
+    assert c.param_read(param).param_value == pytest.approx(edge)
+    if autopilot == "ardupilot":
+        assert c.param_read("FENCE_ENABLE").param_value == 1
+        assert c.param_read("FENCE_TYPE").param_value == 7
+    (fence,) = sim.events("fence")
+    assert fence["radius_m"] == pytest.approx(edge, abs=0.1)
+    assert fence["param"] == param
+
+
+def test_fence_map_is_for_the_emulation_only() -> None:
+    from simbridge.sim import SimConfig
+
+    with pytest.raises(ValueError, match="--fence map sets the emulated autopilot's fence"):
+        SimConfig(autopilot="ardupilot-sitl", fence="map")
+    with pytest.raises(ValueError, match="--fence must be off or map"):
+        SimConfig(fence="on")

@@ -94,6 +94,8 @@ class ConfirmRequest:
     site_up_m: float | None = None  # the site's height above its surroundings (Surface ID), if measured
     site_strip: bool = False  # Surface ID measured the site on an elevated strip (a deck, not a roof)
     built_up: bool = False  # roofs in view or measured near the site: a town, where streets carry people
+    site_area_m2: float | None = None  # the landable area of the site's surface (Surface ID), if measured
+    site_edge_m: float | None = None  # the site's distance from its surface's edge (Surface ID), if measured
     deadline: float | None = None
     transcript: list[dict[str, Any]] | None = field(default=None, compare=False)
 

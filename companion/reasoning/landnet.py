@@ -463,6 +463,16 @@ class LandNet:
         p, clear_p = average_views(_sigmoid(out[0]), _sigmoid(np.asarray(out[1]).reshape(-1)), views)
         return p, clear_p, out
 
+    def probabilities(self, rgb: np.ndarray, views: int = 1) -> np.ndarray:
+        """Per class (sidecar order) and cell of 8 x 8 input pixels, the probability that it is present:
+        (K, h, w) float, laid out as :meth:`presence`'s cells (which are these at the cells' thresholds).
+
+        Raises:
+            ValueError: not a non-empty (H, W, 3) uint8 numpy array.
+        """
+        p, _clear, _out = self._infer(check_rgb(rgb), views)
+        return np.asarray(p[0])
+
     def presence(self, rgb: np.ndarray, views: int = 1) -> np.ndarray:
         """Per class (sidecar order) and cell of 8 x 8 input pixels, whether it is present: (K, h, w)
         bool, cell (r, c) covering rows ``r * H / h`` .. and columns ``c * W / w`` .. of the image.

@@ -20,7 +20,12 @@ asphalt road looks like a tar roof from above; the height tells them apart), ove
 ``max_street_asphalt`` a road or a car park. In open country (street level, no roof in view or measured near
 the site: ``built_up`` false) only level ground with nothing on it passes, whatever the clear-site
 probability: no object, person, vehicle, water or marking in the window, paving and trees within their
-limits (a bare field, a yard, a lawn). Among buildings street level is a last resort. A rejection names what
+limits (a bare field, a yard, a lawn). Among buildings street level is a last resort, but for open ground:
+a window mostly grass (``OPEN_GRASS_SHARE``) on a surface Surface ID measured at least
+``ConfirmParams.open_ground_area_m2`` large, the site at least ``open_ground_edge_m`` from its edge (a
+lawn, a sports field, a park's meadow, a pasture beside a farm; not a plaza, a street or a small garden,
+whose edges carry people), judged then as open country is. In open country too a site on ground
+Surface ID measured must meet those two (the field's edge is a road or a path). A rejection names what
 was seen where (objects, people, vehicles, vegetation, road surface, ...). With a critical alarm and a
 clear LiDAR disc, one group of objects in view is tolerated, as the cues' one raised blob is.
 
@@ -55,6 +60,7 @@ CANOPY_SIDE_PX = 192  # the window is judged at this size
 UNSURE_MARGIN = 0.15  # a clear-site probability this close to the threshold is a guess, either way ...
 UNSURE_SPREAD = 0.35  # ... as is one whose mirror-image views differ by this much
 FIRM_NOT_CLEAR_P = 0.2  # a clear-site probability under this: the net is sure it is no clear roof
+OPEN_GRASS_SHARE = 0.5  # of the window's cells grass: open ground among buildings (_wide_grass)
 
 
 def unsure(r: SceneReading, threshold: float) -> str:
@@ -127,7 +133,8 @@ def confirm_reading(
     paved = _paved(r)
     if street_level and paved > p.max_street_asphalt:
         vetoes.append(("street_asphalt", f"{_paved_phrase(r, paved)} {where}: a road or a car park"))
-    if street_level and request.built_up and not vetoes:
+    open_among = street_level and request.built_up and not vetoes and _wide_grass(r, request, p)
+    if street_level and request.built_up and not vetoes and not open_among:
         vetoes.append(
             ("street_level", f"{where} among buildings: people and traffic come back (a last resort only)")
         )
@@ -135,13 +142,20 @@ def confirm_reading(
     groups = sum(r.count(c) for c in COUNTED)
     vegetation = r.share("low_vegetation") + r.share("tree")
     open_country = street_level and not request.built_up
-    if not vetoes and open_country:
+    if not vetoes and (open_country or open_among):
         # the net's clear site means a clear roof, which a surface measured at street level is not: there
         # only level ground with nothing on it passes, whatever the clear-site probability
-        if _open_ground(r, p, groups):
-            note = " (open country: level ground with nothing on it)"
-        else:
+        if not _open_ground(r, p, groups):
             vetoes.append(_not_open_ground(r, groups, vegetation))
+        elif (cramped := _cramped(request, p)) is not None:
+            vetoes.append(("street_level", cramped))
+        elif open_among:
+            note = (
+                f" (open ground among buildings: {request.site_area_m2:,.0f} m2 of it, "
+                f"{request.site_edge_m:.0f} m from its edge)"
+            )
+        else:
+            note = " (open country: level ground with nothing on it)"
     elif not vetoes and r.clear_p < net.clear_threshold:
         lidar_clear = request.check is not None and request.check.clear
         tolerate = (
@@ -180,6 +194,32 @@ def _open_ground(r: SceneReading, p: ConfirmParams, groups: int) -> bool:
         and _paved(r) <= p.max_street_asphalt
         and r.share("tree") <= p.max_vegetation
     )
+
+
+def _wide_grass(r: SceneReading, request: ConfirmRequest, p: ConfirmParams) -> bool:
+    """Open ground among buildings (module docstring): the window mostly grass (``OPEN_GRASS_SHARE``:
+    a lawn, a sports field, a pasture; not a plaza, whose people come back), on a surface Surface ID
+    measured at least ``open_ground_area_m2`` large with the site ``open_ground_edge_m`` from its edge."""
+    area, edge = request.site_area_m2, request.site_edge_m
+    return (
+        area is not None
+        and edge is not None
+        and area >= p.open_ground_area_m2
+        and edge >= p.open_ground_edge_m
+        and r.share("low_vegetation") >= OPEN_GRASS_SHARE
+    )
+
+
+def _cramped(request: ConfirmRequest, p: ConfirmParams) -> str | None:
+    """Why open ground Surface ID measured is too small, or the site too near its edge (the road, path
+    or fence where people pass), for ``open_ground_area_m2`` and ``open_ground_edge_m``; None when it
+    is neither, or was not measured."""
+    area, edge = request.site_area_m2, request.site_edge_m
+    if edge is not None and edge < p.open_ground_edge_m:
+        return f"open ground, but {edge:.0f} m from its edge (at least {p.open_ground_edge_m:.0f} m)"
+    if area is not None and area < p.open_ground_area_m2:
+        return f"open ground, but {area:,.0f} m2 of it (at least {p.open_ground_area_m2:,.0f} m2)"
+    return None
 
 
 def _not_open_ground(r: SceneReading, groups: int, vegetation: float) -> tuple[str, str]:

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from companion.config_schema import DEFAULTS
+
 __all__ = ["ConfirmParams", "GeometryWeights"]
 
 
@@ -41,4 +43,8 @@ class ConfirmParams:
     max_markings: float = 0.3  # total lane-marking length, in working-image diagonals (about one line)
     max_raised_lines: float = 0.3  # pipes, rails
     max_street_asphalt: float = 0.5  # asphalt-like share of a site measured at street level: road, car park
+    # open ground among buildings (a lawn, a sports field, a pasture: net_judge): a grass surface at least
+    # this large and the site at least this far from its edge (the road, path or fence where people pass)
+    open_ground_area_m2: float = DEFAULTS.reasoner.open_ground_area_m2
+    open_ground_edge_m: float = DEFAULTS.reasoner.open_ground_edge_m
     site_window: float | None = None  # share of each side judged; None: by the image's shape (image_cues)

@@ -25,6 +25,7 @@ from companion.reasoning.cascade import Cascade, CascadeParams, Hedged
 from companion.reasoning.landnet import LandNet, LandNetError
 from companion.reasoning.lvlm import LvlmProfile, LvlmReasoner
 from companion.reasoning.onboard import OnboardReasoner
+from companion.reasoning.onboard_params import ConfirmParams
 
 __all__ = ["BUILTIN_PROFILES", "ONBOARD", "build_cascade", "resolve_profile", "secrets", "tier_names"]
 
@@ -203,7 +204,10 @@ def build_cascade(
     )
     try:  # loads the model now: a missing or corrupt file fails start-up, naming it
         net = LandNet.load(cfg.onboard_model) if cfg.onboard_judge == "landnet" else None
-        onboard = OnboardReasoner(judge=cfg.onboard_judge, landnet=net)
+        confirm = ConfirmParams(
+            open_ground_area_m2=cfg.open_ground_area_m2, open_ground_edge_m=cfg.open_ground_edge_m
+        )
+        onboard = OnboardReasoner(judge=cfg.onboard_judge, landnet=net, confirm=confirm)
     except LandNetError as exc:
         raise ConfigError(
             f"reasoner.onboard_judge = {cfg.onboard_judge!r}, onboard_model = {cfg.onboard_model!r}", str(exc)

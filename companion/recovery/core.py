@@ -7,6 +7,7 @@ from __future__ import annotations
 import enum
 import logging
 import math
+import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -25,6 +26,11 @@ from companion.telemetry import TelemetryCache
 MAX_REENGAGE = 2
 SENSOR_RETRY_S = 1.0  # between two asks for a frame after one failed
 SITE_RETRIES = 2  # more frames asked for when a LiDAR sweep misses the site before judging it unmeasured
+PEOPLE_LOOK_AGAIN_S = 2.0  # wall seconds between two looks at people near a site, held where it is
+PEOPLE_WATCH_STEP_S = 1.0  # wall seconds between two looks at people near a site on the way down
+GO_AROUND_M = 15.0  # a final approach stopped for people climbs back this high above the site
+GO_AROUND_MIN_M = 2.0  # below this height above the site the final approach is not stopped any more
+QUIET_LOOKS = 2  # looks in a row without anyone before a site where people were seen is descended onto
 SEVERITY_CRITICAL = 2  # MAV_SEVERITY_CRITICAL: a defect of the companion's own
 MAX_REJECTED_RADIUS_M = 15.0  # water or traffic rules out at most this far around a rejected site
 # a site at street level with roofs measured this close is among buildings (people and traffic come back)
@@ -85,6 +91,9 @@ class RecoveryParams:
     search: SearchLimits = field(default_factory=SearchLimits)  # when searching on must stop
     search_agl_m: float = DEFAULTS.recovery.search_agl_m  # a search leg's least height above the ground
     lidar_range_m: float = DEFAULTS.perception.lidar_range_m  # how far a search leg's LiDAR reaches
+    # a site off the roofs is watched for people this far around it before each descent step (0: not)
+    people_margin_m: float = DEFAULTS.recovery.people_margin_m
+    people_wait_s: float = DEFAULTS.recovery.people_wait_s  # autopilot seconds held for them to go
 
     @classmethod
     def from_config(cls, cfg: CompanionConfig) -> RecoveryParams:
@@ -193,6 +202,38 @@ class RecoveryContext:
         if c.site_ned_m is None:
             return False
         return any(math.dist(c.site_ned_m[:2], (n, e)) < r for n, e, r in self.rejected)
+
+    def home_ne_m(self) -> tuple[float, float]:
+        """Home in the local frame: where HOME_POSITION puts it, else the frame's origin."""
+        home = self.tm.state.home_ned_m
+        return (home[0], home[1]) if home is not None else (0.0, 0.0)
+
+    def fence_bounds(self) -> tuple[tuple[float, float], float] | None:
+        """(home north, east; radius) that search legs end within (:mod:`companion.fence`), or None."""
+        fence = self.ctl.fence
+        keep = fence.keep_in_m() if fence is not None else None
+        return (self.home_ne_m(), keep) if keep is not None else None
+
+    def outside_fence(self, c: Candidate) -> bool:
+        """Whether ``c``'s site lies beyond what the autopilot's circular fence leaves the recovery
+        (:mod:`companion.fence`): flying there would hand the vehicle to the fence's action."""
+        fence = self.ctl.fence
+        if fence is None or c.site_ned_m is None:
+            return False
+        return not fence.inside((c.site_ned_m[0], c.site_ned_m[1]), self.home_ne_m())
+
+    def clock_s(self) -> float:
+        """The autopilot's clock (seconds since its boot), so that a faster-than-real-time simulation
+        keeps the alarm's window and the recovery's waits; the companion's monotonic clock before any
+        telemetry."""
+        t = self.tm.state.t_boot_s
+        return t if t > 0 else time.monotonic()
+
+    def strike_off(self, target: tuple[float, float, float], choice: Candidate) -> None:
+        """:meth:`reject` the site, and forget it as the site confirmed for descent when it was."""
+        self.reject(target, choice)
+        if self.best is not None and math.dist(self.best.ned_m[:2], target[:2]) < self.p.rejected_radius_m:
+            self.best = None
 
     def reject(self, target: tuple[float, float, float], choice: Candidate) -> None:
         """Rule out candidates around a rejected site: within ``rejected_radius_m``; for water or a

@@ -50,6 +50,11 @@ STEP_FOLLOW_PERIOD_S = 0.5  # during a descent step, a look for the site twice a
 STEP_FOLLOW_MIN_M = 0.3  # and the step's target moved when it is this far from where the site is seen
 RESET_CHECK_PERIOD_S = 0.1  # and for the estimate's resets ten times a second
 ADOPT_SHIFT_M = 1.0  # a look that finds the site moved this far becomes the reference all the same
+# a frame's pose is the estimate at its capture time, which is uncertain by some tens of milliseconds
+# (the estimator's lag behind the airframe, the clocks' offsets): while the vehicle turns, its
+# attitude then is that much uncertain, and the site it places that many times its distance
+POSE_TIMING_S = 0.05
+TURN_BLUR_MAX_M = 0.3  # a frame whose pose may place the site further off than this is not looked in
 
 
 def site_view(frame: Any) -> SiteView | None:
@@ -222,6 +227,9 @@ class SiteFollower:
             ValueError, cv2.error: a malformed frame (the callers say so and try the next)."""
         if self.track is None:
             return None
+        turning = self._turning(frame)
+        if turning is not None:
+            return turning
         state = FollowState(
             self.track, self._anchor, tuple(self._site_seen or ()),
             tuple(self.ctx.tm.position_resets.resets[: self._resets_seen]),
@@ -243,6 +251,23 @@ class SiteFollower:
             t, n, e = look.seen
             self._site_seen.append((t, n + dn, e + de))
         return look.result
+
+    def _turning(self, frame: Any) -> TrackResult | None:
+        """A refusal when the vehicle turned so fast about the frame's capture that its pose could place
+        the site more than ``TURN_BLUR_MAX_M`` off; None otherwise, or when the rate is not known.
+        Without it, a vehicle that pitched to move onto a corrected target saw the site metres off in
+        the next frame, moved again, and so on (the emulated ArduCopter, whose estimate is 50 ms late,
+        rocking 15-35 degrees a second; its touchdowns 0.04-1.6 m from the site)."""
+        assert self.track is not None
+        taken = _frame_time(frame)
+        rate = self.ctx.tm.poses.turn_rate_at(taken) if math.isfinite(taken) else math.nan
+        site = self.track[1]
+        off_m = math.dist(tuple(frame.pos_ned_m), site) * rate * POSE_TIMING_S
+        if not off_m > TURN_BLUR_MAX_M:  # NaN: not known
+            return None
+        why = f"the vehicle was turning {math.degrees(rate):.0f} deg/s: its pose may place the site"
+        why += f" {off_m:.1f} m off"
+        return TrackResult(False, site, (0.0, 0.0), math.nan, math.nan, math.nan, why)
 
     async def follow(self, frame: Any, target: tuple[float, float, float]) -> tuple[float, float, float]:
         """The descent's target after looking for the site in ``frame``: moved onto it when found,

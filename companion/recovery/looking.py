@@ -27,8 +27,10 @@ from companion.perception.surface_id import (
 )
 from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequest, Reasoner
 from companion.reasoning.onboard import OnboardReasoner, lidar_kind
+from companion.reasoning.people_watch import PeopleSeen, people_near
 from companion.recovery.core import (
     BUILT_UP_RADIUS_M,
+    PEOPLE_LOOK_AGAIN_S,
     SENSOR_RETRY_S,
     SITE_RETRIES,
     FrameUnavailable,
@@ -37,7 +39,7 @@ from companion.recovery.core import (
     State,
 )
 from companion.recovery.search_plan import SearchPlanner
-from companion.site_ledger import LedgerSite, hazard_of
+from companion.site_ledger import Hazard, LedgerSite, hazard_of
 
 
 def surface_id_ranking(candidates: Sequence[Candidate]) -> Ranking:
@@ -223,6 +225,8 @@ class Looker:
                     site_up_m=choice.height_above_m if math.isfinite(choice.height_above_m) else None,
                     site_strip=choice.strip,
                     built_up=self.built_up((target[0], target[1])),
+                    site_area_m2=_measured(choice.landable_area_m2),
+                    site_edge_m=_measured(choice.edge_distance_m),
                 )
             )
         up_m = choice.height_above_m if math.isfinite(choice.height_above_m) else None
@@ -376,6 +380,59 @@ class Looker:
             image, camera, frame.pos_ned_m, frame.quat_wxyz, target, self.ctx.p.closeup_half_m
         )
 
+    async def watch_people(self, frame: Any, target: tuple[float, float, float]) -> PeopleSeen | None:
+        """People the onboard net sees within ``people_margin_m`` of the site in this frame
+        (:func:`~companion.reasoning.people_watch.people_near`, a worker-thread job); None when the
+        watch cannot run: no image, the site out of view, no net (the cues judge) or a margin of 0."""
+        margin = self.ctx.p.people_margin_m
+        net = self.onboard.landnet
+        if frame.image_rgb is None or net is None or margin <= 0:
+            return None
+        camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
+        rel = np.asarray(target, dtype=float) - np.asarray(frame.pos_ned_m, dtype=float)
+        uv, front = camera.project_frd((rel @ quat_to_matrix(frame.quat_wxyz))[None, :])
+        dist = float(np.linalg.norm(rel))
+        u, v = float(uv[0, 0]), float(uv[0, 1])
+        if not front[0] or dist <= 0 or not (0 <= u < camera.width and 0 <= v < camera.height):
+            return None
+        return await asyncio.to_thread(people_near, net, frame.image_rgb, (u, v), camera.fx / dist, margin)
+
+    def paused_for_people(
+        self,
+        seen: PeopleSeen,
+        target: tuple[float, float, float],
+        choice: Candidate,
+        *,
+        go_around_m: float | None = None,
+    ) -> None:
+        """Policy: someone came within the margin while the vehicle descended onto the site: the step
+        stopped where it was, or (``go_around_m``) the final approach stopped and the vehicle climbed
+        back that high above the site. Said, and recorded as a ``people_watch`` event (action ``pause``
+        or ``go-around``); the look before the next step decides whether to hold or go on
+        (:meth:`hold_for_people`)."""
+        action = "pause" if go_around_m is None else "go-around"
+        _record_watch(self.ctx, seen, target, choice, 0.0, action)
+        done = "descent paused" if go_around_m is None else f"landing stopped, back up to {go_around_m:.0f} m"
+        self.ctx.say(4, f"site {choice.index}: {seen.phrase(self.ctx.p.people_margin_m)}: {done}")
+
+    async def hold_for_people(
+        self, seen: PeopleSeen, target: tuple[float, float, float], choice: Candidate, waited_s: float
+    ) -> bool:
+        """Policy: people seen within the margin of a site about to be descended onto. Hold where the
+        vehicle is and look again (True) for up to ``people_wait_s``; then strike the site off, for
+        the next round to choose another (False). Said, and recorded as a ``people_watch`` event."""
+        ctx = self.ctx
+        margin = ctx.p.people_margin_m
+        give_up = waited_s >= ctx.p.people_wait_s
+        _record_watch(ctx, seen, target, choice, waited_s, "another site" if give_up else "hold")
+        if give_up:
+            ctx.strike_off(target, choice)
+            ctx.say(4, f"site {choice.index}: {seen.phrase(margin)} for {waited_s:.0f} s: another site")
+            return False
+        ctx.say(4, f"site {choice.index}: {seen.phrase(margin)}: holding")
+        await asyncio.sleep(PEOPLE_LOOK_AGAIN_S)
+        return True
+
     def ipm(self, c: Candidate, frame: Any, camera: PinholeCamera) -> tuple[float, float, float] | None:
         """The chosen pixel -> world point through the LiDAR; the flat-ground fallback without it;
         None when neither can place it."""
@@ -435,3 +492,38 @@ def lidar_silent(lidar_frd: Any) -> bool:
         return False
     pts = np.asarray(lidar_frd, dtype=float)
     return pts.ndim != 2 or pts.shape[0] == 0 or not bool(np.isfinite(pts[:, :3]).all(axis=1).any())
+
+
+def _measured(value: float) -> float | None:
+    """A Surface ID measure for a request: None where it was not measured (NaN)."""
+    return value if math.isfinite(value) else None
+
+
+def _record_watch(
+    ctx: RecoveryContext,
+    seen: PeopleSeen,
+    target: tuple[float, float, float],
+    choice: Candidate,
+    waited_s: float,
+    action: str,
+) -> None:
+    """A ``people_watch`` event: what the look saw near the site, how long the vehicle has waited, and
+    what it does (``pause``, ``hold``, ``another site``). The site ledger keeps the site as obstructed
+    by people: its confirmation said nothing of them, and a landing where nothing else was accepted
+    must not come down among them (its next confirmation and a quiet watch make it the accepted
+    site again)."""
+    why, label = seen.phrase(ctx.p.people_margin_m), f"site {choice.index}"
+    site = LedgerSite(target, Hazard.OBSTRUCTED, why, ctx.round, True, choice.edge_distance_m, label, choice)
+    ctx.ledger.add(site)
+    ctx.record.record_event(
+        "people_watch",
+        {
+            "round": ctx.round,
+            "site_ned_m": list(target),
+            "person_cells": seen.cells,
+            "nearest_m": None if seen.nearest_m is None else round(seen.nearest_m, 1),
+            "seen_share": round(seen.seen_share, 2),
+            "waited_s": round(waited_s, 1),
+            "action": action,
+        },
+    )

@@ -25,8 +25,8 @@ import logging
 import math
 import time
 import traceback
-from collections.abc import Callable
-from typing import Any
+from collections.abc import Callable, Coroutine
+from typing import Any, TypeVar
 
 from companion.alarms import Alarm, Criticality
 from companion.control import (
@@ -46,10 +46,17 @@ from companion.guidance.frames import PinholeCamera, compass_point
 from companion.perception.site_check import check_site
 from companion.perception.surface_id import Candidate
 from companion.reasoning.base import Reasoner
+from companion.reasoning.people_watch import PeopleSeen
 from companion.recovery.core import (
+    GO_AROUND_M,
+    GO_AROUND_MIN_M,
     MAX_REENGAGE,
+    PEOPLE_LOOK_AGAIN_S,
+    PEOPLE_WATCH_STEP_S,
+    QUIET_LOOKS,
     SEVERITY_CRITICAL,
     FrameSource,
+    FrameUnavailable,
     NoRecord,
     Outcome,
     Record,
@@ -67,6 +74,8 @@ from companion.recovery.searching import Searcher
 from companion.telemetry import TelemetryCache
 
 TAKEOVER_TEXTS_S = 5.0  # the autopilot's texts this recent go with a takeover into the record
+
+T = TypeVar("T")
 
 
 class Recovery:
@@ -470,6 +479,10 @@ class Recovery:
         # a roof in view makes it a built-up area; so do roofs the LiDAR saw near a site (Looker.built_up)
         self.looker.roofs_in_view = any(c.elevated for c in candidates)
         candidates = [c for c in candidates if not ctx.near_rejected(c)]
+        beyond = [c.index for c in candidates if ctx.outside_fence(c)]
+        if beyond:
+            ctx.say(6, f"site {', '.join(map(str, beyond))} beyond the autopilot's fence: not considered")
+            candidates = [c for c in candidates if c.index not in beyond]
         if frame.image_rgb is not None:  # JPEG encoding off the event loop: the setpoint stream runs there
             # (before the ranking: a ground feed boxes the ranking's candidates on this frame)
             await asyncio.to_thread(ctx.record.save_image, f"round{ctx.round:02d}-acquire", frame.image_rgb)
@@ -523,9 +536,101 @@ class Recovery:
             await observing
         return await self._confirm_and_descend(target, choice)
 
+    async def _while_watching(
+        self,
+        work: Coroutine[Any, Any, T],
+        target: tuple[float, float, float],
+        *,
+        name: str,
+        floor_m: float = 0.0,
+    ) -> tuple[T | None, PeopleSeen | None]:
+        """``work`` (a descent step, the final approach) with the people watch running through it:
+        every ``PEOPLE_WATCH_STEP_S`` a frame of its own and a look within ``people_margin_m`` of the site
+        (:meth:`Looker.watch_people`), while the vehicle is more than ``floor_m`` above the site.
+        Someone seen ends ``work`` there (cancelled). Returns its result and None, or None and what was
+        seen."""
+        task = asyncio.create_task(work, name=name)
+        watch = asyncio.create_task(self._watch_through(target, floor_m), name=f"people-watch-{name}")
+        try:
+            await asyncio.wait((task, watch), return_when=asyncio.FIRST_COMPLETED)
+            if task.done():
+                return task.result(), None
+            return None, watch.result()  # a watch that failed raises here: a defect, as anywhere else
+        finally:
+            for t in (task, watch):
+                t.cancel()
+            await asyncio.gather(task, watch, return_exceptions=True)
+
+    async def _watched_step(
+        self, target: tuple[float, float, float], down_m: float, timeout_s: float
+    ) -> tuple[tuple[float, float, float], PeopleSeen | None]:
+        """A descent step onto a site off the roofs (:meth:`Follower.goto_following`) watched for people
+        (:meth:`_while_watching`); someone seen stops it where the vehicle is (the position target's
+        height becomes the vehicle's). Returns the target as it ended and what was seen (None: the
+        step ran to its end)."""
+        ctx = self.ctx
+        step = self.follower.goto_following(target, down_m, timeout_s=timeout_s)
+        moved, seen = await self._while_watching(step, target, name="descent-step")
+        if seen is None:
+            assert moved is not None
+            return moved, None
+        here = ctx.tm.state.pos_ned_m
+        held = ctx.ctl.target
+        n, e = (held[0], held[1]) if held is not None else (here[0], here[1])
+        ctx.ctl.set_target(n, e, here[2])  # no lower: the vehicle stops where it is
+        return (n, e, target[2]), seen
+
+    async def _watched_landing(self, target: tuple[float, float, float]) -> PeopleSeen | None:
+        """The final approach onto a site off the roofs (:meth:`Lander.land`) watched for people down
+        to ``GO_AROUND_MIN_M`` above it; someone seen stops the landing: the companion takes the vehicle
+        back from the autopilot's land mode where it is and climbs to ``GO_AROUND_M`` above the site,
+        from where the look before the next step sees the whole margin. Returns what was seen (None:
+        landed)."""
+        ctx = self.ctx
+        _landed, seen = await self._while_watching(
+            self.lander.land(), target, name="final-approach", floor_m=GO_AROUND_MIN_M
+        )
+        if seen is None:
+            return None
+        await ctx.ctl.engage()  # holds where the vehicle is, in the companion's mode again
+        n, e, _d = ctx.tm.state.pos_ned_m
+        ctx.set_state(State.DESCEND)
+        with contextlib.suppress(TargetTimeout):  # wherever the climb got to, the next look is from there
+            await ctx.ctl.goto(
+                n,
+                e,
+                target[2] - GO_AROUND_M,
+                tolerance_m=ctx.p.arrival_tolerance_m,
+                speed_m_s=ctx.p.arrival_speed_m_s,
+                timeout_s=ctx.p.move_timeout_s,
+            )
+        return seen
+
+    async def _watch_through(self, target: tuple[float, float, float], floor_m: float) -> PeopleSeen:
+        """Looks for people near the site until someone is seen (frames missing are skipped); the site
+        where the position target has it (the follower may move it), at ``target``'s height. Below
+        ``floor_m`` above the site it looks no more (and waits to be cancelled)."""
+        ctx = self.ctx
+        while True:
+            await asyncio.sleep(PEOPLE_WATCH_STEP_S)
+            if target[2] - ctx.tm.state.pos_ned_m[2] < floor_m:
+                continue  # too low to turn back: the landing goes on
+            held = ctx.ctl.target
+            site = (held[0], held[1], target[2]) if held is not None else target
+            try:
+                frame = await ctx.frames()
+            except FrameUnavailable as exc:
+                ctx.log.debug("no look for people on the way down: %s", exc)
+                continue
+            seen = await self.looker.watch_people(frame, site)
+            if seen is not None and seen.cells:
+                return seen
+
     async def _confirm_and_descend(self, target: tuple[float, float, float], choice: Candidate) -> bool:
         ctx = self.ctx
         self._descending = (target, choice)  # what a link loss resumes: this site, confirmed again
+        people_since: float | None = None  # when people were first seen near the site, autopilot seconds
+        quiet_looks = 0  # looks in a row without anyone since people were seen there
         while True:
             frame, check = await self.looker.measure_site(target)
             followed = await self.follower.follow(frame, target)
@@ -541,14 +646,23 @@ class Recovery:
                 ctx.say(4, f"site {choice.index} contested: {decision.rationale[:110]}")
                 return False
             if not decision.accept:
-                ctx.reject(target, choice)
-                if (
-                    ctx.best is not None
-                    and math.dist(ctx.best.ned_m[:2], target[:2]) < ctx.p.rejected_radius_m
-                ):
-                    ctx.best = None
+                ctx.strike_off(target, choice)
                 ctx.say(4, f"site {choice.index} {decision.rationale[:120]}")
                 return False
+            if not choice.elevated:  # off the roofs, people walk: none within the margin (people_margin_m)
+                seen = await self.looker.watch_people(frame, target)
+                if seen is not None and seen.cells:
+                    now = ctx.clock_s()
+                    people_since = now if people_since is None else people_since
+                    quiet_looks = 0
+                    if not await self.looker.hold_for_people(seen, target, choice, now - people_since):
+                        return False
+                    continue
+                if people_since is not None and quiet_looks + 1 < QUIET_LOOKS:
+                    quiet_looks += 1  # one look without them is not yet proof they left: another look
+                    await asyncio.sleep(PEOPLE_LOOK_AGAIN_S)
+                    continue
+                people_since, quiet_looks = None, 0
             ctx.best = Site(target, choice)
             _n, _e, d = ctx.tm.state.pos_ned_m
             rng_m, rng_quat = frame.rangefinder_m, frame.quat_wxyz
@@ -570,7 +684,15 @@ class Recovery:
                 self._descending = (target, choice)
                 continue
             if height_m <= ctx.p.final_land_m:
-                return await self.lander.land()
+                if choice.elevated or ctx.p.people_margin_m <= 0:
+                    return await self.lander.land()
+                seen = await self._watched_landing(target)
+                if seen is None:
+                    return True
+                now = ctx.clock_s()
+                people_since, quiet_looks = (now if people_since is None else people_since), 0
+                self.looker.paused_for_people(seen, target, choice, go_around_m=GO_AROUND_M)
+                continue
             ctx.set_state(State.DESCEND)
             ctx.fault.check("descend", ctx.round)
             # an unsure judgement: half the step, so that the next look is from closer
@@ -578,11 +700,18 @@ class Recovery:
             new_d = d + step_m
             closer = " (unsure: a closer look first)" if decision.unsure else ""
             ctx.say(6, f"descending {step_m:.0f} m{closer}, {decision.rationale[:80]}")
+            timeout_s = ctx.p.move_timeout_s + rng_m
+            seen = None
             try:
-                target = await self.follower.goto_following(
-                    target, new_d, timeout_s=ctx.p.move_timeout_s + rng_m
-                )
+                if choice.elevated or ctx.p.people_margin_m <= 0:
+                    target = await self.follower.goto_following(target, new_d, timeout_s=timeout_s)
+                else:  # off the roofs: the people watch goes on through the step
+                    target, seen = await self._watched_step(target, new_d, timeout_s)
             except TargetTimeout as exc:
                 ctx.say(4, f"descent target not reached ({exc.error_m:.1f} m off): next round")
                 return False
             self._descending = (target, choice)
+            if seen is not None:  # someone came within the margin on the way down: stopped, look again
+                now = ctx.clock_s()
+                people_since, quiet_looks = (now if people_since is None else people_since), 0
+                self.looker.paused_for_people(seen, target, choice)

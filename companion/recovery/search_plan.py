@@ -159,6 +159,27 @@ class SearchPlanner:
         self.half_fov_rad = math.radians(45.0)
         self._start: tuple[float, float] | None = None  # autopilot clock (s), battery (%) at the alarm
         self._heading: float | None = None
+        # (home north, east; radius): the circle legs end inside (the autopilot's fence, companion.fence)
+        self.bounds: tuple[tuple[float, float], float] | None = None
+        # where legs were aimed that made no headway (the autopilot refused or could not fly them)
+        self.blocked: list[tuple[float, float]] = []
+
+    def _within(self, ne_m: tuple[float, float]) -> bool:
+        return self.bounds is None or math.dist(ne_m, self.bounds[0]) <= self.bounds[1] + 1e-6
+
+    def _reach_within(self, here: tuple[float, float], u: tuple[float, float], step: float) -> float:
+        """How far along heading ``u`` from ``here`` a leg may go, up to ``step``, and stay inside
+        :attr:`bounds` (0 when ``here`` is outside it and ``u`` does not lead back in)."""
+        if self.bounds is None:
+            return step
+        (cn, ce), r = self.bounds
+        dn, de = here[0] - cn, here[1] - ce
+        # |d + s u| = r: s^2 + 2 (d.u) s + |d|^2 - r^2 = 0, the larger root
+        b = dn * u[0] + de * u[1]
+        disc = b * b - (dn * dn + de * de - r * r)
+        if disc < 0:
+            return 0.0
+        return max(0.0, min(step, -b + math.sqrt(disc)))
 
     # ------------------------------------------------------------------ limits
     def start(self, t_boot_s: float, battery_pct: float) -> None:
@@ -393,7 +414,12 @@ class SearchPlanner:
         self, here: tuple[float, float], bad: list[tuple[float, float]]
     ) -> tuple[float, float, str, str] | None:
         groups = self.roof_groups(
-            lambda c: not self._judged(c) and not any(math.dist(c, b) < 15.0 for b in bad)
+            lambda c: (
+                not self._judged(c)
+                and not any(math.dist(c, b) < 15.0 for b in bad)
+                and self._within(c)
+                and not any(math.dist(c, b) < 2.0 * self.cell_m for b in self.blocked)
+            )
         )
 
         def aim(g: list[tuple[int, int]]) -> tuple[float, float]:
@@ -441,10 +467,17 @@ class SearchPlanner:
         step = max(2.0 * reach, 60.0)  # a view's width: the next look shares no ground with this one
         roofs = [self._centre(c) for c in self.roof_cells()]
         best: tuple[float, float, float, str] | None = None
-        for k in range(HEADINGS):
-            a = 2 * math.pi * k / HEADINGS
+        for k in range(HEADINGS * 2):  # the second pass: headings that made no headway too
+            if k == HEADINGS and (best is not None or not self.blocked):
+                break
+            a = 2 * math.pi * (k % HEADINGS) / HEADINGS
             u = (math.cos(a), math.sin(a))
-            t = (here[0] + step * u[0], here[1] + step * u[1])
+            go = self._reach_within(here, u, step)
+            if go < 0.5 * step:  # the fence leaves too little that way to show new ground
+                continue
+            t = (here[0] + go * u[0], here[1] + go * u[1])
+            if k < HEADINGS and any(math.dist(t, b) < 0.5 * step for b in self.blocked):
+                continue
             covered = self._covered(t, reach)
             if any(look.reach_m > 0 and math.dist(t, look.ne_m) < 0.5 * step for look in self.looks):
                 covered = max(covered, 0.75)  # an earlier look stood about here
@@ -457,10 +490,19 @@ class SearchPlanner:
             why = _why(covered, toward_roofs, toward_bad if bad else None, shown_bad)
             if best is None or score > best[0]:
                 best = (score, t[0], t[1], why)
-        assert best is not None
+        if best is None:  # hemmed in by the fence every way: back toward home, where it is widest
+            assert self.bounds is not None
+            (hn, he), _r = self.bounds
+            dist = math.dist(here, (hn, he))
+            frac = min(1.0, step / dist) if dist > 0 else 0.0
+            tn, te = here[0] + frac * (hn - here[0]), here[1] + frac * (he - here[1])
+            bearing = compass_point(math.degrees(math.atan2(te - here[1], tn - here[0])))
+            return tn, te, "new ground", f"{frac * dist:.0f} m {bearing}, back inside the autopilot's fence"
         _score, tn, te, why = best
+        go_m = math.hypot(tn - here[0], te - here[1])
         bearing = compass_point(math.degrees(math.atan2(te - here[1], tn - here[0])))
-        return tn, te, "new ground", f"{step:.0f} m {bearing} to ground not yet seen ({why})"
+        fenced = ", as far as the autopilot's fence allows" if go_m < step - 0.5 else ""
+        return tn, te, "new ground", f"{go_m:.0f} m {bearing} to ground not yet seen ({why}{fenced})"
 
     def _leg_down(
         self, here: tuple[float, float], to: tuple[float, float], d: float, rangefinder_m: float

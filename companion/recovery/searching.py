@@ -101,10 +101,7 @@ class Searcher:
 
     # ------------------------------------------------------------------ when nothing was accepted
     def _clock_s(self) -> float:
-        """The autopilot's clock (seconds since its boot), so that a faster-than-real-time simulation
-        keeps the alarm's window; the companion's monotonic clock before any telemetry."""
-        t = self.ctx.tm.state.t_boot_s
-        return t if t > 0 else time.monotonic()
+        return self.ctx.clock_s()
 
     def _verdict(self) -> tuple[Verdict, LedgerSite | None]:
         """The search's verdict now (:meth:`SearchPlanner.verdict`), with the site the vehicle would
@@ -184,6 +181,7 @@ class Searcher:
         ctx.set_state(State.EXPLORE)
         s = ctx.tm.state
         n, e, d = s.pos_ned_m
+        self.plan.bounds = ctx.fence_bounds()  # read now: the fence may be read after the alarm came
         leg = await asyncio.to_thread(self.plan.next_leg, (n, e, d), ctx.ledger, s.rangefinder_m)
         tn, te, td = leg.target_ned_m
         count = len(self.plan.legs)
@@ -201,16 +199,26 @@ class Searcher:
             },
         )
         steps = [(n, e, td), (tn, te, td)] if td < d - 3.0 else [(tn, te, d), (tn, te, td)]
-        for sn, se, sd in steps:
-            with contextlib.suppress(TargetTimeout):
-                await ctx.ctl.goto(
-                    sn,
-                    se,
-                    sd,
-                    tolerance_m=2.0,
-                    speed_m_s=0.5,
-                    timeout_s=ctx.p.move_timeout(math.dist((sn, se, sd), ctx.tm.state.pos_ned_m)),
-                )
+        try:
+            for sn, se, sd in steps:
+                with contextlib.suppress(TargetTimeout):
+                    await ctx.ctl.goto(
+                        sn,
+                        se,
+                        sd,
+                        tolerance_m=2.0,
+                        speed_m_s=0.5,
+                        timeout_s=ctx.p.move_timeout(math.dist((sn, se, sd), ctx.tm.state.pos_ned_m)),
+                    )
+        finally:
+            # a leg the autopilot refused or could not fly (its setpoints rejected, a failsafe taking
+            # the vehicle meanwhile) is not planned again: the map it is planned on did not change
+            pn, pe, _pd = ctx.tm.state.pos_ned_m
+            made = math.hypot(pn - n, pe - e)
+            if leg.distance_m >= 10.0 and made < 0.25 * leg.distance_m:
+                self.plan.blocked.append((tn, te))
+                headway = f"{made:.0f} of {leg.distance_m:.0f} m"
+                ctx.say(4, f"search leg {count} made no headway ({headway}): not again")
         return leg
 
     async def explore(self, blind: bool = False) -> bool:

@@ -69,6 +69,12 @@ def save_figure(fig: Figure, path: Path) -> None:
     fig.savefig(path, dpi=DPI, bbox_inches="tight", pad_inches=0.15)  # legends outside the axes included
 
 
+def cache_of(config: Mapping[str, Any]) -> Path | None:
+    """The campaign's place cache (``config.world_cache``), where it still exists."""
+    given = config.get("world_cache")
+    return Path(given) if isinstance(given, str) and Path(given).is_dir() else None
+
+
 def map_figure(
     scenario: str, eps: list[Episode], config: Mapping[str, Any], bm: BaseMap | None, path: Path
 ) -> list[str]:
@@ -83,7 +89,7 @@ def map_figure(
     if bm is None:
         try:
             place = str(config.get("place", "downtown"))
-            bm = basemap(scenario, seed, bounds, max_px=MAP_MAX_PX, place=place)
+            bm = basemap(scenario, seed, bounds, max_px=MAP_MAX_PX, place=place, world_cache=cache_of(config))
         except ValueError as exc:  # an unknown scenario, or bounds outside its world
             log.warning("no background for the %s map: %s", scenario, exc)
             note = f"No background map: {exc}"
@@ -337,7 +343,8 @@ def thumbnail(e: Episode, config: Mapping[str, Any], path: Path) -> bool:
     seed = e.city_seed if e.city_seed is not None else world_seed(e.scenario, [e], config)
     try:
         bounds = (n - half, n + half, east - half, east + half)
-        bm = basemap(e.scenario, seed, bounds, max_px=240, place=str(config.get("place", "downtown")))
+        place = str(config.get("place", "downtown"))
+        bm = basemap(e.scenario, seed, bounds, max_px=240, place=place, world_cache=cache_of(config))
     except ValueError as exc:
         log.warning("no thumbnail for %s: %s", e.id, exc)
         return False

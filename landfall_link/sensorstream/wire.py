@@ -80,7 +80,7 @@ class EndpointError(SensorStreamError, ValueError):
     """A ``HOST:PORT`` text that cannot be used."""
 
     def __init__(self, text: str, reason: str) -> None:
-        super().__init__(f"bad sensor endpoint {text!r}: {reason}; expected HOST:PORT, e.g. 127.0.0.1:5600")
+        super().__init__(f"bad sensor endpoint {text!r}: {reason}; expected HOST:PORT, e.g. 127.0.0.1:5601")
         self.text = text
         self.reason = reason
 
@@ -248,7 +248,7 @@ def parse_endpoint(text: str) -> tuple[str, int]:
     if host.startswith("[") and host.endswith("]"):
         host = host[1:-1]
     elif ":" in host:
-        raise EndpointError(text, "an IPv6 host must be written in brackets, e.g. [::1]:5600")
+        raise EndpointError(text, "an IPv6 host must be written in brackets, e.g. [::1]:5601")
     if not host:
         raise EndpointError(text, "the host is empty")
     if not (port_text.isascii() and port_text.isdigit()) or not 0 <= int(port_text) <= 65535:

@@ -365,6 +365,10 @@ class ArduPilotFlavour(Flavour):
         # the fence's breach (ArduCopter's defaults: disabled; when enabled, RTL or land)
         Param("FENCE_ENABLE", 0, MAV_PARAM_TYPE_INT32),
         Param("FENCE_ACTION", 1, MAV_PARAM_TYPE_INT32),
+        # as the firmware ships them (7: altitude, circle and polygon; 2 m), for a companion to read:
+        # the emulation keeps its circle and altitude whatever they say, and has no polygon
+        Param("FENCE_TYPE", 7, MAV_PARAM_TYPE_INT8),
+        Param("FENCE_MARGIN", 2.0, MAV_PARAM_TYPE_REAL32),
         Param("SIM_GPS1_ENABLE", 1, MAV_PARAM_TYPE_INT32),
         # precision landing on a companion's LANDING_TARGET: ArduCopter ships with it off
         # (PLND_ENABLED 0, PLND_TYPE 0); simbridge's vehicle is set up for Landfall's (as the SITL

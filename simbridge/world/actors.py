@@ -58,24 +58,31 @@ class _Paths:
     cos: np.ndarray
     sin: np.ndarray
     length: np.ndarray  # float64 (paths,): each path's total length
-    base: np.ndarray  # float64 (paths,): the height of the surface its actors stand on
+    base: np.ndarray  # float64 (paths,): the height of the surface its actors stand on (a level path)
+    sloped: np.ndarray  # bool (paths,): the path has a height per point (``z``), linear between them
+    z: np.ndarray  # float64 (points,): the surface height at each point (``base`` on a level path)
 
     @staticmethod
-    def pack(paths: list[tuple[tuple[tuple[float, float], ...], float]]) -> _Paths:
-        """From (points, surface height) per path. A one-point path becomes that point twice: its
-        actors stand on the point facing north, as they always did."""
-        start, length, base = [0], [], []
+    def pack(paths: list[tuple[tuple[tuple[float, float], ...], float, tuple[float, ...] | None]]) -> _Paths:
+        """From (points, surface height, per-point heights or None) per path. A one-point path
+        becomes that point twice: its actors stand on the point facing north, as they always did."""
+        start, length, base, sloped = [0], [], [], []
         points: list[tuple[float, float]] = []
+        z: list[float] = []
         cum: list[np.ndarray] = []
         yaw: list[float] = []
-        for pts, height_m in paths:
-            pts = pts if len(pts) > 1 else pts * 2
+        for pts, height_m, heights in paths:
+            zs = list(heights) if heights is not None else [height_m] * len(pts)
+            if len(pts) == 1:
+                pts, zs = pts * 2, zs * 2
             start.append(start[-1] + len(pts))
             points += pts
+            z += zs
             cum.append(_polyline_lengths(pts))
             yaw += [math.atan2(e2 - e1, n2 - n1) for (n1, e1), (n2, e2) in itertools.pairwise(pts)] + [0.0]
             length.append(cum[-1][-1])
             base.append(height_m)
+            sloped.append(heights is not None)
         return _Paths(
             start=np.asarray(start, np.int64),
             points=np.asarray(points, np.float64).reshape(-1, 2),
@@ -85,17 +92,31 @@ class _Paths:
             sin=np.asarray([math.sin(y) for y in yaw], np.float64),
             length=np.asarray(length, np.float64),
             base=np.asarray(base, np.float64),
+            sloped=np.asarray(sloped, bool),
+            z=np.asarray(z, np.float64),
         )
+
+    def surface(self, path: np.ndarray, seg: np.ndarray, frac: np.ndarray) -> np.ndarray:
+        """The surface height under actors on ``path`` at fraction ``frac`` along segment ``seg``: the
+        path's one height on a level path (exactly, as it always was), linear between the segment's
+        ends on a sloped one."""
+        base: np.ndarray = self.base[path]
+        if not self.sloped.any():
+            return base
+        za, zb = self.z[seg], self.z[np.minimum(seg + 1, len(self.z) - 1)]
+        return np.asarray(np.where(self.sloped[path], za + frac * (zb - za), base))
 
 
 @njit(cache=True)
 def _points_at(
     start: np.ndarray, points: np.ndarray, cum: np.ndarray, path: np.ndarray, s: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """North and east at arc length ``s[a]`` along path ``path[a]``, and the segment (the index of
-    its first point) that is on, for every ``a``: the segment found as ``np.searchsorted(cum, s,
-    side="right") - 1`` clipped to the path's segments, the point interpolated along it."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """North and east at arc length ``s[a]`` along path ``path[a]``, the segment (the index of its
+    first point) that is on and the fraction along it, for every ``a``: the segment found as
+    ``np.searchsorted(cum, s, side="right") - 1`` clipped to the path's segments, the point
+    interpolated along it."""
     n, e, seg = np.empty(len(s)), np.empty(len(s)), np.empty(len(s), np.int64)
+    frac = np.empty(len(s))
     for a in range(len(s)):
         first, end = start[path[a]], start[path[a] + 1]
         lo, hi = first, end
@@ -111,7 +132,8 @@ def _points_at(
         n[a] = points[k, 0] + f * (points[k + 1, 0] - points[k, 0])
         e[a] = points[k, 1] + f * (points[k + 1, 1] - points[k, 1])
         seg[a] = k
-    return n, e, seg
+        frac[a] = f
+    return n, e, seg, frac
 
 
 @njit(cache=True)
@@ -150,8 +172,8 @@ class Actors:
         self._lanes = lanes
         self._walkways = walkways
         self._paths = _Paths.pack(
-            [(ln.points_ne, ln.deck_height_m) for ln in lanes]
-            + [(w.points_ne, w.surface_height_m) for w in walkways]
+            [(ln.points_ne, ln.deck_height_m, ln.heights_m) for ln in lanes]
+            + [(w.points_ne, w.surface_height_m, w.heights_m) for w in walkways]
         )
         self._next_arrival = np.asarray(
             [self._rng.exponential(60.0 / max(ln.arrivals_per_min, 1e-6)) for ln in lanes], np.float64
@@ -237,15 +259,17 @@ class Actors:
             self._car_colour = np.insert(self._car_colour, at, colour)
 
     def _place(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Every actor's path, north, east and segment (its first point's index): the cars, then the
-        pedestrians, each their offset to the left of their walkway's line."""
+        """Every actor's north, east, segment (its first point's index) and the height of the surface
+        it stands on: the cars, then the pedestrians, each their offset to the left of their
+        walkway's line."""
         p = self._paths
         path = np.concatenate([self._car_lane, self._person_path])
-        n, e, seg = _points_at(p.start, p.points, p.cum, path, np.concatenate([self._car_s, self._person_s]))
+        s = np.concatenate([self._car_s, self._person_s])
+        n, e, seg, frac = _points_at(p.start, p.points, p.cum, path, s)
         cars = len(self._car_s)
         n[cars:] -= p.sin[seg[cars:]] * self._person_offset
         e[cars:] += p.cos[seg[cars:]] * self._person_offset
-        return path, n, e, seg
+        return n, e, seg, p.surface(path, seg, frac)
 
     def people_at(self, t_s: float) -> np.ndarray:
         """(people, 3) north, east and the height of the surface under each pedestrian at ``t_s`` (not
@@ -255,19 +279,20 @@ class Actors:
         dt = max(t_s - self.t_s, 0.0)
         end = p.length[self._person_path]
         s = np.clip(self._person_s + self._person_speed * dt, 0.0, end)  # at an end, as advance turns there
-        n, e, seg = _points_at(p.start, p.points, p.cum, self._person_path, s)
+        n, e, seg, frac = _points_at(p.start, p.points, p.cum, self._person_path, s)
         n = n - p.sin[seg] * self._person_offset
         e = e + p.cos[seg] * self._person_offset
-        return np.stack([n, e, p.base[self._person_path]], axis=1) if len(s) else np.zeros((0, 3))
+        base = p.surface(self._person_path, seg, frac)
+        return np.stack([n, e, base], axis=1) if len(s) else np.zeros((0, 3))
 
     def poses(self) -> list[ActorPose]:
         """Every actor now: the cars lane by lane (front first), then the pedestrians."""
-        path, n, e, seg = self._place()
+        n, e, seg, base_m = self._place()
         kinds = [SurfaceClass.VEHICLE] * len(self._car_s) + [SurfaceClass.PEDESTRIAN] * len(self._person_s)
         return [
             ActorPose(kind, (cn, ce), yaw, base, colour)
             for kind, cn, ce, yaw, base, colour in zip(
-                kinds, n.tolist(), e.tolist(), self._paths.yaw[seg].tolist(), self._paths.base[path].tolist(),
+                kinds, n.tolist(), e.tolist(), self._paths.yaw[seg].tolist(), base_m.tolist(),
                 np.concatenate([self._car_colour, self._person_colour]).tolist(), strict=True,
             )
         ]  # fmt: skip
@@ -286,23 +311,30 @@ class Actors:
         rows, cols = grid.shape
         out = np.full((-(-rows // COARSE), -(-cols // COARSE)), -1e9, np.float32)
         coarse_m = grid.res * COARSE
-        paths = [(ln.points_ne, ln.deck_height_m + CAR_HEIGHT_M, CAR_LENGTH_M / 2) for ln in self._lanes]
+        paths = [
+            (ln.points_ne, ln.deck_height_m, ln.heights_m, CAR_HEIGHT_M, CAR_LENGTH_M / 2)
+            for ln in self._lanes
+        ]
         paths += [
-            (w.points_ne, w.surface_height_m + PERSON_HEIGHT_M, 0.4 * w.width_m + PERSON_SIZE_M)
+            (w.points_ne, w.surface_height_m, w.heights_m, PERSON_HEIGHT_M, 0.4 * w.width_m + PERSON_SIZE_M)
             for w in self._walkways
         ]
         cells, tops, reach_m = [], [], 0.0
-        for points, top, reach in paths:
+        for points, level_m, heights, tall, reach in paths:
             p = np.asarray(points, float)
             if len(p) < 2:
                 continue
             seg = np.diff(p, axis=0)
             steps = np.maximum(np.ceil(np.hypot(seg[:, 0], seg[:, 1]) / (coarse_m / 2)), 1).astype(int)
-            pts = np.concatenate(
-                [p[k] + seg[k] * (np.arange(steps[k] + 1)[:, None] / steps[k]) for k in range(len(seg))]
-            )
+            frac = [np.arange(steps[k] + 1) / steps[k] for k in range(len(seg))]
+            pts = np.concatenate([p[k] + seg[k] * frac[k][:, None] for k in range(len(seg))])
             cells.append(np.floor((pts - (grid.n0, grid.e0)) / coarse_m).astype(np.int64))
-            tops.append(np.full(len(pts), top, np.float32))
+            if heights is None:
+                tops.append(np.full(len(pts), level_m + tall, np.float32))
+            else:
+                z = np.asarray(heights, float)
+                under = np.concatenate([z[k] + (z[k + 1] - z[k]) * frac[k] for k in range(len(seg))])
+                tops.append((under + tall).astype(np.float32))
             reach_m = max(reach_m, reach)
         if not cells:
             return out
@@ -314,7 +346,7 @@ class Actors:
 
     def _boxes(self, near: tuple[float, float, float] | None) -> Boxes:
         """The actors' boxes now, in ``poses()`` order: all, or those within ``near``'s radius."""
-        path, n, e, seg = self._place()
+        n, e, seg, base_m = self._place()
         which = np.arange(len(n)) if near is None else _within(n, e, near)
         car = which < len(self._car_s)
         colour = np.concatenate([self._car_colour, self._person_colour])[which]
@@ -325,7 +357,7 @@ class Actors:
             sin=self._paths.sin[seg[which]],
             length=np.where(car, CAR_LENGTH_M, PERSON_SIZE_M),
             width=np.where(car, CAR_WIDTH_M, PERSON_SIZE_M),
-            base=self._paths.base[path[which]],
+            base=base_m[which],
             tall=np.where(car, CAR_HEIGHT_M, PERSON_HEIGHT_M),
             cls=np.where(car, SurfaceClass.VEHICLE, SurfaceClass.PEDESTRIAN).astype(np.uint8),
             mat=np.where(car, Material.CAR_PAINT, Material.CLOTH).astype(np.uint8),

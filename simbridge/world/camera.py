@@ -1,4 +1,5 @@
-"""The downward camera: a pinhole rendered by ray casting the world grid.
+"""The downward camera: a pinhole rendered by ray casting the world grid (one module over 600 lines:
+the frame's one pass from rays to shaded, weathered pixels, which its textures and variety feed).
 
 Camera frame (OpenCV): x right, y down, z along the optical axis. The camera looks straight down
 the body +z axis with the image top toward the vehicle's nose, so the camera-to-body rotation is
@@ -45,6 +46,8 @@ from simbridge.world.camera_variety import (
 )
 from simbridge.world.model import Material, WorldGrid
 from simbridge.world.raycast import HIT_MISS, HIT_TOP, HIT_WALL_N, Pyramid, cast_rays
+from simbridge.world.wire_sensing import draw_wires
+from simbridge.world.world import Wire
 
 __all__ = [
     "CAMERA_TO_BODY", "LABEL_SKY", "MAX_RANGE_M", "WEATHERS", "CameraModel", "Frame", "RenderVariety",
@@ -478,6 +481,7 @@ def render(
     labels: bool = False,
     palette: np.ndarray | None = None,
     variety: RenderVariety | None = None,
+    wires: tuple[Wire, ...] = (),
 ) -> Frame:
     """Render the camera at a pose (position NED, attitude body->NED).
 
@@ -529,6 +533,9 @@ def render(
         image = _to_uint8(
             np.ascontiguousarray(img, np.float32), vignette, int(rng.integers(1, 2**62)), SENSOR_NOISE
         )
+    if wires:
+        r_neu_cam = (quat_matrix(quat) * np.array([[1.0], [1.0], [-1.0]])) @ CAMERA_TO_BODY
+        image = draw_wires(image, depth_img, wires, r_neu_cam, origin[0], camera.focal_px)
     return Frame(image, depth_img, cls.reshape(h, w), hit_material, hit_kind)
 
 

@@ -40,6 +40,8 @@ for _m, _rgb in {
     Material.SEAM_METAL: (0.52, 0.56, 0.58),
     Material.GLASS: (0.22, 0.28, 0.34),
     Material.POOL: (0.35, 0.70, 0.80),
+    Material.SAND: (0.80, 0.72, 0.55),
+    Material.CROP: (0.42, 0.52, 0.20),
 }.items():
     MAT_RGB[int(_m)] = _rgb
 
@@ -173,7 +175,7 @@ def _line(x: float, period: float, width: float, fw: float) -> float:
 def texture_new(
     mat: int, u: float, v: float, r: float, g: float, b: float, fw: float, salt: int
 ) -> tuple[float, float, float]:
-    """Procedural albedo of the roof materials 22..27 (``Material.CORRUGATED`` .. ``POOL``) at local
+    """Procedural albedo of the materials 22..29 (``Material.CORRUGATED`` .. ``CROP``) at local
     coordinates (u, v) in metres: u runs across the rows (down the slope), v along them (the eave).
     ``fw`` is the pixel footprint in metres (fine ridges and lines fade as it grows); ``salt`` varies
     the per-sheet / per-slate tones."""
@@ -230,4 +232,20 @@ def texture_new(
         c = (0.6 * n1**4 + 0.4 * n2**4) * max(0.0, 1.0 - fw / 0.8)
         d = 0.88 + 0.2 * value_noise(u * 0.12, v * 0.12, salt + 92)
         return (r * d + 0.22 * c, g * d + 0.28 * c, b * d + 0.24 * c)
+    elif mat == 28:  # sand: fine grain, wind ripples 8-12 cm apart, damp and dry patches
+        k = 0.9 + 0.12 * hash2(math.floor(u * 30.0), math.floor(v * 30.0), salt + 100)
+        ripple = math.sin(6.283185307179586 * (u + 0.3 * value_noise(u * 0.5, v * 0.5, salt + 101)) / 0.1)
+        k *= 1.0 + 0.05 * ripple * max(0.0, 1.0 - fw / 0.1)
+        k *= 0.82 + 0.26 * value_noise(u * 0.08, v * 0.08, salt + 102)
+    elif mat == 29:  # standing crops: rows 0.75 m apart (green plants over soil), tramlines every 24 m
+        leaf = 0.5 + 0.5 * math.cos(6.283185307179586 * u / 0.75)  # 1 on a row, 0 between two
+        cover = 0.55 + 0.45 * max(0.0, 1.0 - fw / 0.75) * (leaf - 0.5) * 2.0
+        cover = min(1.0, max(0.0, cover)) * (0.85 + 0.3 * value_noise(u * 0.6, v * 0.6, salt + 110))
+        cover *= 1.0 - 0.6 * _line(u, 24.0, 0.5, fw)  # the sprayer's tramlines: bare soil
+        cover = min(1.0, cover)
+        tint = 0.85 + 0.3 * value_noise(u * 0.05, v * 0.05, salt + 111)  # ripening unevenly
+        r = cover * r * tint + (1.0 - cover) * 0.47
+        g = cover * g * (0.9 + 0.1 * tint) + (1.0 - cover) * 0.40
+        b = cover * b + (1.0 - cover) * 0.30
+        k = 0.93 + 0.14 * hash2(math.floor(u * 8.0), math.floor(v * 8.0), salt + 112)
     return (r * k, g * k, b * k)

@@ -75,10 +75,7 @@ class _CityBuilder(CityPlan, Props, Buildings):
             f"procedural city {self.size:.0f} m square, seed {seed}: {self.n_buildings} buildings, "
             f"{len(ew) + len(ns)} streets, a river and an elevated highway"
         )
-        return World(
-            name="city", seed=seed, grid=self.grid, launch_ne_m=(0.0, 0.0), launch_height_m=110.0, sun=sun,
-            safe_zones=(), lanes=tuple(self.lanes), walkways=tuple(self.walkways), description=desc,
-        )  # fmt: skip
+        return self._world("city", seed, sun, desc, launch_height_m=110.0)
 
 
 def generate_city(

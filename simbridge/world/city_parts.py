@@ -10,7 +10,7 @@ from typing import Literal
 import numpy as np
 
 from simbridge.world.model import Material, SurfaceClass, WorldError, WorldGrid
-from simbridge.world.world import Lane, Sun, Walkway
+from simbridge.world.world import Lane, Sun, Walkway, Wire, World
 
 Window = tuple[int, int, int, int]
 Range = tuple[float, float]
@@ -266,6 +266,18 @@ class CityParts:
             azimuth_deg=float(self.rng.uniform(90.0, 270.0)),
             elevation_deg=float(self.rng.uniform(*elevation_deg)),
         )
+
+    def _world(
+        self, name: str, seed: int, sun: Sun, description: str, *, launch_height_m: float = 100.0,
+        wires: tuple[Wire, ...] = (),
+    ) -> World:  # fmt: skip
+        """The place built: its grid, lanes and walkways, launching ``launch_height_m`` above (0, 0); no
+        safe zones (landings are graded from the grid's classes)."""
+        return World(
+            name=name, seed=seed, grid=self.grid, launch_ne_m=(0.0, 0.0), launch_height_m=launch_height_m,
+            sun=sun, safe_zones=(), lanes=tuple(self.lanes), walkways=tuple(self.walkways),
+            description=description, wires=wires,
+        )  # fmt: skip
 
     def _clip_pt(self, pt: tuple[float, float], margin: float) -> tuple[float, float]:
         lo, hi = -self.half + margin, self.half - margin

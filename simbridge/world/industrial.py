@@ -72,10 +72,7 @@ class _EstateBuilder(Props, Buildings):
             f"procedural industrial estate (seed {seed}): {n_roads} roads, a railway, "
             f"{self.n_buildings} sheds, {len(self.clear_roofs)} clear roofs"
         )
-        return World(
-            name="industrial", seed=seed, grid=self.grid, launch_ne_m=(0.0, 0.0), launch_height_m=100.0,
-            sun=sun, safe_zones=(), lanes=tuple(self.lanes), walkways=tuple(self.walkways), description=desc,
-        )  # fmt: skip
+        return self._world("industrial", seed, sun, desc)
 
     # ------------------------------------------------------------------ the plan
     def _road_lines(self) -> list[tuple[float, float]]:

@@ -13,9 +13,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from simbridge.geo import Quat
-from simbridge.world.camera import body_to_neu
+from simbridge.world.camera import body_to_neu, quat_matrix
 from simbridge.world.model import Material, WorldGrid
-from simbridge.world.raycast import HIT_MISS, HIT_TOP, Pyramid, cast_rays
+from simbridge.world.raycast import HIT_MISS, HIT_TOP, HIT_WALL_N, Pyramid, cast_rays
+from simbridge.world.wire_sensing import wire_returns
+from simbridge.world.world import Wire
 
 _REFLECTIVITY = np.full(32, 0.3, np.float32)
 for _m, _r in {
@@ -62,9 +64,14 @@ _RAYS: dict[tuple[int, int, float], np.ndarray] = {}
 
 def sweep(
     grid: WorldGrid, pyramid: Pyramid, model: LidarModel, pos_ned_m: tuple[float, float, float], quat: Quat,
-    rng: np.random.Generator,
+    rng: np.random.Generator, wires: tuple[Wire, ...] = (),
 ) -> np.ndarray:  # fmt: skip
-    """One sweep: (N, 4) float32 of body-FRD x, y, z (m) and intensity (0..1)."""
+    """One sweep: (N, 4) float32 of body-FRD x, y, z (m) and intensity (0..1).
+
+    ``wires``: overhead wires; a beam passing within a few centimetres of a conductor comes back from
+    it now and then (:func:`~simbridge.world.wire_sensing.wire_returns`, drawn from ``rng``). Without
+    wires the sweep is byte for byte what it was.
+    """
     rays = model.rays_body()
     dirs = body_to_neu(rays, quat)
     origin = np.array([[pos_ned_m[0], pos_ned_m[1], -pos_ned_m[2]]])
@@ -81,12 +88,21 @@ def sweep(
         beyond[idx[~seen]] = False
         ts[idx[seen]] = t_open[seen]
         kinds[idx[seen]] = HIT_TOP
+    on_wire = np.zeros(ts.shape[0], bool)
+    if wires:
+        r_body_neu = quat_matrix(quat) * np.array([[1.0], [1.0], [-1.0]])
+        rings = (model.channels, model.points_per_ring, model.min_elevation_deg)
+        got, t_wire = wire_returns(
+            wires, dirs, origin[0], rings, r_body_neu, model.range_m, ts, kinds != HIT_MISS, rng
+        )
+        ts[got], kinds[got], beyond[got], on_wire[got] = t_wire, HIT_WALL_N, False, True
     keep = (kinds != HIT_MISS) & (rng.random(ts.shape[0]) >= model.dropout)
     rng_m = ts[keep] + rng.normal(0.0, model.noise_sigma_m, int(keep.sum())).astype(np.float32)
     rng_m = np.clip(rng_m, 0.05, model.range_m)
     pts = rays[keep] * rng_m[:, None]
     mat = grid.mat[ii[keep], jj[keep]]  # a ground hit beyond the grid has no cell: its index is -1
     mat[beyond[keep]] = int(Material.SOIL)
+    mat[on_wire[keep]] = int(Material.METAL)
     refl = _REFLECTIVITY[mat]
     incidence = np.where(kinds[keep] == HIT_TOP, np.abs(dirs[keep, 2]), 0.6)
     intensity = np.clip(refl * (0.3 + 0.7 * incidence) * (1.0 - 0.3 * rng_m / model.range_m), 0.0, 1.0)

@@ -110,7 +110,8 @@ class LiveWorld:
     def grade_touchdown(self, north_m: float, east_m: float, t_s: float) -> TouchdownGrade:
         with self._lock:
             self._sync(t_s, (north_m, east_m, SEEN_MARGIN_M))
-            return grade(self.grid, north_m, east_m, self.grader)
+            people = self.actors.people_at(t_s)
+            return grade(self.grid, north_m, east_m, self.grader, people=people, wires=self.world.wires)
 
     def rangefinder_m(self, pos_ned_m: tuple[float, float, float], quat: Quat, max_m: float = 200.0) -> float:
         return rangefinder_m(self.grid, self.pyramid, pos_ned_m, quat, max_m)
@@ -127,7 +128,16 @@ class LiveWorld:
         with self._lock:
             self._sync(t_s, self._seen_from(pos_ned_m))
             return render(
-                self.grid, self.pyramid, self.shadow, self.camera, pos_ned_m, quat, self.sun_neu, weather, rng
+                self.grid,
+                self.pyramid,
+                self.shadow,
+                self.camera,
+                pos_ned_m,
+                quat,
+                self.sun_neu,
+                weather,
+                rng,
+                wires=self.world.wires,
             )
 
     def lidar_sweep(
@@ -135,4 +145,4 @@ class LiveWorld:
     ) -> np.ndarray:
         with self._lock:
             self._sync(t_s, self._seen_from(pos_ned_m))
-            return sweep(self.grid, self.pyramid, self.lidar, pos_ned_m, quat, rng)
+            return sweep(self.grid, self.pyramid, self.lidar, pos_ned_m, quat, rng, self.world.wires)

@@ -44,6 +44,7 @@ class SurfaceClass(enum.IntEnum):
     PEDESTRIAN = 18
     RAIL = 19  # a railway's track: ballast, sleepers and rails
     MACHINERY = 20  # containers, stacked material, trucks' trailers and machines parked in a yard
+    CROP = 21  # a field of standing crops (wheat, maize, rows of vegetables): never a landing site
 
 
 class Material(enum.IntEnum):
@@ -77,6 +78,8 @@ class Material(enum.IntEnum):
     SEAM_METAL = 25  # standing-seam metal: raised seams 0.4-0.6 m apart
     GLASS = 26  # skylights, roof windows, greenhouse panes
     POOL = 27  # swimming-pool water (light cyan over tiles)
+    SAND = 28  # beach and dune sand, sand pits
+    CROP = 29  # standing crops: rows of plants over soil
 
 
 ROOF_MATERIALS = (Material.GRAVEL, Material.CONCRETE, Material.TAR, Material.MEMBRANE, Material.TILES)
@@ -104,6 +107,7 @@ GRADE_SURFACE: dict[SurfaceClass, str] = {
     SurfaceClass.PEDESTRIAN: "sidewalk",
     SurfaceClass.RAIL: "rail",
     SurfaceClass.MACHINERY: "machinery",
+    SurfaceClass.CROP: "crops",
 }
 
 # Classes a vehicle must never land on, whatever the geometry says.
@@ -112,7 +116,7 @@ FORBIDDEN_CLASSES = frozenset(
         SurfaceClass.ROAD, SurfaceClass.HIGHWAY, SurfaceClass.GUARD_RAIL, SurfaceClass.SIDEWALK,
         SurfaceClass.CROSSWALK, SurfaceClass.WATER, SurfaceClass.PIER, SurfaceClass.TREE,
         SurfaceClass.VEHICLE, SurfaceClass.PEDESTRIAN, SurfaceClass.UNKNOWN, SurfaceClass.RAIL,
-        SurfaceClass.MACHINERY,
+        SurfaceClass.MACHINERY, SurfaceClass.CROP,
     }
 )  # fmt: skip
 # Classes that count as an obstacle inside the rotor-clearance disc.

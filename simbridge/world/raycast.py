@@ -1,4 +1,5 @@
-"""Ray casting against the 2.5-D world grid, compiled with numba.
+"""Ray casting against the 2.5-D world grid, compiled with numba (one module over 600 lines: the
+max-map pyramid and the casts that read it are one structure).
 
 The grid stores, per cell (``res`` metres square), the height of the top surface in metres above
 the scenario origin (up positive). Cell ``(i, j)`` spans north ``[n0 + i res, n0 + (i+1) res)``

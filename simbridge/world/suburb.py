@@ -62,10 +62,7 @@ class _SuburbBuilder(SuburbSites, SuburbLots):
             f"{len(collectors)} collector roads and {len(local)} residential streets, {school}, "
             "a park and open lawns"
         )
-        return World(
-            name="suburb", seed=seed, grid=self.grid, launch_ne_m=(0.0, 0.0), launch_height_m=100.0, sun=sun,
-            safe_zones=(), lanes=tuple(self.lanes), walkways=tuple(self.walkways), description=desc,
-        )  # fmt: skip
+        return self._world("suburb", seed, sun, desc)
 
     def _tree_clumps(self) -> None:
         """Clumps of one to five trees on grass nothing has claimed (the land between the lots)."""

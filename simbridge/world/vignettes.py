@@ -1,4 +1,5 @@
-"""Vignettes: small, fine-grained worlds for training the onboard landing-site judge.
+"""Vignettes: small, fine-grained worlds for training the onboard landing-site judge (one module over
+600 lines: the scene kinds share one builder and its layout).
 
 The procedural city (:mod:`simbridge.world.city`) is painted at 0.1-0.2 m cells: too coarse for the
 2-5 cm per pixel the judge sees in the last metres of a descent, and its roofs are gable-only with boxy
