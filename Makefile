@@ -99,10 +99,12 @@ model-e: $(DEPTH_STAMP)
 	  --clear-threshold-from runs/landnet-e/folds.json --out runs/landnet-e/landnet-e
 	$(VENV)/bin/python -m landfall_train.whole_read --folds runs/landnet-e/folds.json \
 	  --model runs/landnet-e/landnet-e --threads 2
+	$(VENV)/bin/python -m landfall_train.cells_head --model runs/landnet-e/landnet-e \
+	  --out runs/landnet-e/cells/landnet-e
 
 # float16 weights behind casts to float32: half the bytes, the same arithmetic (landfall_train/package.py)
 model-e-package: $(DEPTH_STAMP)
-	$(VENV)/bin/python -m landfall_train.package runs/landnet-e/landnet-e
+	$(VENV)/bin/python -m landfall_train.package runs/landnet-e/cells/landnet-e
 
 bench: $(STAMP)
 	$(VENV)/bin/python benchmarks/bench_simbridge_rtf.py

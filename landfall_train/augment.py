@@ -58,15 +58,17 @@ def augment(
     return _degrade(x, rng), lab
 
 
-def targets(labels: np.ndarray, roof_share: float = CLEAR_ROOF_SHARE) -> tuple[np.ndarray, np.ndarray, float]:
-    """Cell presence (K, H/8, W/8) float32 0/1, cell validity (H/8, W/8) float32 (not all sky), and
-    site_clear (1.0 or 0.0, at least ``roof_share`` roof) of a class map whose sides are multiples of
-    ``CELL_PX``."""
+def targets(
+    labels: np.ndarray, roof_share: float = CLEAR_ROOF_SHARE, classes: int = len(CLASSES)
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """Cell presence (K, H/8, W/8) float32 0/1 (K ``classes``), cell validity (H/8, W/8) float32 (not
+    all sky), and site_clear (1.0 or 0.0, at least ``roof_share`` roof) of a class map whose sides are
+    multiples of ``CELL_PX``."""
     h, w = labels.shape
     gh, gw = h // CELL_PX, w // CELL_PX
     cut = labels[: gh * CELL_PX, : gw * CELL_PX].reshape(gh, CELL_PX, gw, CELL_PX).transpose(0, 2, 1, 3)
     blocks = cut.reshape(gh, gw, CELL_PX * CELL_PX)
-    k = len(CLASSES)
+    k = classes
     counts = np.stack([(blocks == c).sum(axis=2) for c in range(k)])
     need = max(CELL_MIN_PX, CELL_MIN_SHARE * CELL_PX * CELL_PX)
     presence = (counts >= need).astype(np.float32)

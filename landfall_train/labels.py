@@ -16,7 +16,7 @@ from simbridge.world.model import Material as M
 from simbridge.world.model import SurfaceClass as C
 from simbridge.world.raycast import HIT_TOP
 
-__all__ = ["CLASSES", "HAZARD_CLASSES", "IGNORE", "label_map", "site_clear"]
+__all__ = ["CLASSES", "CLASSES_WITH_CROP", "CROP", "HAZARD_CLASSES", "IGNORE", "label_map", "site_clear"]
 
 CLASSES = (
     "roof",  # 0 the top of a roof: flat or pitched, any material, paint included
@@ -32,6 +32,10 @@ CLASSES = (
     "ground",  # 10 sidewalks, plazas, piers, bare ground
 )
 IGNORE = 255
+# The classes of a model that also tells standing crops from grass (LandNet-E's second cell head,
+# landfall_train.cells_head): ``crop`` after the eleven, so the others keep their indices.
+CLASSES_WITH_CROP = (*CLASSES, "crop")
+CROP = len(CLASSES)  # 11
 # Classes whose presence on a site makes it no clear place to land.
 HAZARD_CLASSES = (1, 3, 4, 5, 9)
 CLEAR_ROOF_SHARE = 0.85  # site_clear: at least this share of the (non-sky) patch is roof surface ...
@@ -73,10 +77,15 @@ _MARKING = np.zeros(256, bool)
 _MARKING[[int(M.LANE_MARKING), int(M.ZEBRA)]] = True
 
 
-def label_map(hit_class: np.ndarray, hit_material: np.ndarray, hit_kind: np.ndarray) -> np.ndarray:
-    """(H, W) uint8 class index per pixel (``CLASSES``; ``IGNORE`` for sky) from a labelled render."""
+def label_map(
+    hit_class: np.ndarray, hit_material: np.ndarray, hit_kind: np.ndarray, crops: bool = False
+) -> np.ndarray:
+    """(H, W) uint8 class index per pixel (``CLASSES``; ``IGNORE`` for sky) from a labelled render;
+    ``crops``: standing crops are ``CROP`` (``CLASSES_WITH_CROP``) instead of ``low_vegetation``."""
     top = hit_kind == HIT_TOP
     out = np.where(top, _TOP[hit_class], _WALL[hit_class]).astype(np.uint8)
+    if crops:
+        out[top & (hit_class == int(C.CROP))] = CROP
     out[top & _MARKING[hit_material]] = 9
     out[hit_kind == LABEL_SKY] = IGNORE
     return np.asarray(out, np.uint8)

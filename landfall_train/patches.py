@@ -56,9 +56,11 @@ __all__ = [
     "MIN_CITY_SEED",
     "STRATA",
     "generate",
+    "generate_places",
     "generate_vignettes",
     "load_shards",
     "render_city",
+    "render_place",
     "render_vignettes",
 ]
 
@@ -75,6 +77,7 @@ WEATHER_P = (0.7, 0.15, 0.15)  # clear, fog, rain
 PALETTE_JITTER = 0.2
 VIGNETTE_GSD_M = (0.015, 0.15)  # metres per pixel over the vignettes (real close-ups: about 1-10 cm)
 VIGNETTE_SALT = 7_000_003  # separates a vignette's view stream from a city's of the same number
+PLACE_SALT = 7_000_019  # and a kind of place's
 VIGNETTES_PER_SHARD = 20
 VIEWS_PER_TIME = 25  # views rendered at one simulated time (actors stamped once)
 ACTOR_STEP_S = (5.0, 60.0)  # simulated time between two such sets of views (actors only move forward)
@@ -96,13 +99,23 @@ STRATA: tuple[tuple[str, float, tuple[int, ...]], ...] = (
     ("ground", 0.05, (C.SIDEWALK, C.GROUND, C.PIER, C.PARAPET)),
     ("vehicle", 0.04, (C.VEHICLE,)),
     ("person", 0.03, (C.PEDESTRIAN,)),
+    ("crop", 0.0, (C.CROP,)),  # no crops downtown: drawn in the kinds of place (PLACE_SHARES)
 )
+
+# The kinds of place (simbridge.world.places) are seen from close up to high above (a rank from 110 m, a
+# confirmation 40 m up: 0.2-0.6 m per pixel at the net's input), water and crops more often.
+PLACE_GSD_M = (0.05, 0.6)
+PLACE_SHARES = {
+    "roof_interior": 0.12, "flat_roof": 0.09, "clutter": 0.10, "pitched_roof": 0.08, "road": 0.10,
+    "marking": 0.04, "water": 0.14, "grass": 0.08, "tree": 0.05, "ground": 0.06, "vehicle": 0.04,
+    "person": 0.03, "crop": 0.07,
+}  # fmt: skip
 
 # Vignettes are mostly houses and roofs close up: their views lean to roofs (same strata, other shares).
 VIGNETTE_SHARES = {
     "roof_interior": 0.14, "flat_roof": 0.10, "clutter": 0.18, "pitched_roof": 0.18, "road": 0.07,
     "marking": 0.05, "water": 0.05, "grass": 0.05, "tree": 0.04, "ground": 0.07, "vehicle": 0.04,
-    "person": 0.03,
+    "person": 0.03, "crop": 0.0,
 }  # fmt: skip
 
 
@@ -149,8 +162,43 @@ def render_city(city_seed: int, count: int, seed: int) -> tuple[np.ndarray, np.n
         )
     rng = np.random.default_rng([seed, city_seed])
     world = generate_city(city_seed, CITY_SIZE_M, CITY_RES_M)
+    return _render_world(world, city_seed, count, rng, GSD_M)
+
+
+def render_place(place: str, place_seed: int, count: int, seed: int) -> tuple[
+    np.ndarray, np.ndarray, list[dict[str, Any]]
+]:  # fmt: skip
+    """``count`` labelled patches of the kind of place ``place`` built from ``place_seed``
+    (:func:`simbridge.world.places.generate_place`), seen at ``PLACE_GSD_M`` with ``PLACE_SHARES``'
+    strata; standing crops labelled ``crop`` (:data:`landfall_train.labels.CLASSES_WITH_CROP`). Returns
+    what :func:`render_city` returns.
+
+    Raises:
+        ValueError: a seed below ``MIN_CITY_SEED`` (reserved for evaluation), or an unknown kind.
+    """
+    from simbridge.world.places import generate_place
+
+    if place_seed < MIN_CITY_SEED:
+        raise ValueError(
+            f"place seed {place_seed} is reserved for evaluation: training uses >= {MIN_CITY_SEED}"
+        )
+    rng = np.random.default_rng([seed, place_seed, PLACE_SALT])
+    world = generate_place(place, place_seed)
+    return _render_world(world, place_seed, count, rng, PLACE_GSD_M, shares=PLACE_SHARES, crops=True)
+
+
+def _render_world(
+    world: Any,
+    actor_seed: int,
+    count: int,
+    rng: np.random.Generator,
+    gsd_range: tuple[float, float],
+    shares: dict[str, float] | None = None,
+    crops: bool = False,
+) -> tuple[np.ndarray, np.ndarray, list[dict[str, Any]]]:
+    """``count`` views of ``world`` under a sun of its own, its actors moving on between sets of views."""
     world.sun = Sun(float(rng.uniform(0.0, 360.0)), float(rng.uniform(*SUN_ELEVATION_DEG)))
-    live = LiveWorld(world, camera=CameraModel(PATCH_PX, PATCH_PX, 50.0), actor_seed=city_seed)
+    live = LiveWorld(world, camera=CameraModel(PATCH_PX, PATCH_PX, 50.0), actor_seed=actor_seed)
     out = _Patches(count)
     interior = _interior_m(live.grid)
     static = {
@@ -167,7 +215,8 @@ def render_city(city_seed: int, count: int, seed: int) -> tuple[np.ndarray, np.n
             cells = dict(static)
             cells["vehicle"] = _cells(live.grid, (C.VEHICLE,), "vehicle", rng, interior)
             cells["person"] = _cells(live.grid, (C.PEDESTRIAN,), "person", rng, interior)
-        out.add(k, _view(live, cells, interior, GSD_M, rng, variety=None), t_s)
+        view = _view(live, cells, interior, gsd_range, rng, variety=None, shares=shares, crops=crops)
+        out.add(k, view, t_s)
     return out.rgb, out.labels, out.meta
 
 
@@ -218,10 +267,12 @@ def _view(
     rng: np.random.Generator,
     variety: RenderVariety | None,
     shares: dict[str, float] | None = None,
+    crops: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
     """One labelled view: a stratum (``STRATA``, among those with cells), a cell of it near the middle,
     a ground resolution in ``gsd_range`` (log-uniform), a lens, a tilt, a heading, a weather and a
-    palette. ``interior``: :func:`_interior_m` of the world; ``shares`` replaces the strata's shares.
+    palette. ``interior``: :func:`_interior_m` of the world; ``shares`` replaces the strata's shares;
+    ``crops``: :func:`landfall_train.labels.label_map`'s.
     Returns (RGB, class map, metadata)."""
     grid = live.grid
     names = [n for n, _w, _c in STRATA]
@@ -261,18 +312,22 @@ def _view(
         "pos_ned_m": [round(v, 2) for v in pos],
         "yaw_rad": round(yaw, 4),
     }
-    return frame.rgb, label_map(frame.hit_class, frame.hit_material, frame.hit_kind), meta
+    return frame.rgb, label_map(frame.hit_class, frame.hit_material, frame.hit_kind, crops=crops), meta
 
 
 def _one_shard(args: tuple[Path, str, int, int, int, int]) -> str:
     out, kind, key, worlds, count, seed = args
     os.environ.setdefault("NUMBA_NUM_THREADS", "1")
     # a shard of fewer vignettes than a full one carries its count: asking for more later renders them
-    partial = kind != "city" and worlds != VIGNETTES_PER_SHARD
+    partial = kind == "vignettes" and worlds != VIGNETTES_PER_SHARD
     path = out / (f"shard-{key}-{worlds}.npz" if partial else f"shard-{key}.npz")
+    if kind.startswith("place:"):
+        path = out / f"shard-{kind[6:]}-{key}-{count}.npz"
     if not path.exists():
         if kind == "city":
             rgb, labels, meta = render_city(key, count, seed)
+        elif kind.startswith("place:"):
+            rgb, labels, meta = render_place(kind[6:], key, count, seed)
         else:
             rgb, labels, meta = render_vignettes(key, worlds, count, seed)
         tmp = path.with_suffix(".tmp.npz")
@@ -288,6 +343,18 @@ def generate(out: Path, city_seeds: Sequence[int], per_city: int, seed: int, wor
     if bad:
         raise ValueError(f"city seeds {bad} are reserved for evaluation: training uses >= {MIN_CITY_SEED}")
     return _run(out, [(out, "city", int(s), 1, per_city, seed) for s in city_seeds], workers)
+
+
+def generate_places(
+    out: Path, places: Sequence[str], seeds: Sequence[int], per_place: int, seed: int, workers: int = 1
+) -> list[Path]:
+    """Render ``per_place`` patches of each kind of place in ``places`` built from each of ``seeds``
+    (:func:`render_place`) into ``out`` (shards already there are kept), with ``workers`` processes."""
+    bad = [s for s in seeds if s < MIN_CITY_SEED]
+    if bad:
+        raise ValueError(f"place seeds {bad} are reserved for evaluation: training uses >= {MIN_CITY_SEED}")
+    jobs = [(out, f"place:{p}", int(s), 1, per_place, seed) for p in places for s in seeds]
+    return _run(out, jobs, workers)
 
 
 def generate_vignettes(

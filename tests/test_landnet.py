@@ -226,11 +226,15 @@ def test_landnet_ranks_read_with_rank_views(net: LandNet, monkeypatch: pytest.Mo
     read = LandNet.read
 
     def spy(
-        self: LandNet, rgb: np.ndarray, views: int | None = None, short_side: int | None = None
+        self: LandNet,
+        rgb: np.ndarray,
+        views: int | None = None,
+        short_side: int | None = None,
+        rank: bool = False,
     ) -> SceneReading:
         asked.append(views)
         sides.append(short_side)
-        return read(self, rgb, views, short_side)
+        return read(self, rgb, views, short_side, rank)
 
     monkeypatch.setattr(LandNet, "read", spy)
     judge = OnboardReasoner(judge="landnet", landnet=net)
@@ -366,6 +370,7 @@ def test_landnet_sidecar_format_names_the_outputs(tmp_path: Path) -> None:
     assert model_outputs({"format": "landfall-landnet/1"}) == OUTPUTS
     assert model_outputs({}) == OUTPUTS
     assert model_outputs({"format": "landfall-landnet/2", "outputs": {"bare": "..."}}) == (*OUTPUTS, "bare")
+    assert model_outputs({"rank_cells": {}}) == (*OUTPUTS, "cells_rank")  # LandNet-E's second cell head
     with pytest.raises(ValueError, match=r"names outputs\.bare"):
         model_outputs({"format": "landfall-landnet/2", "outputs": {}})
     with pytest.raises(ValueError, match="unknown model format 'landfall-landnet/9'"):
@@ -382,6 +387,11 @@ def test_landnet_sidecar_format_names_the_outputs(tmp_path: Path) -> None:
     meta["format"] = "landfall-landnet/9"
     onnx.with_suffix(".json").write_text(json.dumps(meta))
     with pytest.raises(LandNetError, match=r"m\.json: unreadable model sidecar: .*unknown model format"):
+        LandNet.load(onnx)
+    meta["format"] = "landfall-landnet/1"
+    meta["rank_cells"] = {"output": "cells_rank", "thresholds": {"roof": 0.5}}
+    onnx.with_suffix(".json").write_text(json.dumps(meta))
+    with pytest.raises(LandNetError, match=r"classes and rank_cells\.thresholds do not match"):
         LandNet.load(onnx)
 
 

@@ -1,7 +1,7 @@
 """The packaged LandNet-E (``onboard_model = "landnet-e"``): its files as landfall_train.package writes
-them (float16 weights behind casts, the whole read beside the net), both runtimes, and the judgement on
-simbridge's scenario1 with the LiDAR's geometry, as the flights use it. What it gets wrong on simbridge's
-renders without LiDAR (rendered water from 40 m up) is measured in docs/reasoning.md."""
+them (float16 weights behind casts, the whole read beside the net, the rank cells), both runtimes, and
+the judgement on simbridge's scenario1 with the LiDAR's geometry, as the flights use it, and from the
+image alone over the harbour's water, high up and in fog (what its first cell head got wrong)."""
 
 from __future__ import annotations
 
@@ -12,13 +12,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from companion.reasoning.base import ConfirmRequest, RankRequest
 from companion.reasoning.landnet import PACKAGED, LandNet
 from companion.reasoning.onboard import OnboardReasoner
 from simbridge.world.camera import Frame
 from simbridge.world.live import LiveWorld
 from tests.test_landnet import _cut_decision
 from tests.test_landnet_rank import RIVALS, rank_against_rival
-from tests.views import landnet_judge
+from tests.views import CLEAR_ROOF, LAUNCH, close_up, crop, ground_box, landnet_judge, render
 
 E = PACKAGED["landnet-e"]
 
@@ -106,3 +107,45 @@ def test_with_geometry_the_clear_roof_beats_every_rival(
     best, ranking, _transcript = rank_against_rival(judge, city, launch["clear"], rival, reverse)
     assert best == 0, ranking.rationale
     assert "[landnet-e]" in ranking.rationale.split(";")[0]
+
+
+HARBOUR = ((-25.0, 93.0), (5.0, 84.0))  # scenario1's water, at least 12 m from any quay or pier
+
+
+@pytest.mark.parametrize("height_m", [20.0, 40.0, 60.0])
+def test_without_lidar_a_close_up_over_the_water_is_refused(
+    judge: OnboardReasoner, city: LiveWorld, height_m: float
+) -> None:
+    """The whole close-up a confirmation sends, 20-60 m above the harbour, from the image alone, is
+    refused (by the water cells near the water, by the clear site higher up)."""
+    for ne in HARBOUR:
+        frame, _check = close_up(city, ne, -0.8, height_m)
+        d = judge.confirm_sync(ConfirmRequest(frame.rgb))
+        assert not d.accept, d.rationale
+
+
+def test_in_fog_from_the_launch_pose_the_image_alone_sees_the_water_and_ranks_the_roof_first(
+    judge: OnboardReasoner, city: LiveWorld
+) -> None:
+    """From 110 m in fog a crop of the harbour looks like a clear roof to the clear-site read; the rank
+    cells (the second head) see the water in it, so its hazard is the higher and the roof comes first."""
+    assert judge.landnet is not None
+    frame = render(city, LAUNCH, "fog")
+    roof = crop(frame, ground_box(city, LAUNCH, *CLEAR_ROOF))
+    assert judge.landnet.read_rank(roof).share("water") == 0.0
+    for n, e in HARBOUR:
+        water = crop(frame, ground_box(city, LAUNCH, (n - 10.0, n + 10.0), (e - 10.0, e + 10.0), -0.8))
+        reading = judge.landnet.read_rank(water)
+        assert reading.share("water") > 0.05, reading.observations()
+        for crops in ((roof, water), (water, roof)):
+            ranking = judge.rank_sync(RankRequest(crops))
+            assert crops[ranking.order[0]] is roof, ranking.rationale
+
+
+def test_the_rank_cells_read_held_out_water_from_high_up_better_and_left_the_first_head_alone() -> None:
+    meta = json.loads(E.with_suffix(".json").read_text())
+    rank = meta["rank_cells"]
+    figures = rank["figures"]
+    assert figures["after"]["high_up"]["water"]["ap"] > figures["before"]["high_up"]["water"]["ap"] + 0.2
+    assert rank["first_head_max_abs_diff"] == 0.0
+    assert [*rank["thresholds"]] == meta["classes"] == [*figures["after"]["all"]]

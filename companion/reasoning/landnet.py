@@ -51,7 +51,7 @@ import numpy as np
 from companion.reasoning.image_cues import check_rgb
 
 __all__ = [
-    "BACKENDS", "BARE", "DEFAULT_MODEL", "OUTPUTS", "PACKAGED", "VIEWS", "LandNet",
+    "BACKENDS", "BARE", "DEFAULT_MODEL", "OUTPUTS", "PACKAGED", "RANK_CELLS", "VIEWS", "LandNet",
     "LandNetError", "SceneReading", "average_views", "model_outputs", "model_path", "onnx_runner",
     "rank_hazard", "view_batch", "whole_batch",
 ]  # fmt: skip
@@ -60,6 +60,9 @@ _log = logging.getLogger(__name__)
 BACKENDS = ("auto", "onnxruntime", "opencv")
 Runner = Callable[[np.ndarray], tuple[np.ndarray, ...]]  # NCHW float32 -> the outputs' logits, in order
 OUTPUTS = ("cells", "clear")  # every model's outputs; a landfall-landnet/2 model adds BARE
+# a model whose sidecar has ``rank_cells`` adds a second cell output that ranks and the search's camera
+# read, from the search's height (LandNet-E's second cell head, landfall_train.cells_head)
+RANK_CELLS = "cells_rank"
 BARE = "bare"  # (N, 1, 1, 1) logit: nothing (no object, person, vehicle, water, marking) on the surface
 WHOLE = "whole"  # (N, 1) logit of a whole-image read (sidecar whole_read; landfall_train.whole_read)
 
@@ -82,6 +85,7 @@ RANK_BARE_CLEAR_WEIGHT = 0.25
 # hazard peak (the most likely object, person, vehicle, water or marking cell), chosen the same way.
 RANK_CLEAR_WEIGHT = 0.5
 COUNTED = ("object", "person", "vehicle")  # classes counted as separate groups of cells
+SAID_SHARE = 0.005  # the least share of another class a reading's words name
 _INPUT_KEYS = ("mean", "std", "multiple", "short_side_px", "max_long_side_px")
 VIEWS = (1, 2, 4)  # sidecar input.views: the image alone, with its left-right mirror, with all three
 _PLACES = (
@@ -190,10 +194,16 @@ class SceneReading:
             return f"{_WORDS[name]} ({self.count(name)}: {places})"
         return f"{_WORDS[name]} ({100 * self.share(name):.0f} %: {places})"
 
+    def _said(self, name: str) -> bool:
+        """Whether :meth:`observations` names a class: a counted one from one cell on, another from a
+        share that rounds to 1 % ("0 %" would say nothing)."""
+        share = self.share(name)
+        return share > 0.0 if name in COUNTED else share >= SAID_SHARE
+
     def observations(self, names: tuple[str, ...] | None = None) -> tuple[str, ...]:
         """Phrases naming what was seen, hazards first, then the roof surface and the net's confidence."""
         order = names or ("person", "vehicle", "object", "water", "marking", "tree", "low_vegetation", "road")
-        out = [self.phrase(n) for n in order if self.share(n) > 0.0]
+        out = [self.phrase(n) for n in order if self._said(n)]
         out.append(f"roof surface {100 * self.share('roof'):.0f} %")
         if self.whole_p is not None and self.net_clear_p is not None:
             out.append(
@@ -339,7 +349,15 @@ class LandNet:
         self.whole_std = np.array(whole_read["std"] if whole_read else inp["std"], np.float32)
         self.cell_thresholds = np.array([float(thresholds["cells"][c]) for c in self.classes], np.float32)
         hazards = meta["hazard_classes"]
-        self.has_bare = model_outputs(meta) == (*OUTPUTS, BARE)
+        outputs = model_outputs(meta)
+        self.has_bare = BARE in outputs
+        self._rank_out = outputs.index(RANK_CELLS) if RANK_CELLS in outputs else 0
+        rank_cells = meta.get("rank_cells")
+        self.rank_cell_thresholds = (
+            np.array([float(rank_cells["thresholds"][c]) for c in self.classes], np.float32)
+            if rank_cells
+            else self.cell_thresholds
+        )
         self._hazard_rows = np.array([k for k, c in enumerate(self.classes) if c in hazards], np.intp)
 
     @classmethod
@@ -362,6 +380,8 @@ class LandNet:
             classes, inp, thr = meta["classes"], meta["input"], meta["thresholds"]
             if not isinstance(classes, list) or not classes or set(thr["cells"]) != set(classes):
                 raise ValueError("classes and cell thresholds do not match")
+            if "rank_cells" in meta and set(meta["rank_cells"]["thresholds"]) != set(classes):
+                raise ValueError("classes and rank_cells.thresholds do not match")
             hazards = meta["hazard_classes"]
             if not isinstance(hazards, list) or not hazards or not set(hazards) <= set(classes):
                 raise ValueError(f"hazard_classes must be a non-empty list of the classes, got {hazards!r}")
@@ -407,17 +427,20 @@ class LandNet:
 
         return side(h), side(w)
 
-    def read(self, rgb: np.ndarray, views: int | None = None, short_side: int | None = None) -> SceneReading:
+    def read(
+        self, rgb: np.ndarray, views: int | None = None, short_side: int | None = None, rank: bool = False
+    ) -> SceneReading:
         """What the image shows (module docstring), read in ``views`` views (default: the sidecar's
         ``input.views``) with its shorter side scaled to ``short_side`` (default: ``short_side_px``;
-        confirmations pass ``confirm_short_side_px``; ranks read through :meth:`read_rank`).
+        confirmations pass ``confirm_short_side_px``; ranks read through :meth:`read_rank`); ``rank``:
+        the cells from the model's rank cells where it has them (``RANK_CELLS``).
 
         Raises:
             ValueError: not a non-empty (H, W, 3) uint8 numpy array.
         """
         img = check_rgb(rgb)
-        p, clear_p, out = self._infer(img, self.views if views is None else views, short_side)
-        present = p[0] >= self.cell_thresholds[:, None, None]
+        p, clear_p, out = self._infer(img, self.views if views is None else views, short_side, rank)
+        present = p[0] >= (self.rank_cell_thresholds if rank else self.cell_thresholds)[:, None, None]
         peak = float(p[0][self._hazard_rows].max())
         bare = float(_sigmoid(np.asarray(out[2]).reshape(-1)).mean()) if self.has_bare else None
         each = _sigmoid(np.asarray(out[1]).reshape(-1))
@@ -445,14 +468,14 @@ class LandNet:
 
     def read_rank(self, rgb: np.ndarray) -> SceneReading:
         """:meth:`read` as a rank reads each crop: ``rank_views`` views at ``rank_short_side_px``."""
-        return self.read(rgb, self.rank_views, self.rank_short_side_px)
+        return self.read(rgb, self.rank_views, self.rank_short_side_px, rank=True)
 
     def _infer(
-        self, img: np.ndarray, views: int, short_side: int | None = None
+        self, img: np.ndarray, views: int, short_side: int | None = None, rank: bool = False
     ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
         """One image (H, W, 3) uint8 scaled (:meth:`input_size`), normalised and run in ``views`` views:
-        the cells' probabilities (1, K, h, w) and the clear site's (1,), views averaged, and the raw
-        outputs."""
+        the cells' probabilities (1, K, h, w; ``rank``: the rank cells') and the clear site's (1,), views
+        averaged, and the raw outputs."""
         h, w = img.shape[:2]
         ih, iw = self.input_size(h, w, short_side)
         interp = cv2.INTER_AREA if ih * iw < h * w else cv2.INTER_LINEAR
@@ -460,7 +483,8 @@ class LandNet:
         blob = view_batch(((x - self.mean) / self.std).transpose(2, 0, 1), views)
         with self._lock:
             out = self._net(np.ascontiguousarray(blob, np.float32))
-        p, clear_p = average_views(_sigmoid(out[0]), _sigmoid(np.asarray(out[1]).reshape(-1)), views)
+        cells = out[self._rank_out] if rank else out[0]
+        p, clear_p = average_views(_sigmoid(cells), _sigmoid(np.asarray(out[1]).reshape(-1)), views)
         return p, clear_p, out
 
     def probabilities(self, rgb: np.ndarray, views: int = 1) -> np.ndarray:
@@ -475,13 +499,14 @@ class LandNet:
 
     def presence(self, rgb: np.ndarray, views: int = 1) -> np.ndarray:
         """Per class (sidecar order) and cell of 8 x 8 input pixels, whether it is present: (K, h, w)
-        bool, cell (r, c) covering rows ``r * H / h`` .. and columns ``c * W / w`` .. of the image.
+        bool, cell (r, c) covering rows ``r * H / h`` .. and columns ``c * W / w`` .. of the image. The
+        search reads its frames with it from its height, so from the rank cells where the model has them.
 
         Raises:
             ValueError: not a non-empty (H, W, 3) uint8 numpy array.
         """
-        p, _clear, _out = self._infer(check_rgb(rgb), views)
-        return np.asarray(p[0] >= self.cell_thresholds[:, None, None])
+        p, _clear, _out = self._infer(check_rgb(rgb), views, rank=True)
+        return np.asarray(p[0] >= self.rank_cell_thresholds[:, None, None])
 
     def _reading(
         self, size: tuple[int, int], present: np.ndarray, clear_p: float, peak: float, bare: float | None
@@ -548,12 +573,14 @@ def model_path(model: str | Path | None) -> Path:
 
 def model_outputs(meta: dict[str, Any]) -> tuple[str, ...]:
     """The outputs a model's sidecar promises: ``OUTPUTS`` (format ``landfall-landnet/1``), and ``BARE``
-    too (``landfall-landnet/2``). ValueError for another format, or a /2 sidecar without ``outputs.bare``."""
+    too (``landfall-landnet/2``), then ``RANK_CELLS`` where the sidecar has ``rank_cells``. ValueError for
+    another format, or a /2 sidecar without ``outputs.bare``."""
     fmt = meta.get("format", "landfall-landnet/1")
+    rank = (RANK_CELLS,) if "rank_cells" in meta else ()
     if fmt == "landfall-landnet/1":
-        return OUTPUTS
+        return (*OUTPUTS, *rank)
     if fmt == "landfall-landnet/2":
         if BARE not in meta.get("outputs", {}):
             raise ValueError("format landfall-landnet/2 names outputs.bare")
-        return (*OUTPUTS, BARE)
+        return (*OUTPUTS, BARE, *rank)
     raise ValueError(f"unknown model format {fmt!r} (landfall-landnet/1 or /2)")

@@ -289,5 +289,8 @@ def rank_readings(
 
 
 def _describe(r: SceneReading, threshold: float, limit: int) -> str:
+    """The rank's words for one reading: up to ``limit`` things seen, then the roof surface's share and
+    the net's confidence, which are always said."""
     head = "looks like a clear roof" if r.clear_p >= threshold else "not a clear roof"
-    return f"{head}, " + ", ".join(r.observations()[: limit + 2])
+    seen = r.observations()
+    return f"{head}, " + ", ".join([*seen[:-2][:limit], *seen[-2:]])
