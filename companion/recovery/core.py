@@ -4,6 +4,7 @@ its construction."""
 
 from __future__ import annotations
 
+import contextlib
 import enum
 import logging
 import math
@@ -14,7 +15,7 @@ from typing import Any, Protocol
 
 from companion.alarms import Alarm, Criticality
 from companion.config_schema import DEFAULTS, CompanionConfig
-from companion.control import VehicleController
+from companion.control import TargetTimeout, VehicleController
 from companion.faults import FaultHook
 from companion.perception.depth import DepthSource, LidarDepth
 from companion.perception.sources import make_source
@@ -28,6 +29,8 @@ SENSOR_RETRY_S = 1.0  # between two asks for a frame after one failed
 SITE_RETRIES = 2  # more frames asked for when a LiDAR sweep misses the site before judging it unmeasured
 PEOPLE_LOOK_AGAIN_S = 2.0  # wall seconds between two looks at people near a site, held where it is
 PEOPLE_WATCH_STEP_S = 1.0  # wall seconds between two looks at people near a site on the way down
+TRANSIT_CLEARANCE_M = 10.0  # a level move flies at least this far above every roof measured near it
+TRANSIT_NEAR_M = 100.0  # ... within this of where it starts or ends
 GO_AROUND_M = 15.0  # a final approach stopped for people climbs back this high above the site
 GO_AROUND_MIN_M = 2.0  # below this height above the site the final approach is not stopped any more
 QUIET_LOOKS = 2  # looks in a row without anyone before a site where people were seen is descended onto
@@ -221,6 +224,43 @@ class RecoveryContext:
         if fence is None or c.site_ned_m is None:
             return False
         return not fence.inside((c.site_ned_m[0], c.site_ned_m[1]), self.home_ne_m())
+
+    def transit_d(self, to_ned: tuple[float, float, float]) -> float:
+        """The height (NED down, metres) a level move from here to ``to_ned`` flies at: where the vehicle
+        is, or higher where that is less than ``TRANSIT_CLEARANCE_M`` above a surface the recovery
+        measured within ``TRANSIT_NEAR_M`` of either end (every roof in the ledger, the destination's
+        own). A descent stopped low among taller buildings must not fly on level into their walls."""
+        n, e, d = self.tm.state.pos_ned_m
+        ends = ((n, e), (to_ned[0], to_ned[1]))
+        near = [
+            s.ned_m[2]
+            for s in self.ledger.sites
+            if math.isfinite(s.ned_m[2])
+            and min(math.dist(s.ned_m[:2], end) for end in ends) <= TRANSIT_NEAR_M
+        ]
+        if math.isfinite(to_ned[2]):
+            near.append(to_ned[2])
+        if not near or not math.isfinite(d):
+            return d
+        return min(d, min(near) - TRANSIT_CLEARANCE_M)
+
+    async def climb_for_transit(self, to_ned: tuple[float, float, float]) -> float:
+        """Climb straight up to :meth:`transit_d` when it is above the vehicle (said and recorded, a
+        climb not finished in time goes on as the level move's own); the height to fly level at."""
+        n, e, d = self.tm.state.pos_ned_m
+        level = self.transit_d(to_ned)
+        if not level < d - 1.0:
+            return d
+        self.say(
+            5, f"climbing {d - level:.0f} m before flying on: {TRANSIT_CLEARANCE_M:.0f} m over the roofs near"
+        )
+        self.record.record_event("transit_climb", {"from_d_m": round(d, 2), "to_d_m": round(level, 2)})
+        with contextlib.suppress(TargetTimeout):
+            await self.ctl.goto(
+                n, e, level, tolerance_m=self.p.arrival_tolerance_m, speed_m_s=self.p.arrival_speed_m_s,
+                timeout_s=self.p.move_timeout(d - level),
+            )  # fmt: skip
+        return level
 
     def clock_s(self) -> float:
         """The autopilot's clock (seconds since its boot), so that a faster-than-real-time simulation

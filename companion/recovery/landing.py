@@ -101,12 +101,14 @@ class Lander:
         return site
 
     async def fly_over(self, site: LedgerSite, what: str, then: str = "landing here") -> bool:
-        """Fly over ``site`` at the current altitude; False (said, with what happens ``then``) when it
+        """Fly over ``site`` at the current altitude, or higher where roofs measured near stand above
+        it (:meth:`RecoveryContext.climb_for_transit`); False (said, with what happens ``then``) when it
         was not reached in time."""
         ctx = self.ctx
         n, e, _ = site.ned_m
-        n0, e0, d = ctx.tm.state.pos_ned_m
+        n0, e0, _d = ctx.tm.state.pos_ned_m
         try:
+            d = await ctx.climb_for_transit(site.ned_m)
             await ctx.ctl.goto(
                 n,
                 e,

@@ -521,6 +521,7 @@ class Recovery:
         ctx.fault.check("move", ctx.round)
         observing = asyncio.create_task(self.searcher.observed(), name="observe")  # once the setpoint is out
         try:
+            d = await ctx.climb_for_transit(target)
             await ctx.ctl.goto(
                 target[0],
                 target[1],

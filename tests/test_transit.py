@@ -1,0 +1,50 @@
+"""A level move after a descent stopped low among taller buildings: it climbs first to 10 m over every roof
+measured near its ends (RecoveryContext.transit_d, climb_for_transit), so that it cannot fly into a wall.
+City 0 launch 19 with LandNet-E's rank cells (2026-12-03): a site refused 35 m above the street, a closer
+look at another flown level at that height, into the side of a 42 m building."""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Any
+
+from companion.recovery.core import TRANSIT_CLEARANCE_M, TRANSIT_NEAR_M
+from companion.recovery.landing import Lander
+from companion.site_ledger import Hazard, LedgerSite
+from tests.recovery_fakes import Said, context
+
+
+def test_a_move_from_below_the_roofs_near_climbs_over_them_first() -> None:
+    ctx = context(pos_ned_m=(0.0, 0.0, -35.0))
+    ctx.ledger.add(
+        LedgerSite((20.0, 0.0, -42.0), Hazard.OBSTRUCTED, "a roof with HVAC", 3, False, 4.0, "site 0")
+    )
+    ctx.ledger.add(LedgerSite((60.0, 30.0, -17.0), Hazard.ACCEPTED, "a clear roof", 4, True, 7.0, "site 2"))
+    far = (TRANSIT_NEAR_M + 80.0, 0.0, -90.0)  # a tower far from both ends counts for nothing
+    ctx.ledger.add(LedgerSite(far, Hazard.OBSTRUCTED, "a tower", 2, False, 3.0, "site 5"))
+    assert ctx.transit_d((60.0, 30.0, -17.0)) == -42.0 - TRANSIT_CLEARANCE_M
+    level = asyncio.run(ctx.climb_for_transit((60.0, 30.0, -17.0)))
+    assert level == -52.0
+    assert ctx.ctl.gotos == [(0.0, 0.0, -52.0)]  # straight up, where it was
+    assert isinstance(ctx.announce, Said)
+    assert any("climbing 17 m before flying on" in t for t in ctx.announce.texts)
+    assert ctx.record.of("transit_climb") == [{"from_d_m": -35.0, "to_d_m": -52.0}]
+
+
+def test_a_move_already_high_enough_flies_level_at_once() -> None:
+    ctx = context(pos_ned_m=(0.0, 0.0, -110.0))
+    ctx.ledger.add(LedgerSite((20.0, 0.0, -42.0), Hazard.OBSTRUCTED, "a roof", 1, False, 4.0, "site 0"))
+    assert asyncio.run(ctx.climb_for_transit((40.0, 0.0, -22.0))) == -110.0
+    assert ctx.ctl.gotos == []
+
+
+def test_flying_over_the_least_bad_site_climbs_over_the_roofs_near_first() -> None:
+    ctx = context(pos_ned_m=(0.0, 0.0, -35.0))
+    roof = LedgerSite((20.0, 0.0, -42.0), Hazard.OBSTRUCTED, "a roof", 1, False, 4.0, "site 0")
+    site = LedgerSite((50.0, 0.0, -20.0), Hazard.DOUBTED, "a roof, doubted", 2, False, 6.0, "site 3")
+    ctx.ledger.add(roof)
+    ctx.ledger.add(site)
+    nothing: Any = None  # fly_over looks at nothing and follows nothing
+    lander = Lander(ctx, looker=nothing, follower=nothing)
+    assert asyncio.run(lander.fly_over(site, site.label))
+    assert ctx.ctl.gotos == [(0.0, 0.0, -52.0), (50.0, 0.0, -52.0)]
