@@ -29,8 +29,12 @@ cross-validation (docs/reasoning.md, "Reading a confirmation smaller"). :meth:`L
 renders by ``landfall_train.bare``; ranks weigh it), the hazard peak (the highest probability of an
 object, person, vehicle, water or marking in any cell), per class the share of the image's cells where it
 is present and where (a 3 x 3 compass: "upper left" ... "centre" ... "lower right"), and how many separate
-groups of cells hold objects, people or vehicles. One ``cv2.dnn.Net`` is not safe to call from two threads
-at once (the onboard tier runs in worker threads): a lock guards either runtime.
+groups of cells hold objects, people or vehicles. A model whose sidecar has ``rank_cells`` (LandNet-E's
+second cell head, learnt from every kind of place and from high up: ``landfall_train.cells_head``) gives
+a second cell output, ``cells_rank``, with thresholds of its own: ranks (:meth:`LandNet.read_rank`) and
+the search's reading of its frames (:meth:`LandNet.presence`) use it, confirmations the first. One
+``cv2.dnn.Net`` is not safe to call from two threads at once (the onboard tier runs in worker threads): a
+lock guards either runtime.
 """
 
 from __future__ import annotations
