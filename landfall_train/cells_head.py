@@ -48,7 +48,7 @@ from typing import Any
 
 import numpy as np
 
-from companion.reasoning.landnet import RANK_CELLS
+from companion.reasoning.landnet import RANK_CELLS, onnx_runner
 from landfall_train import patches
 from landfall_train.augment import augment, targets
 from landfall_train.labels import CLASSES, CROP
@@ -150,20 +150,12 @@ def feature_reader(model: Any, threads: int) -> Callable[[np.ndarray], tuple[np.
     return read
 
 
-def cell_head(first: dict[str, np.ndarray], classes: int) -> Any:
-    """A :class:`CellHead` started from the first head's weights; a class beyond the first head's
-    starts from ``low_vegetation``'s row."""
+def cell_head(first: dict[str, np.ndarray]) -> Any:
+    """A :class:`CellHead` started from the first head's weights."""
     import torch
 
-    head = CellHead(classes)
-    state = {k: torch.from_numpy(np.array(v)) for k, v in first.items()}
-    w, b = state["cells.weight"], state["cells.bias"]
-    extra = classes - w.shape[0]
-    if extra:
-        veg = CLASSES.index("low_vegetation")
-        state["cells.weight"] = torch.cat([w, w[veg : veg + 1].repeat(extra, 1, 1, 1)])
-        state["cells.bias"] = torch.cat([b, b[veg : veg + 1].repeat(extra)])
-    head.load_state_dict(state, strict=True)
+    head = CellHead(len(CLASSES))
+    head.load_state_dict({k: torch.from_numpy(np.array(v)) for k, v in first.items()}, strict=True)
     return head
 
 
@@ -296,20 +288,19 @@ def load(paths: Sequence[Path]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.
 
 
 def views(
-    x: np.ndarray, y: np.ndarray, n: int, seed: int, names: Sequence[str] = CLASSES
+    x: np.ndarray, y: np.ndarray, n: int, seed: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``n`` randomised views (patch ``k % len(x)``, each its own stream): images, cell targets over
-    ``names`` (standing crops, which the kinds of place label apart, are ``low_vegetation`` here as
+    ``CLASSES`` (standing crops, which the kinds of place label apart, are ``low_vegetation`` here as
     they were for the first head), cell validity, and which patch each came from."""
-    k = len(names)
+    k = len(CLASSES)
     imgs = np.empty((n, INPUT_PX, INPUT_PX, 3), np.uint8)
     cells = np.empty((n, k, INPUT_PX // 8, INPUT_PX // 8), np.uint8)
     valid = np.empty((n, INPUT_PX // 8, INPUT_PX // 8), np.uint8)
     src = np.arange(n) % len(x)
     for i in range(n):
         img, lab = augment(x[src[i]], y[src[i]], np.random.default_rng([seed, 77, i]), INPUT_PX)
-        if k == len(CLASSES):
-            lab[lab == CROP] = VEGETATION
+        lab[lab == CROP] = VEGETATION
         c, v, _ = targets(lab, classes=k)
         imgs[i], cells[i], valid[i] = img, c, v
     return imgs, cells, valid, src
@@ -345,8 +336,7 @@ def fit(
 
     torch.manual_seed(args.seed)
     torch.set_num_threads(args.threads)
-    names = CLASSES
-    pos = torch.tensor([POS_WEIGHT.get(c, 1.0) for c in names]).view(1, -1, 1, 1)
+    pos = torch.tensor([POS_WEIGHT.get(c, 1.0) for c in CLASSES]).view(1, -1, 1, 1)
     opt = torch.optim.AdamW(head.parameters(), lr=args.lr, weight_decay=1e-4)
     n = len(s8)
     steps = args.epochs * (n // args.batch)
@@ -366,7 +356,7 @@ def fit(
             bce = torch.nn.functional.binary_cross_entropy_with_logits(
                 logits, torch.from_numpy(cells[idx].astype(np.float32)), pos_weight=pos, reduction="none"
             )
-            loss = (bce * v).sum() / (v.sum() * len(names)).clamp(min=1.0)
+            loss = (bce * v).sum() / (v.sum() * len(CLASSES)).clamp(min=1.0)
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()
@@ -404,36 +394,25 @@ def figures(
     return out
 
 
-def onnx_cells(path: Path, threads: int, output: str = "cells") -> Callable[[np.ndarray], np.ndarray]:
-    """NHWC uint8 views to the model's ``output`` cell logits, read as the companion reads the file."""
-    import onnxruntime as ort
-
+def onnx_cells(path: Path, output: str = "cells") -> Callable[[np.ndarray], np.ndarray]:
+    """NHWC uint8 views to the model's ``output`` cell logits, read as the companion reads the file
+    (:func:`companion.reasoning.landnet.onnx_runner`)."""
     from landfall_train.effnet import IMAGENET_MEAN, IMAGENET_STD
     from landfall_train.train import normalised
 
-    options = ort.SessionOptions()
-    options.intra_op_num_threads = threads
-    options.inter_op_num_threads = 1
-    session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
-
-    def run(imgs: np.ndarray) -> np.ndarray:
-        out: np.ndarray = session.run([output], {"image": normalised(imgs, (IMAGENET_MEAN, IMAGENET_STD))})[0]
-        return out
-
-    return run
+    run, _backend = onnx_runner(path, "onnxruntime", (output,))
+    return lambda imgs: run(normalised(imgs, (IMAGENET_MEAN, IMAGENET_STD)))[0]
 
 
 def check_unchanged(a: Path, b: Path) -> float:
     """The largest difference between two models' ``cells`` and ``clear`` logits over random inputs at
     the sizes the companion reads (the second head must leave the first's outputs exactly as they were)."""
-    import onnxruntime as ort
-
     rng = np.random.default_rng(0)
-    sessions = [ort.InferenceSession(str(p), providers=["CPUExecutionProvider"]) for p in (a, b)]
+    runs = [onnx_runner(p, "onnxruntime", ("cells", "clear"))[0] for p in (a, b)]
     worst = 0.0
     for shape in ((1, 3, 128, 128), (4, 3, 96, 96), (1, 3, 144, 256)):
         x = rng.normal(0.0, 1.0, shape).astype(np.float32)
-        ra, rb = (s.run(["cells", "clear"], {"image": x}) for s in sessions)
+        ra, rb = (run(x) for run in runs)
         worst = max(worst, *(float(np.abs(u - v).max()) for u, v in zip(ra, rb, strict=True)))
     return worst
 
@@ -498,13 +477,12 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     base = without_rank_cells(unhalved(src_onnx))
     read = feature_reader(base, args.threads)
-    names = CLASSES
-    imgs, cells, valid, _src = views(train_x, train_y, args.views * len(train_x), args.seed, names)
+    imgs, cells, valid, _src = views(train_x, train_y, args.views * len(train_x), args.seed)
     del train_x, train_y
     s8, s16 = features(read, imgs)
     del imgs
-    k = len(names)
-    head = fit(cell_head(first_head(base), k), s8, s16, cells, valid, args)
+    k = len(CLASSES)
+    head = fit(cell_head(first_head(base)), s8, s16, cells, valid, args)
     del s8, s16
     train_s = time.monotonic() - t0 - render_s
     state = {name: t.detach().numpy() for name, t in head.state_dict().items()}
@@ -518,11 +496,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     if unchanged > 1e-5:
         raise RuntimeError(f"the second head moved the first head's outputs by {unchanged:.2e}")
 
-    vimgs, vcells, vvalid, vsrc = views(val_x, val_y, len(val_x), args.seed + 1, names)
+    vimgs, vcells, vvalid, vsrc = views(val_x, val_y, len(val_x), args.seed + 1)
     high = val_gsd[vsrc] >= HIGH_GSD_M
     place = val_place[vsrc]
-    before = cell_probabilities(onnx_cells(src_onnx, args.threads), vimgs)
-    after = cell_probabilities(onnx_cells(out_onnx, args.threads, RANK_CELLS), vimgs)
+    before = cell_probabilities(onnx_cells(src_onnx), vimgs)
+    after = cell_probabilities(onnx_cells(out_onnx, RANK_CELLS), vimgs)
     every = np.ones(len(vimgs), bool)
     report: dict[str, Any] = {
         "before": {
@@ -531,14 +509,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             "places": figures(before, vcells, vvalid, place, CLASSES),
         },
         "after": {
-            "all": figures(after, vcells, vvalid, every, names),
-            "high_up": figures(after, vcells, vvalid, high, names),
-            "places": figures(after, vcells, vvalid, place, names),
+            "all": figures(after, vcells, vvalid, every, CLASSES),
+            "high_up": figures(after, vcells, vvalid, high, CLASSES),
+            "places": figures(after, vcells, vvalid, place, CLASSES),
         },
         "views": {"all": int(every.sum()), "high_up": int(high.sum()), "places": int(place.sum())},
     }
     thresholds = {name: f["threshold"] for name, f in report["after"]["all"].items()}
-    missing = [c for c in names if c not in thresholds]
+    missing = [c for c in CLASSES if c not in thresholds]
     if missing:
         raise RuntimeError(f"no validation view holds {missing}: render more validation patches")
     meta = {k: v for k, v in meta.items() if k != "rank_cells"}

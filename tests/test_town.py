@@ -19,6 +19,7 @@ from simbridge.world.places import generate_place
 from simbridge.world.town import District, TownPlan, generate_town, plan_town
 from simbridge.world.town_roads import CARRIAGEWAY_M, SIDEWALK_M, Seam, seam_band_mask
 from simbridge.world.world import Lane, SafeZone, Walkway, Wire, World
+from tests.test_suburb import _samples
 
 SMALL_M = 600.0
 ON_ROAD = (SurfaceClass.ROAD, SurfaceClass.CROSSWALK)
@@ -38,15 +39,6 @@ def town() -> World:
 @pytest.fixture(scope="module")
 def plan() -> TownPlan:
     return plan_town(0)
-
-
-def _samples(points: tuple[tuple[float, float], ...], step_m: float = 1.0) -> np.ndarray:
-    """(k, 2) points every ``step_m`` metres along a polyline."""
-    out = []
-    for (n1, e1), (n2, e2) in itertools.pairwise(points):
-        f = np.linspace(0.0, 1.0, max(2, math.ceil(math.hypot(n2 - n1, e2 - e1) / step_m) + 1))
-        out.append(np.stack([n1 + f * (n2 - n1), e1 + f * (e2 - e1)], axis=1))
-    return np.concatenate(out)
 
 
 def _classes(world: World, pts: np.ndarray) -> np.ndarray:
