@@ -152,12 +152,12 @@ def _descent_on_fakes(
     by one (then no one); ``settle`` stands in for the follower's. Returns it and the looks taken."""
     from companion.perception.site_check import SiteCheck
     from companion.reasoning.base import Decision
-    from companion.recovery import Recovery, machine
+    from companion.recovery import Recovery, machine, watching
     from tests.recovery_fakes import FakeReasoner, context, frame
 
     for module in (machine, looking_module):
         monkeypatch.setattr(module, "PEOPLE_LOOK_AGAIN_S", 0.0)
-    monkeypatch.setattr(machine, "PEOPLE_WATCH_STEP_S", 0.0)
+    monkeypatch.setattr(watching, "PEOPLE_WATCH_STEP_S", 0.0)
     here = (0.0, 0.0, -height_m)
     ctx = context(frame(pos_ned_m=here, rangefinder_m=height_m), pos_ned_m=here)
     rec = Recovery(
@@ -276,7 +276,7 @@ def test_a_person_coming_near_during_the_final_approach_stops_it_and_the_vehicle
     autopilot's landing begins; a look during it sees a person 5 m away: the companion takes the
     vehicle back where it is and climbs to GO_AROUND_M above the site (said, recorded "go-around"), the
     next looks hold until two see no one, and the second approach lands."""
-    from companion.recovery import machine
+    from companion.recovery import watching
 
     async def settle(target: Any) -> Any:
         return target
@@ -307,7 +307,7 @@ def test_a_person_coming_near_during_the_final_approach_stops_it_and_the_vehicle
     assert asyncio.run(rec._confirm_and_descend((4.0, 2.0, 0.0), ground)) is True
     assert approaches == ["started", "stopped", "started"]
     assert engaged == [(0.0, 0.0, -4.0)]  # taken back where it was
-    assert ctx.ctl.gotos == [(0.0, 0.0, -machine.GO_AROUND_M)]  # and up above the site
+    assert ctx.ctl.gotos == [(0.0, 0.0, -watching.GO_AROUND_M)]  # and up above the site
     assert watched[: len(looks)] == looks  # (the second approach may take a look more as it lands)
     assert [f["action"] for k, f in ctx.record.events if k == "people_watch"] == ["go-around", "hold"]
     said = "Landfall: site 0: a person 5 m from the site (within 10 m): landing stopped, back up to 15 m"

@@ -274,7 +274,7 @@ def test_recovery_parts_share_its_context_and_the_package_docstring_lists_them()
     doc = companion.recovery.__doc__ or ""
     listed = dict(re.findall(r"^- ``(\w+)``: :class:`~([\w.]+)`", doc, re.MULTILINE))
     assert listed == owned
-    assert set(owned) == {"looker", "follower", "lander", "searcher"}
+    assert set(owned) == {"looker", "follower", "lander", "searcher", "watch", "handover"}
     named = set(re.findall(r":(?:mod|class):`~(companion\.recovery\.\w+)", doc))
     package = Path(companion.recovery.__file__).parent
     assert named == {f"companion.recovery.{p.stem}" for p in package.glob("*.py") if p.stem != "__init__"}

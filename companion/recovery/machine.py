@@ -12,8 +12,9 @@ defect of the companion's own (any unexpected exception) never leaves the vehicl
 commander: it is announced, recorded with its traceback, and the vehicle lands
 (:meth:`Recovery._fail_safe`).
 
-The machine decides; its parts (:mod:`companion.recovery` lists them) look, follow the site, land and
-search, each on the context they share.
+The machine decides; its parts (:mod:`companion.recovery` lists them) look, follow the site, land,
+search, watch for people on the way down and take the autopilot's failsafes and a lost link, each on
+the context they share.
 """
 
 from __future__ import annotations
@@ -25,14 +26,12 @@ import logging
 import math
 import time
 import traceback
-from collections.abc import Callable, Coroutine
+from collections.abc import Callable
 from typing import Any, TypeVar
 
 from companion.alarms import Alarm, Criticality
 from companion.control import (
-    MAV_STATE_CRITICAL,
     AutopilotFailsafe,
-    CommandRefused,
     ControlError,
     OperatorTakeover,
     TargetTimeout,
@@ -46,17 +45,12 @@ from companion.guidance.frames import PinholeCamera, compass_point
 from companion.perception.site_check import check_site
 from companion.perception.surface_id import Candidate
 from companion.reasoning.base import Reasoner
-from companion.reasoning.people_watch import PeopleSeen
 from companion.recovery.core import (
     GO_AROUND_M,
-    GO_AROUND_MIN_M,
-    MAX_REENGAGE,
     PEOPLE_LOOK_AGAIN_S,
-    PEOPLE_WATCH_STEP_S,
     QUIET_LOOKS,
     SEVERITY_CRITICAL,
     FrameSource,
-    FrameUnavailable,
     NoRecord,
     Outcome,
     Record,
@@ -67,10 +61,12 @@ from companion.recovery.core import (
     State,
 )
 from companion.recovery.following import SiteFollower
+from companion.recovery.handover import Handover
 from companion.recovery.landing import Lander
 from companion.recovery.looking import Looker, lidar_silent, onboard_tier
 from companion.recovery.search_plan import SearchPlanner
 from companion.recovery.searching import Searcher
+from companion.recovery.watching import PeopleWatch
 from companion.telemetry import TelemetryCache
 
 TAKEOVER_TEXTS_S = 5.0  # the autopilot's texts this recent go with a takeover into the record
@@ -82,7 +78,8 @@ class Recovery:
     """One recovery, from the alarm to the ground (module docstring): the state machine. It owns its
     parts, each built on the context they share (:class:`RecoveryContext`) and given the parts it
     calls: ``looker`` (:class:`Looker`), ``follower`` (:class:`SiteFollower`), ``lander``
-    (:class:`Lander`) and ``searcher`` (:class:`Searcher`)."""
+    (:class:`Lander`), ``searcher`` (:class:`Searcher`), ``watch`` (:class:`PeopleWatch`) and
+    ``handover`` (:class:`Handover`)."""
 
     def __init__(
         self,
@@ -117,7 +114,8 @@ class Recovery:
         self.follower = SiteFollower(ctx)
         self.lander = Lander(ctx, looker=self.looker, follower=self.follower)
         self.searcher = Searcher(ctx, plan=plan, lander=self.lander, onboard=onboard)
-        self._reengaged = 0  # re-engagements after the autopilot's own failsafe (MAX_REENGAGE)
+        self.watch = PeopleWatch(ctx, looker=self.looker, follower=self.follower, lander=self.lander)
+        self.handover = Handover(ctx)
         # the site a descent is on, confirmed again first when a lost link comes back
         self._descending: tuple[tuple[float, float, float], Candidate] | None = None
         self.extra = 0  # rounds flown past the budget (nothing acceptable seen)
@@ -139,12 +137,12 @@ class Recovery:
         ctx.say(5, f"alarm '{ctx.alarm.reason}' ({ctx.criticality.name.lower()}), {ctx.budget} rounds")
         self.searcher.start()
         try:
-            held = self._failsafe_in_charge()
+            held = self.handover.in_charge()
             if held is not None:  # an alarm after the autopilot's own failsafe took the vehicle
                 self.ctx.record.record_event(
                     "autopilot_failsafe", {"round": 0, "state": "idle", "mode": held}
                 )
-                return await self._leave_to_autopilot(held)
+                return await self.handover.leave_to_autopilot(held)
             await self._engage_and_look()
             resume: tuple[tuple[float, float, float], Candidate] | None = None
             while resume is not None or self.searcher.go_on():
@@ -160,13 +158,13 @@ class Recovery:
                     resume = None
                 except AutopilotFailsafe as exc:
                     resume = None
-                    ended = await self._on_failsafe(exc)
+                    ended = await self.handover.on_failsafe(exc)
                     if ended is not None:
                         return ended
                     continue
                 except TelemetryLost as exc:
                     resume = self._descending
-                    ended = await self._ride_out_link_loss(exc)
+                    ended = await self.handover.ride_out_link_loss(exc)
                     if ended is not None:
                         return ended
                     continue
@@ -271,134 +269,6 @@ class Recovery:
         from afar are sites to land at)."""
         await self.searcher.observed_or_said()
         return await self.lander.land_at_best(reason, measure_here=measure_here)
-
-    def _failsafe_in_charge(self) -> str | None:
-        """The mode of an autopilot failsafe that lands or flies home and has the vehicle now
-        (system status critical): the companion does not take the vehicle from it."""
-        s = self.ctx.tm.state
-        if s.system_status != MAV_STATE_CRITICAL:
-            return None
-        return self.ctx.ctl.flavour.lands_or_returns(s.custom_mode)
-
-    async def _on_failsafe(self, exc: AutopilotFailsafe) -> Outcome | None:
-        """Policy for the autopilot leaving the companion's mode in a failsafe of its own. A failsafe
-        may clear by itself (PX4's offboard-loss fallback, once setpoints flow again) or hold before it
-        acts (PX4 holds for ``COM_BAT_ACT_T`` / ``COM_FAIL_ACT_T`` before its battery or other action,
-        and a command in that time is a user takeover that cancels it). So first, for
-        ``failsafe_grace_s``, the companion streams a hold where the vehicle is and commands no mode.
-        Back in the companion's mode meanwhile: the recovery goes on (None). Then in a mode that lands
-        or flies home (a battery, GPS, geofence or link failsafe), or already down: the autopilot keeps
-        the vehicle (:meth:`_leave_to_autopilot`). Still holding (PX4's POSCTL or AUTO.LOITER,
-        ArduPilot's LOITER or BRAKE): re-engaged from where it is (:meth:`_reengage`)."""
-        ctx = self.ctx
-        flavour = ctx.ctl.flavour
-        seen = flavour.mode_name(exc.custom_mode)
-        fields = {"round": ctx.round, "state": ctx.state.value, "mode": seen}
-        ctx.record.record_event("autopilot_failsafe", fields)
-        ctx.say(4, f"autopilot failsafe: {seen}; waiting {ctx.p.failsafe_grace_s:g} s for it to clear")
-        if await ctx.ctl.ride_out_failsafe(ctx.p.failsafe_grace_s):
-            ctx.record.record_event("autopilot_failsafe_cleared", fields)
-            ctx.say(5, f"the autopilot's failsafe cleared ({seen} -> back to the companion): going on")
-            return None
-        now = ctx.tm.state
-        mode = flavour.lands_or_returns(now.custom_mode)
-        if now.on_ground and mode is None:
-            # down already (an autopilot may leave its landing mode as it disarms): the landing mode
-            # it came down in, if the grace period saw one
-            landed_in = [m for m in map(flavour.lands_or_returns, ctx.ctl.failsafe_modes) if m is not None]
-            mode = landed_in[-1] if landed_in else seen
-        if mode is not None:
-            return await self._leave_to_autopilot(mode)
-        try:
-            await self._reengage(AutopilotFailsafe(now.custom_mode))
-        except CommandRefused as refused:
-            # the companion's mode cannot run (no position estimate: PX4 refuses OFFBOARD and holds in
-            # ALTCTL, drifting, for as long as the battery lasts): the least bad is the autopilot's own
-            # landing where the vehicle is
-            return await self._land_in_place(flavour.mode_name(now.custom_mode), refused)
-        return None
-
-    async def _land_in_place(self, holding: str, refused: CommandRefused) -> Outcome:
-        """The autopilot's failsafe holds and will not give the companion its mode back: ask for the
-        autopilot's land mode where the vehicle is and watch it down (``land_timeout_s``); refused
-        too, the autopilot keeps the vehicle (:meth:`_leave_to_autopilot`)."""
-        ctx = self.ctx
-        ctx.set_state(State.LAND)
-        ctx.say(
-            SEVERITY_CRITICAL,
-            f"autopilot failsafe holds in {holding} and refuses the companion's mode ({refused}): "
-            "asking it to land where it is",
-        )
-        ctx.record.record_event(
-            "land_in_place", {"round": ctx.round, "holding": holding, "why": str(refused)}
-        )
-        try:
-            await ctx.ctl.land(ctx.p.land_timeout_s)
-        except CommandRefused as again:
-            # refused too (real PX4 takes no AUTO.LAND without a position; its own blind descent is
-            # what is left): the autopilot keeps the vehicle, watched down
-            ctx.say(4, f"land mode refused as well ({again})")
-            return await self._leave_to_autopilot(holding)
-        ctx.set_state(State.LANDED)
-        return Outcome(State.LANDED, ctx.round, None, f"landed where it was: the autopilot held in {holding}")
-
-    async def _leave_to_autopilot(self, mode: str) -> Outcome:
-        """The autopilot's failsafe keeps the vehicle: the companion stops its setpoint stream, says so
-        (critical) and never takes the vehicle back. A landing (or a return home, which ends in one)
-        is watched to the ground for ``land_timeout_s`` so that the record ends with it."""
-        ctx = self.ctx
-        await ctx.ctl.release()
-        ctx.set_state(State.ABORTED)
-        ctx.say(SEVERITY_CRITICAL, f"autopilot failsafe: {mode}; the autopilot keeps control")
-        ctx.record.record_event("released", {"round": ctx.round, "to": mode})
-        if await ctx.ctl.wait_on_ground(ctx.p.land_timeout_s):
-            ctx.set_state(State.LANDED)
-            return Outcome(State.LANDED, ctx.round, None, f"the autopilot's failsafe landed it ({mode})")
-        return Outcome(State.ABORTED, ctx.round, None, f"the autopilot's failsafe has it ({mode})")
-
-    async def _reengage(self, exc: AutopilotFailsafe) -> None:
-        """Policy: the autopilot's own failsafe (e.g. a lost setpoint stream) is re-engaged from where
-        the vehicle is, ``MAX_REENGAGE`` times at most; then the autopilot keeps control."""
-        self._reengaged += 1
-        if self._reengaged > MAX_REENGAGE:
-            raise ControlError(f"{exc}; not re-engaging again") from exc
-        self.ctx.say(4, f"{exc}: re-engaging")
-        await self.ctx.ctl.engage()
-
-    async def _ride_out_link_loss(self, exc: TelemetryLost) -> Outcome | None:
-        """Policy for a lost MAVLink link: keep streaming the last setpoint and wait up to
-        ``link_loss_s`` for telemetry. Meanwhile the autopilot holds (PX4's offboard-loss failsafe
-        after COM_OF_LOSS_T; ArduPilot's GUIDED keeps the last target). When the link returns: a
-        vehicle that came down meanwhile ends the recovery; a failsafe that holds is re-engaged from
-        where the vehicle is, one that lands or returns keeps the vehicle; someone else's mode is a
-        takeover. Then an interrupted descent goes on at the
-        same site, confirmed again first; otherwise the next round starts. No telemetry within
-        ``link_loss_s``: the companion stops commanding and leaves the vehicle to the autopilot."""
-        ctx = self.ctx
-        ctx.record.record_event("link_lost", {"round": ctx.round, "state": ctx.state.value})
-        ctx.say(3, f"link to the autopilot lost ({exc}): holding, waiting {ctx.p.link_loss_s:.0f} s")
-        try:
-            silent_s = await ctx.ctl.await_link(ctx.p.link_loss_s)
-        except TelemetryLost as lost:
-            raise ControlError(f"{lost}: leaving the vehicle to the autopilot") from lost
-        except AutopilotFailsafe as failsafe:  # heartbeats without positions: the estimator lost them
-            ctx.say(4, "the autopilot is heard but sends no position: its estimator has none")
-            return await self._on_failsafe(failsafe)
-        s = ctx.tm.state
-        ctx.record.record_event(
-            "link_restored",
-            {"round": ctx.round, "silent_s": round(silent_s, 2), "custom_mode": s.custom_mode},
-        )
-        ctx.say(5, f"link back after {silent_s:.1f} s")
-        if s.on_ground:
-            ctx.set_state(State.LANDED)
-            ctx.say(4, "the vehicle came down while the link was lost")
-            return Outcome(State.LANDED, ctx.round, None, "landed by the autopilot during a link loss")
-        try:
-            ctx.ctl.check_interruption()
-        except AutopilotFailsafe as failsafe:
-            return await self._on_failsafe(failsafe)
-        return None
 
     async def _engage_and_look(self) -> None:
         """Take control and ask for the first round's frame at the same time: the frame (render,
@@ -537,96 +407,6 @@ class Recovery:
             await observing
         return await self._confirm_and_descend(target, choice)
 
-    async def _while_watching(
-        self,
-        work: Coroutine[Any, Any, T],
-        target: tuple[float, float, float],
-        *,
-        name: str,
-        floor_m: float = 0.0,
-    ) -> tuple[T | None, PeopleSeen | None]:
-        """``work`` (a descent step, the final approach) with the people watch running through it:
-        every ``PEOPLE_WATCH_STEP_S`` a frame of its own and a look within ``people_margin_m`` of the site
-        (:meth:`Looker.watch_people`), while the vehicle is more than ``floor_m`` above the site.
-        Someone seen ends ``work`` there (cancelled). Returns its result and None, or None and what was
-        seen."""
-        task = asyncio.create_task(work, name=name)
-        watch = asyncio.create_task(self._watch_through(target, floor_m), name=f"people-watch-{name}")
-        try:
-            await asyncio.wait((task, watch), return_when=asyncio.FIRST_COMPLETED)
-            if task.done():
-                return task.result(), None
-            return None, watch.result()  # a watch that failed raises here: a defect, as anywhere else
-        finally:
-            for t in (task, watch):
-                t.cancel()
-            await asyncio.gather(task, watch, return_exceptions=True)
-
-    async def _watched_step(
-        self, target: tuple[float, float, float], down_m: float, timeout_s: float
-    ) -> tuple[tuple[float, float, float], PeopleSeen | None]:
-        """A descent step onto a site off the roofs (:meth:`Follower.goto_following`) watched for people
-        (:meth:`_while_watching`); someone seen stops it where the vehicle is (the position target's
-        height becomes the vehicle's). Returns the target as it ended and what was seen (None: the
-        step ran to its end)."""
-        ctx = self.ctx
-        step = self.follower.goto_following(target, down_m, timeout_s=timeout_s)
-        moved, seen = await self._while_watching(step, target, name="descent-step")
-        if seen is None:
-            assert moved is not None
-            return moved, None
-        here = ctx.tm.state.pos_ned_m
-        held = ctx.ctl.target
-        n, e = (held[0], held[1]) if held is not None else (here[0], here[1])
-        ctx.ctl.set_target(n, e, here[2])  # no lower: the vehicle stops where it is
-        return (n, e, target[2]), seen
-
-    async def _watched_landing(self, target: tuple[float, float, float]) -> PeopleSeen | None:
-        """The final approach onto a site off the roofs (:meth:`Lander.land`) watched for people down
-        to ``GO_AROUND_MIN_M`` above it; someone seen stops the landing: the companion takes the vehicle
-        back from the autopilot's land mode where it is and climbs to ``GO_AROUND_M`` above the site,
-        from where the look before the next step sees the whole margin. Returns what was seen (None:
-        landed)."""
-        ctx = self.ctx
-        _landed, seen = await self._while_watching(
-            self.lander.land(), target, name="final-approach", floor_m=GO_AROUND_MIN_M
-        )
-        if seen is None:
-            return None
-        await ctx.ctl.engage()  # holds where the vehicle is, in the companion's mode again
-        n, e, _d = ctx.tm.state.pos_ned_m
-        ctx.set_state(State.DESCEND)
-        with contextlib.suppress(TargetTimeout):  # wherever the climb got to, the next look is from there
-            await ctx.ctl.goto(
-                n,
-                e,
-                target[2] - GO_AROUND_M,
-                tolerance_m=ctx.p.arrival_tolerance_m,
-                speed_m_s=ctx.p.arrival_speed_m_s,
-                timeout_s=ctx.p.move_timeout_s,
-            )
-        return seen
-
-    async def _watch_through(self, target: tuple[float, float, float], floor_m: float) -> PeopleSeen:
-        """Looks for people near the site until someone is seen (frames missing are skipped); the site
-        where the position target has it (the follower may move it), at ``target``'s height. Below
-        ``floor_m`` above the site it looks no more (and waits to be cancelled)."""
-        ctx = self.ctx
-        while True:
-            await asyncio.sleep(PEOPLE_WATCH_STEP_S)
-            if target[2] - ctx.tm.state.pos_ned_m[2] < floor_m:
-                continue  # too low to turn back: the landing goes on
-            held = ctx.ctl.target
-            site = (held[0], held[1], target[2]) if held is not None else target
-            try:
-                frame = await ctx.frames()
-            except FrameUnavailable as exc:
-                ctx.log.debug("no look for people on the way down: %s", exc)
-                continue
-            seen = await self.looker.watch_people(frame, site)
-            if seen is not None and seen.cells:
-                return seen
-
     async def _confirm_and_descend(self, target: tuple[float, float, float], choice: Candidate) -> bool:
         ctx = self.ctx
         self._descending = (target, choice)  # what a link loss resumes: this site, confirmed again
@@ -687,7 +467,7 @@ class Recovery:
             if height_m <= ctx.p.final_land_m:
                 if choice.elevated or ctx.p.people_margin_m <= 0:
                     return await self.lander.land()
-                seen = await self._watched_landing(target)
+                seen = await self.watch.landing(target)
                 if seen is None:
                     return True
                 now = ctx.clock_s()
@@ -707,7 +487,7 @@ class Recovery:
                 if choice.elevated or ctx.p.people_margin_m <= 0:
                     target = await self.follower.goto_following(target, new_d, timeout_s=timeout_s)
                 else:  # off the roofs: the people watch goes on through the step
-                    target, seen = await self._watched_step(target, new_d, timeout_s)
+                    target, seen = await self.watch.step(target, new_d, timeout_s)
             except TargetTimeout as exc:
                 ctx.say(4, f"descent target not reached ({exc.error_m:.1f} m off): next round")
                 return False
