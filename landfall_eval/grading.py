@@ -6,8 +6,9 @@ event (``simbridge/world/grader.py`` on the world grid at touchdown time).
 **Surface classes** (``SURFACES``): simbridge's own class names, with one refinement: a touchdown on a
 clear flat roof that the grader failed for an object within the rotor-clearance disc (clutter, a
 parapet, a person, a vehicle, a tree, a rail or any object taller than 0.3 m) is ``rooftop_obstructed``,
-which is what the study counted as a "cluttered roof". An episode that never touched down is
-``no_landing``.
+which is what the study counted as a "cluttered roof". A flight into a building's wall (or anything
+standing taller than the vehicle flew) is ``collision``: simbridge ends the episode with the wreck's
+touchdown, unsafe. An episode that never touched down is ``no_landing``.
 
 **Kinematic lower bound**: the shortest time in which the vehicle could have gone from where it was
 when the companion took control to where it touched down, at its limits (simbridge's ``ControlLimits``:
@@ -52,6 +53,7 @@ SURFACES = (
     "machinery",
     "crops",
     "outside",
+    "collision",
     "no_landing",
 )
 PERSON_MARGIN_M = 10.0  # the grader's person rule (simbridge GraderConfig.person_m)

@@ -11,7 +11,7 @@ import contextlib
 import math
 import os
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import jsbsim
@@ -28,6 +28,8 @@ CONTACT_MARGIN_M = 0.15  # the gear springs bounce the CG ~7 cm above rest on a 
 MOTOR_COUNT = 4
 CONTACT_DT_S = 1.0 / 240.0  # the longest JSBSim step while a gear leg touches
 _ESC_PROPS = ("fcs/cmdFR_ext_nd", "fcs/cmdAL_ext_nd", "fcs/cmdFL_ext_nd", "fcs/cmdAR_ext_nd")
+WALL_STEP_M = 1.0  # the ground under the vehicle rising more than this in one step is a wall, not a slope
+G_M_S2 = 9.80665
 
 
 @dataclass(frozen=True, slots=True)
@@ -48,6 +50,26 @@ class VehicleState:
     def height_agl_m(self) -> float:
         """Height of the CG above the ground directly under it."""
         return -self.pos_ned_m[2] - self.ground_height_m
+
+
+@dataclass(frozen=True, slots=True)
+class Collision:
+    """The vehicle flew into something standing above it (a building's wall, a tree's crown): where
+    and how fast it was going as the ground under it jumped from ``ground_before_m`` to ``struck_up_m``
+    (heights up positive), at simulated time ``t_s``."""
+
+    t_s: float
+    pos_ned_m: Vec3
+    speed_m_s: float
+    ground_before_m: float
+    struck_up_m: float
+
+    def said(self) -> str:
+        """In words, for the grade's reasons."""
+        return (
+            f"collision: flew into a structure {self.struck_up_m - self.ground_before_m:.0f} m tall "
+            f"at {self.speed_m_s:.1f} m/s, {-self.pos_ned_m[2] - self.ground_before_m:.1f} m above the ground"
+        )
 
 
 @contextlib.contextmanager
@@ -123,7 +145,12 @@ class F450Physics:
         self._ground_height_m = 0.0
         self._t0_s = 0.0
         self._last_pos: Vec3 = (0.0, 0.0, 0.0)
+        self._prev_pos: Vec3 = (0.0, 0.0, 0.0)  # a step before _last_pos
         self._contact = True
+        # after a collision the airframe is a wreck at the foot of what it struck: JSBSim is stepped
+        # no more (its ground reaction inside a wall blows up), the wreck's clock runs on
+        self.collision: Collision | None = None
+        self._wreck: VehicleState | None = None
         fdm["fcs/ScasEngage"] = 0.0
         self.reset((0.0, 0.0, -GEAR_HEIGHT_M), 0.0)
 
@@ -153,7 +180,9 @@ class F450Physics:
             fdm.run_ic()
         fdm["propulsion/set-running"] = -1
         self._t0_s = self._sim_time.get_double_value()
-        self._last_pos = (n, e, d)
+        self._last_pos = self._prev_pos = (n, e, d)
+        self.collision = None
+        self._wreck = None
 
     def set_dt(self, dt_s: float) -> None:
         """Step length from now on (``DT_S`` unless an external autopilot sets its own rate)."""
@@ -165,6 +194,8 @@ class F450Physics:
     def specific_force_frd(self) -> Vec3:
         """What an accelerometer at the CG reads, body FRD, m/s^2: every force but gravity over the
         mass (at rest on the gear, (0, 0, -g))."""
+        if self._wreck is not None:
+            return (0.0, 0.0, -G_M_S2)
         fx, fy, fz, mass_slugs = (read() for read in self._force_reads)
         k = LBF_N / (mass_slugs * _SLUG_KG)
         return (fx * k, fy * k, fz * k)
@@ -177,8 +208,14 @@ class F450Physics:
             w = self.wind.step(self.dt_s)
             for node, v in zip(self._wind, w, strict=True):
                 node.set_double_value(v / FT_M)
+        if self._wreck is not None:
+            self._wreck = replace(self._wreck, t_s=self._wreck.t_s + self.dt_s)
+            return
         pos = self._last_pos  # the ground under the vehicle at the start of the step
         ground = self.terrain.height_m(pos[0], pos[1])
+        if ground - self._ground_height_m > WALL_STEP_M and ground > -pos[2] - GEAR_HEIGHT_M:
+            self._crash(ground)
+            return
         if ground != self._ground_height_m:
             self._ground_height_m = ground
             self._terrain_ft.set_double_value((self.origin.alt_m + ground) / FT_M)
@@ -193,14 +230,37 @@ class F450Physics:
         else:
             self._fdm.run()
 
+    def _crash(self, struck_up_m: float) -> None:
+        """The ground under the vehicle rose above it in one step (:data:`WALL_STEP_M`): it flew into
+        a wall. Recorded as :attr:`collision`; the wreck rests where the vehicle was a step before,
+        on the ground it flew over, motors stopped."""
+        n, e, _d = self._prev_pos
+        s = self.state()
+        before = self._ground_height_m
+        self.collision = Collision(s.t_s, s.pos_ned_m, math.hypot(*s.vel_ned_m_s), before, struck_up_m)
+        yaw = s.euler_rad[2]
+        self._wreck = VehicleState(
+            t_s=s.t_s + self.dt_s,  # this step's time passes
+            pos_ned_m=(n, e, -(before + GEAR_HEIGHT_M)),
+            vel_ned_m_s=(0.0, 0.0, 0.0),
+            quat=euler_to_quat(0.0, 0.0, yaw),
+            euler_rad=(0.0, 0.0, yaw),
+            rates_frd_rad_s=(0.0, 0.0, 0.0),
+            ground_height_m=before,
+            on_ground=True,
+            thrust_n=0.0,
+        )
+
     def state(self) -> VehicleState:
         """Read the truth state after the last step."""
+        if self._wreck is not None:
+            return self._wreck
         v = [read() for read in self._state_reads]
         w0, w1 = self._wow_at
         lat, lon, alt, roll, pitch, psi, vn, ve, vd, p, q, r, t = v[:w0]
         pos = self.origin.to_ned(lat, lon, alt)
         yaw = wrap_pi(psi)
-        self._last_pos = pos
+        self._prev_pos, self._last_pos = self._last_pos, pos
         self._contact = max(v[w0:w1]) > 0.5  # a gear leg's weight on wheels
         return VehicleState(
             t_s=t - self._t0_s,

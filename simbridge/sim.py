@@ -26,6 +26,7 @@ from simbridge.geo import GeoOrigin
 from simbridge.physics import GEAR_HEIGHT_M
 from simbridge.scenarios import Scenario, load_scenario
 from simbridge.telemetry import Telemetry
+from simbridge.terrain import TouchdownGrade
 from simbridge.vehicle import Vehicle
 from simbridge.wind import WindConfig, WindModel
 from simbridge.world.places import PLACES
@@ -159,6 +160,8 @@ class SimBridge:
         self._people = getattr(self.scenario.terrain, "nearest_person_m", None)
         self._nearest_low_m: float | None = None
         self._next_person_t_s = 0.0
+        # a collision (the vehicle flew into a wall) is seen and said once: its touchdown ends the episode
+        self._crash_seen = self._crash_said = False
         self.episode.event(
             0.0,
             "start",
@@ -270,7 +273,14 @@ class SimBridge:
 
     def _on_event(self, name: str, fields: dict[str, Any]) -> None:
         s = self.vehicle.state
-        if name == "touchdown":
+        collision = self.vehicle.physics.collision
+        if name == "touchdown" and collision is not None:
+            if self._crash_said:
+                return  # the wreck's touchdown was the collision's, said once
+            self._crash_said = True
+            grade = TouchdownGrade("collision", False, (collision.said(),))
+            fields = {**fields, "surface": grade.surface, "safe": grade.safe, "reasons": list(grade.reasons)}
+        elif name == "touchdown":
             grade = self.scenario.terrain.grade_touchdown(s.pos_ned_m[0], s.pos_ned_m[1], s.t_s)
             fields = {**fields, "surface": grade.surface, "safe": grade.safe, "reasons": list(grade.reasons)}
             if self._people is not None:
@@ -280,6 +290,23 @@ class SimBridge:
                 fields["nearest_person_last_10m_m"] = None if low is None else round(low, 2)
         self.episode.event(s.t_s, name, fields)
         self.log.info("t=%.2f %s %s", s.t_s, name, fields)
+
+    def _crashed(self, s: Any) -> None:
+        """The vehicle flew into a wall (:class:`simbridge.physics.Collision`): a ``collision`` event
+        with where, how fast and what it struck, then the wreck's touchdown, graded unsafe with the
+        surface ``collision``; the episode ends there as any touchdown ends it."""
+        c = self.vehicle.physics.collision
+        assert c is not None
+        self._on_event(
+            "collision",
+            {
+                "pos_ned_m": [round(v, 3) for v in c.pos_ned_m],
+                "speed_m_s": round(c.speed_m_s, 2),
+                "struck_up_m": round(c.struck_up_m, 2),
+                "ground_up_m": round(c.ground_before_m, 2),
+            },
+        )
+        self._on_event("touchdown", {"pos_ned_m": [round(v, 3) for v in s.pos_ned_m], "collision": True})
 
     def _on_text(self, severity: int, text: str) -> None:
         self.log.info("STATUSTEXT[%d] %s", severity, text)
@@ -291,6 +318,10 @@ class SimBridge:
         ap = self.autopilot
         sp = ap.tick(self.vehicle.state)
         s = self.vehicle.step(sp, ap.armed)
+        if self.vehicle.physics.collision is not None and not self._crash_seen:
+            self._crash_seen = True
+            self._crashed(s)
+            ap.crash()
         if self._people is not None and s.t_s >= self._next_person_t_s:
             self._watch_people(s.pos_ned_m, s.t_s, ap.armed)
         for msg in self.telemetry.due(s.t_s):

@@ -182,7 +182,10 @@ class FirmwareBridge(SimBridge):
             self.episode.state(
                 s, v.mode, v.armed, v.landed_state, 100 * self.vehicle.battery.remaining_fraction
             )
-        if self.touchdown.update(s):
+        if self.vehicle.physics.collision is not None and not self._crash_seen:
+            self._crash_seen = True  # the firmware's own crash check decides about its motors
+            self._call(self._crashed, s)
+        elif self.touchdown.update(s):
             self._call(self._on_event, "touchdown", {"pos_ned_m": [round(c, 3) for c in s.pos_ned_m]})
         fault = self.gps_fault
         if fault is not None and self.ready.is_set():

@@ -79,6 +79,14 @@ DATA_STREAMS: dict[int, tuple[int, ...]] = {
 DATA_STREAMS[0] = tuple(m for ids in DATA_STREAMS.values() for m in ids)  # MAV_DATA_STREAM_ALL
 
 
+def _cm_s(v_m_s: float) -> int:
+    """A velocity in the int16 cm/s of GLOBAL_POSITION_INT, held to its range (a tumbling airframe,
+    an estimate gone wild): a message out of range cannot be packed and would end the telemetry."""
+    if not math.isfinite(v_m_s):
+        return 0
+    return max(-32767, min(32767, int(v_m_s * 100)))
+
+
 def rangefinder_m(autopilot: Autopilot) -> float:
     """Downward rangefinder reading: distance along body +z to the first surface of the world."""
     s = autopilot.vehicle.state
@@ -291,9 +299,9 @@ class Telemetry:
             lon,
             alt_mm,
             round(alt_mm - home_alt_m * 1000),
-            int(vn * 100),
-            int(ve * 100),
-            int(vd * 100),
+            _cm_s(vn),
+            _cm_s(ve),
+            _cm_s(vd),
             hdg,
         )
 

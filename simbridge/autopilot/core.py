@@ -247,6 +247,13 @@ class Autopilot:
         self._set_mode(spec, s)
         return ACCEPTED
 
+    def crash(self) -> None:
+        """The airframe struck something (the simulator says so): the motors stop, as ArduCopter's
+        crash check and PX4's failure detector disarm a vehicle that has crashed."""
+        if self.armed:
+            self._emit_text(SEV_CRITICAL, "Crash: Disarming" if not self._px4 else "Critical: crash detected")
+            self._disarm("crash")
+
     def takeoff(self, alt_m: float | None) -> CommandOutcome:
         """NAV_TAKEOFF; ``alt_m`` is relative to the ground under the vehicle (NaN/None: default)."""
         if alt_m is not None and not (math.isfinite(alt_m) and 0.5 <= alt_m <= self.tun.fence_alt_m):
