@@ -2,7 +2,7 @@
 its own object store and CPUs, started as separate processes on this machine (ray.cluster_utils, as
 ``ray start --head`` and ``ray start --address`` start them on several machines). A worker node dies
 while an episode flies on it, then the driver is killed outright: no episode is lost or counted twice,
-and ``--resume`` finishes the campaign."""
+and ``--resume`` finishes the campaign, with the verdicts a local campaign gives these episodes."""
 
 from __future__ import annotations
 
@@ -120,10 +120,12 @@ def test_a_node_and_then_the_driver_killed_lose_no_episode_and_count_none_twice(
         assert sorted(e["id"] for e in episodes) == IDS  # each once: none lost, none twice
         for e in first:  # kept as they were
             assert [x for x in episodes if x["id"] == e["id"]] == [e]
-        for e in episodes:
+        for e in episodes:  # the verdicts the local executor gives these episodes (tests/test_bench.py)
             assert e["outcome"] == "landed", (e["id"], e["error"])
             assert e["safe"], (e["id"], e["reasons"])
             assert e["surface"] == "rooftop_clear", e["id"]
+            assert (out / "episodes" / e["id"] / "episode.jsonl").exists()
+        assert json.loads(results.read_text())["config"]["executor"] == "ray"
         assert doomed_id in IDS
     finally:
         cluster.shutdown()
