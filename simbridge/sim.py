@@ -122,6 +122,32 @@ class SimConfig:
             raise ValueError(f"--weather must be clear, fog or rain, got {self.weather!r}")
 
 
+HOME_STEP_M = 5.0  # home's search from a launch over water: rings this far apart, points this far apart
+HOME_SEARCH_M = 600.0  # and out to this far
+
+
+def home_on_land(terrain: Any, north_m: float, east_m: float) -> tuple[float, float]:
+    """Where the vehicle took off (home): the ground under the launch point, unless that is water. A
+    multirotor takes off from land: one launched over a lake or the sea flew out from the shore, so its
+    home is the nearest point, in rings ``HOME_STEP_M`` apart out to ``HOME_SEARCH_M``, on open ground, a
+    lawn, a car park or a pier where a touchdown would grade safe (the operator's take-off spot, clear of
+    people then). A world without a grid, or no such point, keeps the launch point."""
+    from simbridge.world.model import SurfaceClass
+
+    grid = getattr(terrain, "grid", None)
+    if grid is None or grid.class_at(north_m, east_m) != SurfaceClass.WATER:
+        return north_m, east_m
+    land = (SurfaceClass.GROUND, SurfaceClass.GRASS, SurfaceClass.PARKING_LOT, SurfaceClass.PIER)
+    for r in np.arange(HOME_STEP_M, HOME_SEARCH_M, HOME_STEP_M):
+        k = max(8, math.ceil(2.0 * math.pi * r / HOME_STEP_M))
+        for a in np.linspace(0.0, 2.0 * math.pi, k, endpoint=False):
+            n, e = north_m + r * math.cos(a), east_m + r * math.sin(a)
+            on_land = grid.index(n, e) is not None and grid.class_at(n, e) in land
+            if on_land and terrain.grade_touchdown(n, e, 0.0).safe:
+                return float(n), float(e)
+    return north_m, east_m
+
+
 class SimBridge:
     """Build with a config, then ``await run()``; ``stop()`` ends it cleanly."""
 
@@ -147,7 +173,8 @@ class SimBridge:
         sc = self.scenario
         n, e = sc.launch_ne_m
         ground = sc.terrain.height_m(n, e)
-        self.home_ned_m = (n, e, -ground)
+        hn, he = home_on_land(sc.terrain, n, e)
+        self.home_ned_m = (hn, he, -sc.terrain.height_m(hn, he))
         if config.start == "air":
             self.vehicle.reset((n, e, -(ground + sc.launch_height_m)), sc.launch_yaw_rad)
         else:

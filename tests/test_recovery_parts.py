@@ -182,6 +182,30 @@ def test_lander_flies_to_the_least_bad_site_when_nothing_was_accepted() -> None:
     assert ctx.state is State.LANDED
 
 
+def test_over_water_with_only_water_measured_the_lander_flies_home_and_lands_there() -> None:
+    """Water under the vehicle and water 40 m off, home (where it took off) 200 m away: it lands at
+    home, not on the water; without a home, on the water here as before; with home itself measured as
+    water, not there either."""
+    ctx = context(pos_ned_m=(0.0, 0.0, -60.0))
+    ctx.ledger.add(LedgerSite((0.0, 0.0, 0.0), Hazard.WATER, "water", 1, True, label="here"))
+    ctx.ledger.add(LedgerSite((40.0, 0.0, 0.0), Hazard.WATER, "water", 1, False, label="site 0"))
+    lander = _parts(ctx)[2]
+    assert lander.fallback_site() is not None
+    assert lander.fallback_site().label == "here"  # type: ignore[union-attr]  # no home heard: as before
+    ctx.tm.state.home_ned_m = (-120.0, 160.0, 2.0)
+    outcome = asyncio.run(lander.land_at_best("search ended (window)", measure_here=False))
+    assert outcome == Outcome(State.LANDED, 0, (-120.0, 160.0, 2.0), "search ended (window)")
+    assert _ctl(ctx).gotos == [(-120.0, 160.0, -60.0)]
+    (event,) = _record(ctx).of("fallback_site")
+    assert event["chosen"]["label"] == "home"
+    assert "landing at home (unknown: where the vehicle took off)" in " ".join(_said(ctx))
+    ctx.tm.state.pos_ned_m = (0.0, 0.0, -60.0)  # back over the water
+    ctx.ledger.add(LedgerSite((-118.0, 161.0, 2.0), Hazard.WATER, "water", 2, True, label="site 3"))
+    assert lander.fallback_site().label == "here"  # type: ignore[union-attr]
+    ctx.ledger.sites[-1] = LedgerSite((-118.0, 161.0, 2.0), Hazard.OFF_ROOF, "lawn", 2, True, label="site 3")
+    assert lander.fallback_site().label == "site 3"  # type: ignore[union-attr]  # measured land first
+
+
 def test_lander_fallback_is_the_accepted_site_before_any_ledger_site() -> None:
     ctx = context()
     ctx.ledger.add(LedgerSite((0.0, 5.0, 0.0), Hazard.DOUBTED, "a bit rough", 1, True))

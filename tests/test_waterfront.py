@@ -189,3 +189,30 @@ def test_the_camera_over_the_launch_point_sees_water_and_land(live: LiveWorld) -
 def test_places_names_it() -> None:
     assert "waterfront" in PLACES
     assert generate_place("waterfront", 1).name == "waterfront"
+
+
+def test_a_launch_over_the_water_took_off_from_the_shore(live: LiveWorld) -> None:
+    """Home is where the vehicle took off: over the water, the nearest point on land where a touchdown
+    grades safe (simbridge.sim.home_on_land); over land, the ground under the launch point."""
+    from simbridge.sim import HOME_STEP_M, home_on_land
+
+    g = live.grid
+    i, j = _cells(live.world, SurfaceClass.WATER, 30.0)[0]
+    n, e = _centre(live.world, int(i), int(j))
+    hn, he = home_on_land(live, n, e)
+    assert g.class_at(hn, he) in (
+        SurfaceClass.GROUND,
+        SurfaceClass.GRASS,
+        SurfaceClass.PARKING_LOT,
+        SurfaceClass.PIER,
+    )
+    assert live.grade_touchdown(hn, he, 0.0).safe
+    far = float(np.hypot(hn - n, he - e))
+    assert far >= 30.0  # off the water, which reaches 30 m every way
+    # nearest: no ring nearer than the one it came from holds such a point on the 8 compass points
+    for r in np.arange(HOME_STEP_M, far - HOME_STEP_M, HOME_STEP_M):
+        for a in np.linspace(0.0, 2 * np.pi, 8, endpoint=False):
+            p = (n + r * np.cos(a), e + r * np.sin(a))
+            assert not (g.class_at(*p) == SurfaceClass.GRASS and live.grade_touchdown(*p, 0.0).safe)
+    i, j = _cells(live.world, SurfaceClass.ROOF_FLAT, 5.0)[0]
+    assert home_on_land(live, *_centre(live.world, int(i), int(j))) == _centre(live.world, int(i), int(j))

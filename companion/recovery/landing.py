@@ -96,9 +96,28 @@ class Lander:
             )
         n, e, _ = ctx.tm.state.pos_ned_m
         site = ctx.ledger.least_bad((n, e))
+        if site is not None and site.hazard > Hazard.UNKNOWN:
+            home = self.home_site((n, e))
+            if home is not None:
+                return home  # where it took off beats the water or the traffic lane measured
         if site is not None and site.hazard > Hazard.UNKNOWN and not ctx.ledger.near((n, e)):
             return None  # only water or traffic measured, and not here: unknown beats known bad
         return site
+
+    def home_site(self, here_ne_m: tuple[float, float]) -> LedgerSite | None:
+        """Home (the autopilot's HOME_POSITION, where the vehicle took off) as a site of last resort:
+        it was land enough to take off from, so it beats the water or the traffic lane that is the
+        least bad measured (with nothing measured at all the vehicle lands where it is). None when
+        home is not known, is here already (within the ledger's ``same_site_m``), or was itself
+        measured as water or traffic."""
+        ctx = self.ctx
+        home = ctx.tm.state.home_ned_m
+        if home is None or math.dist(home[:2], here_ne_m) < ctx.ledger.same_site_m:
+            return None
+        there = ctx.ledger.near((home[0], home[1]))
+        if there is not None and there.hazard > Hazard.UNKNOWN:
+            return None
+        return LedgerSite(home, Hazard.UNKNOWN, "where the vehicle took off", ctx.round, False, label="home")
 
     async def fly_over(self, site: LedgerSite, what: str, then: str = "landing here") -> bool:
         """Fly over ``site`` at the current altitude, or higher where roofs measured near stand above
