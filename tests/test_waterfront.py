@@ -197,7 +197,8 @@ def test_a_launch_over_the_water_took_off_from_the_shore(live: LiveWorld) -> Non
     from simbridge.sim import HOME_STEP_M, home_on_land
 
     g = live.grid
-    i, j = _cells(live.world, SurfaceClass.WATER, 30.0)[0]
+    wet = _cells(live.world, SurfaceClass.WATER, 30.0)
+    i, j = wet[np.argmin(np.hypot(*(wet - np.array(g.shape) / 2).T))]  # the water nearest the middle
     n, e = _centre(live.world, int(i), int(j))
     hn, he = home_on_land(live, n, e)
     assert g.class_at(hn, he) in (
@@ -209,10 +210,14 @@ def test_a_launch_over_the_water_took_off_from_the_shore(live: LiveWorld) -> Non
     assert live.grade_touchdown(hn, he, 0.0).safe
     far = float(np.hypot(hn - n, he - e))
     assert far >= 30.0  # off the water, which reaches 30 m every way
+    n0, n1, e0, e1 = g.extent_m
+    assert min(hn - n0, n1 - hn, he - e0, e1 - he) >= far + 20.0  # --fence map's circle holds the launch
     # nearest: no ring nearer than the one it came from holds such a point on the 8 compass points
     for r in np.arange(HOME_STEP_M, far - HOME_STEP_M, HOME_STEP_M):
         for a in np.linspace(0.0, 2 * np.pi, 8, endpoint=False):
             p = (n + r * np.cos(a), e + r * np.sin(a))
-            assert not (g.class_at(*p) == SurfaceClass.GRASS and live.grade_touchdown(*p, 0.0).safe)
+            room = min(p[0] - n0, n1 - p[0], p[1] - e0, e1 - p[1]) - r
+            grass = g.class_at(*p) == SurfaceClass.GRASS and live.grade_touchdown(*p, 0.0).safe
+            assert not (grass and room >= 20.0)
     i, j = _cells(live.world, SurfaceClass.ROOF_FLAT, 5.0)[0]
     assert home_on_land(live, *_centre(live.world, int(i), int(j))) == _centre(live.world, int(i), int(j))
