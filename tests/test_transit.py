@@ -10,6 +10,7 @@ from typing import Any
 
 from companion.recovery.core import TRANSIT_CLEARANCE_M, TRANSIT_NEAR_M
 from companion.recovery.landing import Lander
+from companion.recovery.searching import Searcher
 from companion.site_ledger import Hazard, LedgerSite
 from tests.recovery_fakes import Said, context
 
@@ -48,3 +49,37 @@ def test_flying_over_the_least_bad_site_climbs_over_the_roofs_near_first() -> No
     lander = Lander(ctx, looker=nothing, follower=nothing)
     assert asyncio.run(lander.fly_over(site, site.label))
     assert ctx.ctl.gotos == [(0.0, 0.0, -52.0), (50.0, 0.0, -52.0)]
+
+
+def _leg_to(ctx: Any, target: tuple[float, float, float]) -> list[tuple[float, float, float]]:
+    """A search leg to ``target`` flown on the fakes (the planner's choice given): the gotos."""
+    from companion.reasoning.onboard import OnboardReasoner
+    from companion.recovery.search_plan import Leg, SearchPlanner
+
+    nothing: Any = None
+    plan = SearchPlanner(ctx.criticality)
+    searcher = Searcher(
+        ctx, plan=plan, lander=Lander(ctx, looker=nothing, follower=nothing), onboard=OnboardReasoner()
+    )
+    leg = Leg(target, "new ground", "a test's leg", 100.0, 90.0)
+    plan.next_leg = lambda *args: leg  # type: ignore[method-assign]
+    asyncio.run(searcher.leg())
+    return list(ctx.ctl.gotos)
+
+
+def test_a_search_leg_from_below_the_roofs_near_climbs_over_them_first() -> None:
+    """A leg flown level from 35 m after a refused descent, with a 42 m roof measured 20 m away: straight
+    up to 10 m over it, across at that height, then down to the leg's own height."""
+    ctx = context(pos_ned_m=(0.0, 0.0, -35.0))
+    ctx.ledger.add(LedgerSite((20.0, 0.0, -42.0), Hazard.OBSTRUCTED, "a roof", 1, False, 4.0, "site 0"))
+    assert _leg_to(ctx, (0.0, 100.0, -30.0)) == [(0.0, 0.0, -52.0), (0.0, 100.0, -52.0), (0.0, 100.0, -30.0)]
+    assert ctx.record.of("transit_climb") == [{"from_d_m": -35.0, "to_d_m": -52.0}]
+
+
+def test_a_search_leg_with_no_roof_near_climbs_or_descends_as_before() -> None:
+    """Nothing measured near: a leg that goes higher climbs first, one that goes lower descends last."""
+    ctx = context(pos_ned_m=(0.0, 0.0, -35.0))
+    assert _leg_to(ctx, (0.0, 100.0, -60.0)) == [(0.0, 0.0, -60.0), (0.0, 100.0, -60.0)]
+    ctx = context(pos_ned_m=(0.0, 0.0, -60.0))
+    assert _leg_to(ctx, (0.0, 100.0, -35.0)) == [(0.0, 100.0, -60.0), (0.0, 100.0, -35.0)]
+    assert ctx.record.of("transit_climb") == []

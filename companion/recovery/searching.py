@@ -15,7 +15,7 @@ from companion.alarms import Criticality
 from companion.control import TargetTimeout
 from companion.perception.surface_id import Candidate
 from companion.reasoning.onboard import OnboardReasoner
-from companion.recovery.core import RecoveryContext, State
+from companion.recovery.core import TRANSIT_CLEARANCE_M, RecoveryContext, State
 from companion.recovery.landing import Lander
 from companion.recovery.search_plan import Leg, SearchPlanner, Verdict
 from companion.site_ledger import Hazard, LedgerSite
@@ -173,7 +173,9 @@ class Searcher:
 
     async def leg(self) -> Leg:
         """Fly the planner's next leg (:meth:`SearchPlanner.next_leg`): climb first when the leg goes
-        higher, descend last when it goes lower, so the level part flies at the safer height. Said,
+        higher, or when roofs measured near either end stand within ``TRANSIT_CLEARANCE_M`` of the
+        level part (:meth:`RecoveryContext.transit_d`), descend last when it goes lower, so the level
+        part flies at the safer height. Said,
         recorded (``search_leg``) and shown on the ground feed. The last frame goes into the search's
         map first (:meth:`_observed`): the leg is planned on it."""
         ctx = self.ctx
@@ -198,7 +200,19 @@ class Searcher:
                 **leg.to_json(),
             },
         )
-        steps = [(n, e, td), (tn, te, td)] if td < d - 3.0 else [(tn, te, d), (tn, te, td)]
+        # the level part at the higher of here and the leg's end, higher still where that is less than
+        # TRANSIT_CLEARANCE_M over a roof measured near either end (RecoveryContext.transit_d)
+        level = min(d, td, ctx.transit_d((tn, te, math.nan)))
+        if level < min(d, td) - 1.0:
+            ctx.say(
+                5,
+                f"climbing {d - level:.0f} m before the leg: {TRANSIT_CLEARANCE_M:.0f} m over the roofs near",
+            )
+            ctx.record.record_event("transit_climb", {"from_d_m": round(d, 2), "to_d_m": round(level, 2)})
+        steps = [(n, e, level)] if level < d - 3.0 else []
+        steps.append((tn, te, level))
+        if td > level + 3.0:  # descend last
+            steps.append((tn, te, td))
         try:
             for sn, se, sd in steps:
                 with contextlib.suppress(TargetTimeout):
