@@ -193,8 +193,8 @@ def test_places_names_it() -> None:
 
 def test_a_launch_over_the_water_took_off_from_the_shore(live: LiveWorld) -> None:
     """Home is where the vehicle took off: over the water, the nearest point on land where a touchdown
-    grades safe (simbridge.sim.home_on_land); over land, the ground under the launch point."""
-    from simbridge.sim import HOME_STEP_M, home_on_land
+    grades safe (simbridge.home.home_on_land); over land, the ground under the launch point."""
+    from simbridge.home import HOME_STEP_M, home_on_land
 
     g = live.grid
     wet = _cells(live.world, SurfaceClass.WATER, 30.0)
