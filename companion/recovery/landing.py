@@ -96,20 +96,20 @@ class Lander:
             )
         n, e, _ = ctx.tm.state.pos_ned_m
         site = ctx.ledger.least_bad((n, e))
-        if site is not None and site.hazard > Hazard.UNKNOWN:
+        if site is not None and site.hazard >= Hazard.WATER:
             home = self.home_site((n, e))
             if home is not None:
-                return home  # where it took off beats the water or the traffic lane measured
+                return home  # where it took off beats ditching
         if site is not None and site.hazard > Hazard.UNKNOWN and not ctx.ledger.near((n, e)):
             return None  # only water or traffic measured, and not here: unknown beats known bad
         return site
 
     def home_site(self, here_ne_m: tuple[float, float]) -> LedgerSite | None:
         """Home (the autopilot's HOME_POSITION, where the vehicle took off) as a site of last resort:
-        it was land enough to take off from, so it beats the water or the traffic lane that is the
-        least bad measured (with nothing measured at all the vehicle lands where it is). None when
-        home is not known, is here already (within the ledger's ``same_site_m``), or was itself
-        measured as water or traffic."""
+        it was land enough to take off from, so it beats water as the least bad measured (a traffic
+        lane measured stays before it: a street is near and the battery may be low; with nothing
+        measured at all the vehicle lands where it is). None when home is not known, is here already
+        (within the ledger's ``same_site_m``), or was itself measured as water or traffic."""
         ctx = self.ctx
         home = ctx.tm.state.home_ned_m
         if home is None or math.dist(home[:2], here_ne_m) < ctx.ledger.same_site_m:
