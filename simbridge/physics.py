@@ -202,15 +202,15 @@ class F450Physics:
 
     def step(self, throttles: tuple[float, float, float, float]) -> None:
         """Advance one JSBSim step (``dt_s``) with ESC commands in [0, 1], JSBSim motor order."""
+        if self._wreck is not None:
+            self._wreck = replace(self._wreck, t_s=self._wreck.t_s + self.dt_s)
+            return
         for esc, th in zip(self._esc, throttles, strict=True):
             esc.set_double_value(min(1.0, max(0.0, th)))
         if self.wind is not None:
             w = self.wind.step(self.dt_s)
             for node, v in zip(self._wind, w, strict=True):
                 node.set_double_value(v / FT_M)
-        if self._wreck is not None:
-            self._wreck = replace(self._wreck, t_s=self._wreck.t_s + self.dt_s)
-            return
         pos = self._last_pos  # the ground under the vehicle at the start of the step
         ground = self.terrain.height_m(pos[0], pos[1])
         if ground - self._ground_height_m > WALL_STEP_M and ground > -pos[2] - GEAR_HEIGHT_M:

@@ -276,16 +276,16 @@ class SimBridge:
     def _on_event(self, name: str, fields: dict[str, Any]) -> None:
         s = self.vehicle.state
         collision = self.vehicle.physics.collision
-        if name == "touchdown" and collision is not None:
-            if self._crash_said:
-                return  # the wreck's touchdown was the collision's, said once
-            self._crash_said = True
-            grade = TouchdownGrade("collision", False, (collision.said(),))
+        if name == "touchdown":
+            if collision is not None:
+                if self._crash_said:
+                    return  # the wreck's touchdown was the collision's, said once
+                self._crash_said = True
+                grade = TouchdownGrade("collision", False, (collision.said(),))
+            else:
+                grade = self.scenario.terrain.grade_touchdown(s.pos_ned_m[0], s.pos_ned_m[1], s.t_s)
             fields = {**fields, "surface": grade.surface, "safe": grade.safe, "reasons": list(grade.reasons)}
-        elif name == "touchdown":
-            grade = self.scenario.terrain.grade_touchdown(s.pos_ned_m[0], s.pos_ned_m[1], s.t_s)
-            fields = {**fields, "surface": grade.surface, "safe": grade.safe, "reasons": list(grade.reasons)}
-            if self._people is not None:
+            if collision is None and self._people is not None:
                 now = self._people(s.pos_ned_m, s.t_s)
                 low = now if self._nearest_low_m is None else min(self._nearest_low_m, now or math.inf)
                 fields["nearest_person_m"] = None if now is None else round(now, 2)

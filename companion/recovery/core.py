@@ -251,16 +251,20 @@ class RecoveryContext:
         level = self.transit_d(to_ned)
         if not level < d - 1.0:
             return d
-        self.say(
-            5, f"climbing {d - level:.0f} m before flying on: {TRANSIT_CLEARANCE_M:.0f} m over the roofs near"
-        )
-        self.record.record_event("transit_climb", {"from_d_m": round(d, 2), "to_d_m": round(level, 2)})
+        self.say_transit_climb(d, level, "flying on")
         with contextlib.suppress(TargetTimeout):
             await self.ctl.goto(
                 n, e, level, tolerance_m=self.p.arrival_tolerance_m, speed_m_s=self.p.arrival_speed_m_s,
                 timeout_s=self.p.move_timeout(d - level),
             )  # fmt: skip
         return level
+
+    def say_transit_climb(self, d: float, level: float, before: str) -> None:
+        """Say and record a climb from ``d`` to ``level`` (NED down, metres) before a level move."""
+        self.say(
+            5, f"climbing {d - level:.0f} m before {before}: {TRANSIT_CLEARANCE_M:.0f} m over the roofs near"
+        )
+        self.record.record_event("transit_climb", {"from_d_m": round(d, 2), "to_d_m": round(level, 2)})
 
     def clock_s(self) -> float:
         """The autopilot's clock (seconds since its boot), so that a faster-than-real-time simulation

@@ -15,7 +15,7 @@ from companion.alarms import Criticality
 from companion.control import TargetTimeout
 from companion.perception.surface_id import Candidate
 from companion.reasoning.onboard import OnboardReasoner
-from companion.recovery.core import TRANSIT_CLEARANCE_M, RecoveryContext, State
+from companion.recovery.core import RecoveryContext, State
 from companion.recovery.landing import Lander
 from companion.recovery.search_plan import Leg, SearchPlanner, Verdict
 from companion.site_ledger import Hazard, LedgerSite
@@ -204,11 +204,7 @@ class Searcher:
         # TRANSIT_CLEARANCE_M over a roof measured near either end (RecoveryContext.transit_d)
         level = min(d, td, ctx.transit_d((tn, te, math.nan)))
         if level < min(d, td) - 1.0:
-            ctx.say(
-                5,
-                f"climbing {d - level:.0f} m before the leg: {TRANSIT_CLEARANCE_M:.0f} m over the roofs near",
-            )
-            ctx.record.record_event("transit_climb", {"from_d_m": round(d, 2), "to_d_m": round(level, 2)})
+            ctx.say_transit_climb(d, level, "the leg")
         steps = [(n, e, level)] if level < d - 3.0 else []
         steps.append((tn, te, level))
         if td > level + 3.0:  # descend last
