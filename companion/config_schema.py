@@ -355,7 +355,7 @@ class ReasonerConfig(_Section):
     hedge_after_s: float = Field(default=4.0, gt=0)
     override_lone_no_after: int = Field(default=2, ge=1)
     onboard_judge: Literal["cues", "landnet"] = "landnet"
-    onboard_model: str = Field(default="landnet-s", min_length=1)
+    onboard_model: str = Field(default="landnet-e", min_length=1)
     # open ground among buildings (a lawn, a sports field, a pasture) is a site like a roof when its
     # surface is at least this large and the site this far from its edge (docs/reasoning.md)
     open_ground_area_m2: float = Field(default=600.0, ge=0)

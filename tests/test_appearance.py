@@ -1,5 +1,5 @@
 """Surfaces by their look, for a camera alone (companion.perception.appearance): a clear-cell mask to
-candidates, and LandNet-S's cells over a scenario1 frame from the launch pose."""
+candidates, and each packaged net's cells over a scenario1 frame from the launch pose."""
 
 from __future__ import annotations
 
@@ -31,20 +31,27 @@ def test_a_judge_without_a_roof_class_is_refused() -> None:
         clear_cells(np.zeros((40, 60, 3), np.uint8), lambda img: np.zeros((2, 4, 4), bool), ("water", "road"))
 
 
-def test_scenario1s_clear_roof_is_the_largest_surface_by_its_look() -> None:
-    from companion.reasoning.landnet import DEFAULT_MODEL, LandNet
+@pytest.mark.parametrize("model", ["landnet-s", "landnet-e"])
+def test_scenario1s_clear_roof_is_the_largest_surface_by_its_look(model: str) -> None:
+    """From the launch pose 110 m up, the largest candidate by the net's cells is centred on the clear
+    gravel roof and none on the cluttered one. With LandNet-S its box holds the roof's middle; LandNet-E's
+    rank cells read much of that gravel from so high as grass too (docs/reasoning.md, "Rank cells"), so
+    its clear cells break the roof into parts: the two largest are both on it."""
+    from companion.reasoning.landnet import PACKAGED, LandNet
     from tests.views import LAUNCH, render, world
 
     frame = render(world("scenario1"), LAUNCH)
-    net = LandNet.load(DEFAULT_MODEL)
+    net = LandNet.load(PACKAGED[model])
     clear = clear_cells(frame.rgb, net.presence, tuple(net.classes))
     cands = appearance_candidates(clear, frame.rgb.shape[1], frame.rgb.shape[0])
     assert cands
     # the clear gravel roof west of the street (pixels 250-415 x 160-375 from the launch pose)
-    x0, y0, x1, y1 = cands[0].box_px
-    assert max(x0 - 300, y0 - 200, 380 - x1, 340 - y1) <= 0, cands[0]  # the box holds the roof's middle
-    u, v = cands[0].centre_px
-    assert 250 <= u <= 415, cands[0]
-    assert 160 <= v <= 375, cands[0]
+    on_roof = [250 <= c.centre_px[0] <= 415 and 160 <= c.centre_px[1] <= 375 for c in cands]
+    assert on_roof[0], cands[0]
+    if model == "landnet-s":
+        x0, y0, x1, y1 = cands[0].box_px
+        assert max(x0 - 300, y0 - 200, 380 - x1, 340 - y1) <= 0, cands[0]  # the box holds the roof's middle
+    else:
+        assert on_roof[1], cands[1]
     # the cluttered roof with "LAND HERE" painted on it (pixels 545-720 x 165-375) is no candidate centre
     assert not any(545 <= c.centre_px[0] <= 720 and 165 <= c.centre_px[1] <= 375 for c in cands)

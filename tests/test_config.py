@@ -543,8 +543,8 @@ def test_reasoner_onboard_model_names_a_packaged_net_or_a_file_and_a_bad_one_fai
     from companion.reasoning.landnet import DEFAULT_MODEL, PACKAGED
     from companion.reasoning.tiers import build_cascade
 
-    assert CompanionConfig().reasoner.onboard_model == "landnet-s"
-    assert PACKAGED["landnet-s"] == DEFAULT_MODEL
+    assert CompanionConfig().reasoner.onboard_model == "landnet-e"
+    assert PACKAGED["landnet-e"] == DEFAULT_MODEL
     for name in PACKAGED:  # each packaged net by its name
         path = write(Path(f"{name}.toml"), f'[reasoner]\nonboard_model = "{name}"\n')
         packaged = build_cascade(load_config(path, {}, {}).reasoner).onboard.landnet

@@ -73,8 +73,9 @@ def test_landnet_load_packaged_model_and_sidecar(net: LandNet) -> None:
 
 
 def test_a_packaged_model_is_named_and_a_path_is_a_file(tmp_path: Path) -> None:
-    assert model_path(None) == model_path("") == model_path("landnet-s") == DEFAULT_MODEL == LIGHT
-    assert model_path("landnet-e") == PACKAGED["landnet-e"]
+    assert model_path(None) == model_path("") == model_path("landnet-e") == DEFAULT_MODEL
+    assert PACKAGED["landnet-e"] == DEFAULT_MODEL
+    assert model_path("landnet-s") == LIGHT
     onnx = tmp_path / "mine.onnx"
     shutil.copy(LIGHT, onnx)
     shutil.copy(LIGHT.with_suffix(".json"), onnx.with_suffix(".json"))
@@ -440,10 +441,10 @@ def test_companion_defaults_to_landnet_the_class_to_cues_and_unknown_is_refused(
 def test_onboard_landnet_missing_weights_fail_start_up_naming_the_file(
     monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
-    monkeypatch.setitem(PACKAGED, "landnet-s", tmp_path / "gone.onnx")
+    monkeypatch.setitem(PACKAGED, "landnet-e", tmp_path / "gone.onnx")  # the default
     with pytest.raises(
         ConfigError,
-        match=r"onboard_judge = 'landnet', onboard_model = 'landnet-s': .*gone.onnx: model file not found",
+        match=r"onboard_judge = 'landnet', onboard_model = 'landnet-e': .*gone.onnx: model file not found",
     ):
         build_cascade(ReasonerConfig(onboard_judge="landnet"))
     assert build_cascade(ReasonerConfig(onboard_judge="cues")).onboard is not None  # cues need no file

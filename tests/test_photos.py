@@ -78,7 +78,7 @@ def test_an_unsure_confirm_says_so_in_its_rationale_record_and_decision(tmp_path
 
 def test_members_read_back_from_the_merged_model_give_its_outputs() -> None:
     members = [from_onnx(f"{LIGHT}#m{k}/") for k in (0, 1)]
-    net = LandNet.load(backend="onnxruntime")
+    net = LandNet.load(LIGHT, backend="onnxruntime")
     img = np.random.default_rng(3).integers(0, 256, (128, 160, 3), dtype=np.uint8)
     x = torch.from_numpy(((img.astype(np.float32) / 255 - 0.5) / 0.25).transpose(2, 0, 1)[None].copy())
     with torch.no_grad():

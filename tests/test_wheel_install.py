@@ -70,8 +70,10 @@ def test_the_wheel_installs_every_command_and_its_own_code_and_data(venv: Path, 
     where = subprocess.run(
         [str(venv / "bin" / "python"), "-c",
          "import companion, simbridge, landfall_eval, landfall_link, landfall_ground; "
-         "from companion.reasoning.landnet import DEFAULT_MODEL; "
-         "print(companion.__file__); print(simbridge.__file__); print(DEFAULT_MODEL)"],
+         "from companion.reasoning.landnet import DEFAULT_MODEL, LandNet; "
+         "net = LandNet.load(); "  # the default net and its whole read, sha256s checked, from the wheel
+         "print(companion.__file__); print(simbridge.__file__); print(DEFAULT_MODEL); "
+         "print(DEFAULT_MODEL.with_name(DEFAULT_MODEL.stem + '-whole.onnx'))"],
         cwd=tmp_path, env=_env(venv), capture_output=True, text=True, timeout=120,
     )  # fmt: skip
     assert where.returncode == 0, where.stderr

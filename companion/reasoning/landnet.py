@@ -72,12 +72,13 @@ WHOLE = "whole"  # (N, 1) logit of a whole-image read (sidecar whole_read; landf
 
 MODELS = Path(__file__).with_name("models")
 # The packaged models by name (``reasoner.onboard_model``); any other value is the path of an ONNX file
-# with its sidecar. LandNet-S (a small net trained from nothing on simbridge's renders and a few
-# photographs) is the default; LandNet-E (EfficientNet-Lite0's ImageNet backbone fine-tuned, with its
-# whole-image read; ``make model-e``, ``make model-e-package``) is right far more often on real
-# photographs and reads simbridge's rendered water from high up as roof (docs/reasoning.md).
+# with its sidecar. LandNet-E (EfficientNet-Lite0's ImageNet backbone fine-tuned, with its whole-image
+# read and its rank cells; ``make model``) is the default: on real photographs it confirms no unsafe
+# surface where LandNet-S confirms 3-7 % of them. LandNet-S (a small net trained from nothing on
+# simbridge's renders and a few photographs; ``make model-s``) is about three times as fast
+# (docs/reasoning.md).
 PACKAGED = {"landnet-s": MODELS / "landnet-s.onnx", "landnet-e": MODELS / "landnet-e.onnx"}
-DEFAULT_MODEL = PACKAGED["landnet-s"]
+DEFAULT_MODEL = PACKAGED["landnet-e"]
 HAZARD_SCALE = 3.0  # rank: hazard points of a surely-not-clear site (the image cues' water weight)
 # rank, a model with the bare head (landfall-landnet/2; the packaged model has none): weight of the
 # clear-site probability in a site's hazard, the rest on the probability that nothing stands on it.
@@ -367,7 +368,7 @@ class LandNet:
     @classmethod
     def load(cls, path: Path | str | None = None, backend: str = "auto") -> LandNet:
         """The model at ``path`` (``X.onnx`` with its sidecar ``X.json``, or a packaged model's name:
-        :func:`model_path`; default: the packaged LandNet-S), run
+        :func:`model_path`; default: the packaged LandNet-E), run
         by ``backend`` (module docstring; ``"auto"``: ONNX Runtime where installed, else OpenCV).
 
         Raises:
@@ -567,7 +568,7 @@ def _whole_read_path(entry: Any, onnx_path: Path) -> Path | None:
 
 def model_path(model: str | Path | None) -> Path:
     """The ONNX file ``model`` names: a packaged model's name (``PACKAGED``), a path to an ``.onnx``
-    file with its sidecar beside it, or None / "" for the default (LandNet-S)."""
+    file with its sidecar beside it, or None / "" for the default (LandNet-E)."""
     if model is None or model == "":
         return DEFAULT_MODEL
     if isinstance(model, str) and model in PACKAGED:
