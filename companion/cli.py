@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import ctypes
 import gc
 import logging
 import os
@@ -24,6 +25,26 @@ from companion.reasoning.tiers import BUILTIN_PROFILES, ONBOARD, build_cascade, 
 from companion.recovery import RecoveryParams
 from companion.redact import redact_logs
 from landfall_link.mavlink import URL_FORMS
+
+M_ARENA_MAX = -8  # glibc's malloc.h: mallopt's parameter for the most malloc arenas
+MALLOC_ARENAS = 2  # the daemon's: the event loop's thread and one for its worker threads
+
+
+def limit_malloc_arenas(arenas: int = MALLOC_ARENAS) -> bool:
+    """At most ``arenas`` glibc malloc arenas in this process, unless ``MALLOC_ARENA_MAX`` is set (the
+    operator's own choice wins); True when set. glibc gives each thread that allocates while another
+    holds the lock an arena of its own, up to eight per core, and each keeps what it freed: the
+    reasoner's and the record's worker threads took the daemon's peak memory with LandNet-E from
+    234 MB to 254-270 MB in one sitting (docs/performance.md). Call it before the first thread starts.
+    Other C libraries (musl) have no such arenas: nothing to set, False."""
+    if os.environ.get("MALLOC_ARENA_MAX"):
+        return False
+    try:
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):
+        return False
+    mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
+    return bool(mallopt(M_ARENA_MAX, arenas))
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -156,6 +177,7 @@ def build_companion(cfg: CompanionConfig) -> Companion:
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    limit_malloc_arenas()
     overrides = {
         key: value
         for key, value in (
