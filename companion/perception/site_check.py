@@ -1,5 +1,12 @@
 """The geometric veto: slope, roughness, obstacles in the rotor-clearance disc and the distance to an
-edge around a landing site, from a close-up LiDAR sweep."""
+edge around a landing site, from a close-up LiDAR sweep.
+
+Rough also means a surface with the ground seen through it: standing crops (a canopy of leaves in rows,
+the soil between them 0.2-1 m lower) or a step down inside the disc. Their top alone can look smooth, so
+the share of the disc's returns that lie ``SUNKEN_BAND_M`` below the surface is a test of its own
+(``MAX_SUNKEN_SHARE``): a rotor disc over a crop field has about a third of them there, a lawn or a
+roof none.
+"""
 
 from __future__ import annotations
 
@@ -20,6 +27,10 @@ def world_points(
 
 
 MIN_SITE_RETURNS = 5  # LiDAR returns within the rotor-clearance disc needed to judge a site
+# returns this far below the surface (metres; a drop of more than 1 m is an edge) are the ground seen
+# through a canopy or the foot of a step: more than this share of the disc's returns there is rough
+SUNKEN_BAND_M = (0.2, 1.0)
+MAX_SUNKEN_SHARE = 0.1
 
 
 @dataclass(frozen=True, slots=True)
@@ -32,6 +43,7 @@ class SiteCheck:
     obstacle_m: float  # tallest return above the surface within the rotor-clearance radius
     edge_distance_m: float  # to the nearest drop of more than 1 m (inf when none is seen)
     reasons: tuple[str, ...]
+    sunken_share: float = math.nan  # share of the disc's returns SUNKEN_BAND_M below the surface
 
     @property
     def clear(self) -> bool:
@@ -113,12 +125,20 @@ def check_site(
     # No return near the median level (the disc holds two levels, a step or a ramp): nothing there
     # is a surface, so its roughness is the spread of the whole disc, not the std of nothing (NaN).
     rough = float(np.std(on_surface if len(on_surface) else up[disc]))
+    below = surface - up[disc]
+    sunken = float(np.mean((below > SUNKEN_BAND_M[0]) & (below <= SUNKEN_BAND_M[1])))
     edge = _edge_distance(world, d, up, site_ne_m, surface, clearance_m + 4.0)
     reasons = []
     if obstacle > max_obstacle_m:
         reasons.append(f"object {obstacle:.1f} m tall within {clearance_m:.0f} m")
     if rough > max_roughness_m:
         reasons.append(f"rough ({100 * rough:.0f} cm)")
+    elif sunken > MAX_SUNKEN_SHARE:
+        low, high = SUNKEN_BAND_M
+        reasons.append(
+            f"rough ({100 * sunken:.0f} % of returns {low:g}-{high:g} m below the surface: "
+            "the ground seen through a crop, or a step)"
+        )
     if edge < min_edge_m:
         reasons.append(f"{edge:.1f} m from an edge")
-    return SiteCheck(int(disc.sum()), surface, rough, obstacle, edge, tuple(reasons))
+    return SiteCheck(int(disc.sum()), surface, rough, obstacle, edge, tuple(reasons), sunken)
