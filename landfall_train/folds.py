@@ -73,7 +73,7 @@ def readings(model: Path, images: dict[str, np.ndarray], short_side: int = 0) ->
     params = ConfirmParams(site_window=CueParams().site_window_crop)  # a crop's window, whatever its shape
     out = {}
     for key, rgb in images.items():
-        vetoes, _categorical, _note, r = confirm_reading(
+        vetoes, _categorical, _note, r, _open = confirm_reading(
             net, ConfirmRequest(rgb), params, lidar_vetoes=[], street_level=False, where=""
         )
         whole = net.read_rank(rgb)

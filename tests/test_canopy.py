@@ -52,7 +52,7 @@ def test_a_crown_is_refused_by_name_above_street_level_and_left_to_the_parks_rul
     d = OnboardReasoner(judge="landnet", landnet=net).confirm_sync(ConfirmRequest(_canopy(0)))
     assert not d.accept
     assert "tree canopy" in d.rationale, d.rationale
-    vetoes, _, _, _ = confirm_reading(
+    vetoes, _, _, _, _ = confirm_reading(
         net, ConfirmRequest(_canopy(0)), ConfirmParams(), lidar_vetoes=[], street_level=True, where="here"
     )
     assert "canopy" not in [kind for kind, _ in vetoes]

@@ -570,6 +570,45 @@ def test_landnet_confirm_takes_a_wide_lawn_among_buildings_but_not_a_small_one_o
     assert "street_level" in d.hazards
 
 
+def test_landnet_confirm_takes_wide_grass_above_its_surroundings_as_open_ground(
+    judge: OnboardReasoner, tmp_path: Path
+) -> None:
+    """On a slope a meadow or a terrace measures well above its surroundings (the ground falls away on
+    one side), as a roof does; the clear-site probability, which means a clear roof, refuses grass. Wide
+    grass there is judged as open ground (and the descent then watches for people, ``open_ground``);
+    the same lawn measured small or near its edge is still refused as a roof would be."""
+    from simbridge.world.scenario_file import load_scenario_file
+
+    lawn = LiveWorld(
+        load_scenario_file(
+            _write(
+                tmp_path / "lawn.toml",
+                open_field_toml(60.0, 60.0).replace('ground = "soil"', 'ground = "grass"'),
+            )
+        )
+    )
+    frame, check = close_up(lawn, (0.0, 0.0), 0.0, HEIGHT_M)
+    image = site_cut(lawn, frame, HEIGHT_M)
+
+    def confirm(area_m2: float, edge_m: float) -> Decision:
+        return judge.confirm_sync(
+            ConfirmRequest(image, check=check, site_up_m=9.0, site_area_m2=area_m2, site_edge_m=edge_m)
+        )
+
+    wide = confirm(5600.0, 29.0)
+    assert wide.accept, wide.rationale
+    assert wide.open_ground
+    assert (
+        "open ground 9 m above its surroundings, a terrace or a green roof: 5,600 m2 of it" in wide.rationale
+    )
+    for area_m2, edge_m in ((400.0, 29.0), (5600.0, 6.0)):
+        d = confirm(area_m2, edge_m)
+        assert not d.accept, (area_m2, edge_m, d.rationale)
+        assert not d.open_ground
+    on_roof = judge.confirm_sync(ConfirmRequest(image, check=check, site_up_m=9.0))  # nothing measured
+    assert not on_roof.accept, on_roof.rationale
+
+
 def _write(path: Path, text: str) -> Path:
     path.write_text(text)
     return path

@@ -146,11 +146,17 @@ class _Stop(Exception):
 
 
 def _descent_on_fakes(
-    monkeypatch: pytest.MonkeyPatch, looks: list[PeopleSeen], settle: Any, *, height_m: float = 50.0
+    monkeypatch: pytest.MonkeyPatch,
+    looks: list[PeopleSeen],
+    settle: Any,
+    *,
+    height_m: float = 50.0,
+    open_ground: bool = False,
 ) -> tuple[Any, list[PeopleSeen]]:
     """A Recovery on tests.recovery_fakes hovering ``height_m`` above the ground, whose site is always
-    measured flat, followed where it is and confirmed clear, and whose people watch sees ``looks`` one
-    by one (then no one); ``settle`` stands in for the follower's. Returns it and the looks taken."""
+    measured flat, followed where it is and confirmed clear (as open ground with ``open_ground``), and
+    whose people watch sees ``looks`` one by one (then no one); ``settle`` stands in for the
+    follower's. Returns it and the looks taken."""
     from companion.perception.site_check import SiteCheck
     from companion.reasoning.base import Decision
     from companion.recovery import Recovery, machine, watching
@@ -175,7 +181,7 @@ def _descent_on_fakes(
         return target
 
     async def confirm(*_args: Any) -> Decision:
-        return Decision(True, "site clear", "onboard", 0.0)
+        return Decision(True, "site clear", "onboard", 0.0, open_ground=open_ground)
 
     async def watch(_frame: Any, _target: Any) -> PeopleSeen:
         watched.append(looks[len(watched)] if len(watched) < len(looks) else PeopleSeen(0, None, 1.0))
@@ -212,6 +218,24 @@ def test_the_machine_holds_while_people_are_seen_and_goes_on_after_two_quiet_loo
     with pytest.raises(_Stop):
         asyncio.run(rec._confirm_and_descend((0.0, 0.0, -12.0), roof))
     assert watched == []  # a roof: no one walks there
+
+
+def test_open_ground_above_its_surroundings_is_watched_as_ground_is(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A meadow or a terrace on a slope measures well above its surroundings, as a roof does; confirmed
+    as open ground (``Decision.open_ground``), people may walk onto it: the machine looks for them
+    before the descent step as it does at street level."""
+
+    async def settle(_target: Any) -> Any:
+        raise _Stop
+
+    people, quiet = PeopleSeen(1, 7.0, 1.0), PeopleSeen(0, None, 1.0)
+    looks = [people, quiet, quiet]
+    rec, watched = _descent_on_fakes(monkeypatch, looks, settle, open_ground=True)
+    terrace = Candidate(0, (0, 0, 10, 10), (5.0, 5.0), height_above_m=9.0, site_ned_m=(0.0, 0.0, -9.0))
+    with pytest.raises(_Stop):
+        asyncio.run(rec._confirm_and_descend((0.0, 0.0, -9.0), terrace))
+    assert watched == looks
+    assert [k for k, _f in rec.ctx.record.events if k == "people_watch"] == ["people_watch"]
 
 
 def test_a_person_coming_near_during_a_descent_step_stops_it_where_the_vehicle_is(

@@ -109,7 +109,7 @@ def test_confirm_reading_judges_the_mean_and_the_whole_read_can_refuse(tmp_path:
     rgb = np.full((96, 96, 3), 128, np.uint8)
     params = ConfirmParams(site_window=CueParams().site_window_crop)
     net = LandNet.load(_with_whole_read(tmp_path, 0.0, -30.0, weight=1.0), backend="onnxruntime")
-    vetoes, _categorical, _note, r = confirm_reading(
+    vetoes, _categorical, _note, r, _open = confirm_reading(
         net, ConfirmRequest(rgb), params, lidar_vetoes=[], street_level=False, where=""
     )
     assert r.clear_p == pytest.approx(0.0, abs=1e-6)

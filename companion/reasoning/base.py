@@ -127,6 +127,10 @@ class Decision:
     # threshold, or its views disagreeing): the rationale says so, and an accepted site is looked at
     # again from closer before the full descent step (companion/recovery/machine.py)
     unsure: bool = False
+    # accepted as open ground (a field, a lawn, a terrace on a slope: the onboard tier's net judge), not
+    # as a roof: people may walk onto it, so the descent watches for them even where Surface ID measured
+    # the site above its surroundings (companion/recovery/machine.py)
+    open_ground: bool = False
 
 
 # The kinds of ``Decision.hazards``: what the recovery's least-bad-site policy ranks sites by.

@@ -24,10 +24,12 @@ limits (a bare field, a yard, a lawn). Among buildings street level is a last re
 a window mostly grass (``OPEN_GRASS_SHARE``) on a surface Surface ID measured at least
 ``ConfirmParams.open_ground_area_m2`` large, the site at least ``open_ground_edge_m`` from its edge (a
 lawn, a sports field, a park's meadow, a pasture beside a farm; not a plaza, a street or a small garden,
-whose edges carry people), judged then as open country is. In open country too a site on ground
-Surface ID measured must meet those two (the field's edge is a road or a path). A rejection names what
-was seen where (objects, people, vehicles, vegetation, road surface, ...). With a critical alarm and a
-clear LiDAR disc, one group of objects in view is tolerated, as the cues' one raised blob is.
+whose edges carry people), judged then as open country is. So is the same wide grass measured above its
+surroundings (a terrace or a meadow on a slope, where the ground falls away on one side, or a green
+roof), which the clear-site probability, meaning a clear roof, would refuse. In open country too a site
+on ground Surface ID measured must meet those two (the field's edge is a road or a path). A rejection
+names what was seen where (objects, people, vehicles, vegetation, road surface, ...). With a critical
+alarm and a clear LiDAR disc, one group of objects in view is tolerated, as the cues' one raised blob is.
 
 **Rank (images only).** Score = crop size term - ``SceneReading.hazard`` (``HAZARD_SCALE`` x (half of
 1 - clear probability, half the hazard peak: the likeliest hazard cell)): continuous, so ties are rare.
@@ -105,10 +107,11 @@ def confirm_reading(
     lidar_vetoes: list[tuple[str, str]],
     street_level: bool,
     where: str,
-) -> tuple[list[tuple[str, str]], bool, str, SceneReading]:
+) -> tuple[list[tuple[str, str]], bool, str, SceneReading, bool]:
     """Vetoes from the reading of the site window (module docstring), after ``lidar_vetoes``.
 
-    Returns (vetoes as (kind, text), categorical, a note for an acceptance, the reading).
+    Returns (vetoes as (kind, text), categorical, a note for an acceptance, the reading, whether it was
+    judged as open ground: a field, a lawn or a terrace, where people walk, not a roof).
 
     Raises:
         ValueError: an image that is not a non-empty (H, W, 3) uint8 array.
@@ -134,6 +137,9 @@ def confirm_reading(
     if street_level and paved > p.max_street_asphalt:
         vetoes.append(("street_asphalt", f"{_paved_phrase(r, paved)} {where}: a road or a car park"))
     open_among = street_level and request.built_up and not vetoes and _wide_grass(r, request, p)
+    # level grass measured above its surroundings: a terrace or a meadow on a slope (the ground falls
+    # away on one side), or a green roof; the clear-site probability means a clear roof, which it is not
+    terrace = not street_level and not vetoes and _wide_grass(r, request, p)
     if street_level and request.built_up and not vetoes and not open_among:
         vetoes.append(
             ("street_level", f"{where} among buildings: people and traffic come back (a last resort only)")
@@ -142,7 +148,7 @@ def confirm_reading(
     groups = sum(r.count(c) for c in COUNTED)
     vegetation = r.share("low_vegetation") + r.share("tree")
     open_country = street_level and not request.built_up
-    if not vetoes and (open_country or open_among):
+    if not vetoes and (open_country or open_among or terrace):
         # the net's clear site means a clear roof, which a surface measured at street level is not: there
         # only level ground with nothing on it passes, whatever the clear-site probability
         if not _open_ground(r, p, groups):
@@ -153,6 +159,12 @@ def confirm_reading(
             note = (
                 f" (open ground among buildings: {request.site_area_m2:,.0f} m2 of it, "
                 f"{request.site_edge_m:.0f} m from its edge)"
+            )
+        elif terrace:
+            note = (
+                f" (open ground {request.site_up_m or 0.0:.0f} m above its surroundings, a terrace or a "
+                f"green roof: {request.site_area_m2:,.0f} m2 of it, {request.site_edge_m:.0f} m from its "
+                "edge)"
             )
         else:
             note = " (open country: level ground with nothing on it)"
@@ -168,7 +180,7 @@ def confirm_reading(
             note = " (critical: one object in view tolerated, LiDAR finds the rotor disc clear)"
         elif not tolerate:
             vetoes.append(_not_clear(r, net.clear_threshold, groups, vegetation, p.max_vegetation))
-    return vetoes, categorical, note, r
+    return vetoes, categorical, note, r, open_country or open_among or terrace
 
 
 def _paved(r: SceneReading) -> float:

@@ -314,7 +314,7 @@ class OnboardReasoner:
     def _confirm_net(self, request: ConfirmRequest, net: LandNet, t0: float) -> Decision:
         """``confirm_sync`` with LandNet-S's reading in place of the image cues (net_judge)."""
         _elevated, street_level, where = self._level(request)
-        vetoes, categorical, note, reading = confirm_reading(
+        vetoes, categorical, note, reading, open_ground = confirm_reading(
             net,
             request,
             self.confirm_params,
@@ -326,8 +326,10 @@ class OnboardReasoner:
         why = f"site clear: {_geometry_phrase(request.check)}; image: {seen}{note}"
         body = {"judge": self.judge, "reading": reading.to_json()}
         # the clear-site probability decided (a roof, no binding veto): say how sure it was
-        guess = "" if categorical or street_level else unsure(reading, net.clear_threshold)
-        return self._decision(request, t0, vetoes, categorical or street_level, why, body, guess)
+        guess = "" if categorical or street_level or open_ground else unsure(reading, net.clear_threshold)
+        return self._decision(
+            request, t0, vetoes, categorical or street_level, why, body, guess, open_ground=open_ground
+        )
 
     def _level(self, request: ConfirmRequest) -> tuple[bool, bool, str]:
         """(elevated, street level, where in words) of the site. A roof is a surface measured well
@@ -348,9 +350,12 @@ class OnboardReasoner:
         clear_why: str,
         body: dict[str, Any],
         guess: str = "",
+        *,
+        open_ground: bool = False,
     ) -> Decision:
         """The confirm stage's Decision from its vetoes (none: accepted, with ``clear_why``); a
-        rejection is binding when ``binds``. Appends the transcript entry (``body`` and the verdict)."""
+        rejection is binding when ``binds``; ``open_ground``: judged as open ground, not a roof.
+        Appends the transcript entry (``body`` and the verdict)."""
         accept = not vetoes
         if accept:
             why = clear_why
@@ -368,7 +373,16 @@ class OnboardReasoner:
                  "unsure": bool(guess)}
             )  # fmt: skip
         spent = time.perf_counter() - t0
-        return Decision(accept, why, self.name, spent, binding=binding, hazards=kinds, unsure=bool(guess))
+        return Decision(
+            accept,
+            why,
+            self.name,
+            spent,
+            binding=binding,
+            hazards=kinds,
+            unsure=bool(guess),
+            open_ground=accept and open_ground,
+        )
 
 
 def _lidar_vetoes(check: SiteCheck | None) -> list[tuple[str, str]]:

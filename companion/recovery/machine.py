@@ -430,7 +430,10 @@ class Recovery:
                 ctx.strike_off(target, choice)
                 ctx.say(4, f"site {choice.index} {decision.rationale[:120]}")
                 return False
-            if not choice.elevated:  # off the roofs, people walk: none within the margin (people_margin_m)
+            # off the roofs, people walk: none within the margin (people_margin_m); so they do on open
+            # ground measured above its surroundings (a terrace on a slope)
+            on_roof = choice.elevated and not decision.open_ground
+            if not on_roof:
                 seen = await self.looker.watch_people(frame, target)
                 if seen is not None and seen.cells:
                     now = ctx.clock_s()
@@ -465,7 +468,7 @@ class Recovery:
                 self._descending = (target, choice)
                 continue
             if height_m <= ctx.p.final_land_m:
-                if choice.elevated or ctx.p.people_margin_m <= 0:
+                if on_roof or ctx.p.people_margin_m <= 0:
                     return await self.lander.land()
                 seen = await self.watch.landing(target)
                 if seen is None:
@@ -484,7 +487,7 @@ class Recovery:
             timeout_s = ctx.p.move_timeout_s + rng_m
             seen = None
             try:
-                if choice.elevated or ctx.p.people_margin_m <= 0:
+                if on_roof or ctx.p.people_margin_m <= 0:
                     target = await self.follower.goto_following(target, new_d, timeout_s=timeout_s)
                 else:  # off the roofs: the people watch goes on through the step
                     target, seen = await self.watch.step(target, new_d, timeout_s)
