@@ -1,0 +1,68 @@
+"""The daemon's glibc malloc arenas (companion.cli.limit_malloc_arenas): at most two, so that freed
+memory held by each worker thread's own arena does not add to the vehicle's peak; an operator's
+MALLOC_ARENA_MAX (or glibc's tunable) wins. Counted by glibc's own malloc_stats in a fresh process whose
+threads allocate."""
+
+from __future__ import annotations
+
+import os
+import platform
+import subprocess
+import sys
+
+import pytest
+
+pytestmark = pytest.mark.skipif(
+    platform.libc_ver()[0] != "glibc", reason="malloc arenas are glibc's (this C library has none to limit)"
+)
+
+SCRIPT = """
+import ctypes, sys, threading
+from companion.cli import limit_malloc_arenas
+print(limit_malloc_arenas() if sys.argv[1] == "limit" else "unset", flush=True)
+kept = []
+together = threading.Barrier(8)  # every thread alive at once: none hands its arena on to the next
+def work():
+    kept.append([bytearray(200_000) for _ in range(20)])
+    together.wait()
+threads = [threading.Thread(target=work) for _ in range(8)]
+for t in threads:
+    t.start()
+for t in threads:
+    t.join()
+ctypes.CDLL(None).malloc_stats()  # one "Arena N:" block per arena, on stderr
+"""
+
+
+def _arenas(mode: str, env_max: str | None = None, tunables: str | None = None) -> tuple[str, int]:
+    env = {k: v for k, v in os.environ.items() if k not in ("MALLOC_ARENA_MAX", "GLIBC_TUNABLES")}
+    if env_max is not None:
+        env["MALLOC_ARENA_MAX"] = env_max
+    if tunables is not None:
+        env["GLIBC_TUNABLES"] = tunables
+    env["MALLOC_MMAP_THRESHOLD_"] = str(1 << 24)  # every block from an arena, none mapped apart
+    out = subprocess.run(
+        [sys.executable, "-c", SCRIPT, mode], capture_output=True, text=True, env=env, timeout=60, check=True
+    )
+    return out.stdout.strip(), sum(line.startswith("Arena ") for line in out.stderr.splitlines())
+
+
+def test_eight_threads_share_two_arenas_once_limited() -> None:
+    said, unlimited = _arenas("unset")
+    assert said == "unset"
+    assert unlimited > 2, unlimited  # glibc's own way: an arena per thread that allocates
+    said, limited = _arenas("limit")
+    assert said == "True"
+    assert limited <= 2, limited
+
+
+def test_the_operators_malloc_arena_max_wins() -> None:
+    said, arenas = _arenas("limit", env_max="4")
+    assert said == "False"  # not overridden
+    assert 2 < arenas <= 4, arenas
+
+
+def test_glibcs_own_tunable_wins_too() -> None:
+    said, arenas = _arenas("limit", tunables="glibc.malloc.arena_max=4")
+    assert said == "False"
+    assert 2 < arenas <= 4, arenas
