@@ -14,8 +14,8 @@ then ranks them by :class:`Hazard`, worst kinds last:
 ``OFF_ROOF``    street level with no road markings or asphalt seen: a sidewalk, a plaza, a car park, a
                 lawn (people, parked cars, but no traffic lanes)
 ``OBSTRUCTED``  the LiDAR found an object in the rotor disc, rough ground or an edge; people, vehicles
-                or rooftop objects, pipes or trees on it; or the image judgement is sure it is no
-                clear roof (``not_clear``: clear-site confidence under 0.2), whatever it could name
+                or rooftop objects, pipes, trees or a tree's canopy on it; or the image judgement is sure it
+                is no clear roof (``not_clear``: clear-site confidence under 0.2), whatever it could name
 ``UNKNOWN``     nothing measured (no camera image and no LiDAR check)
 ``TRAFFIC``     lane markings or asphalt at street level, or an elevated strip: a road, a highway deck
 ``WATER``       water
@@ -57,7 +57,7 @@ class Hazard(enum.IntEnum):
 
 
 _TRAFFIC = {"markings", "street_asphalt"}
-_OBSTRUCTED = {"lidar_obstacle", "lidar_rough", "lidar_edge", "raised", "raised_lines", "not_clear"}
+_OBSTRUCTED = {"lidar_obstacle", "lidar_rough", "lidar_edge", "raised", "raised_lines", "not_clear", "canopy"}
 
 
 def hazard_of(

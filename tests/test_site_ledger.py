@@ -26,6 +26,7 @@ def _site(n: float, hazard: Hazard, *, closeup: bool = True, edge: float = math.
         (("lidar_obstacle",), False, False, False, Hazard.OBSTRUCTED),
         (("raised",), False, True, False, Hazard.OBSTRUCTED),
         (("vegetation",), False, False, False, Hazard.OBSTRUCTED),  # tree crowns up on a roof
+        (("canopy",), False, False, False, Hazard.OBSTRUCTED),  # the same, measured on the pixels
         (("vegetation",), False, True, False, Hazard.OFF_ROOF),  # a lawn
         ((), False, True, False, Hazard.OFF_ROOF),  # a sidewalk, a plaza, a car park
         (("street_level",), False, True, False, Hazard.OFF_ROOF),  # refused among buildings: last resort
@@ -114,3 +115,23 @@ def test_fault_hook_fires_once_at_its_stage_and_round() -> None:
 def test_fault_hook_refuses_a_bad_setting(text: str) -> None:
     with pytest.raises(ValueError, match="LANDFALL_TEST_FAULT"):
         FaultHook.from_env({"LANDFALL_TEST_FAULT": text})
+
+
+def test_every_kind_a_judge_vetoes_with_is_a_known_hazard_kind_and_none_is_a_soft_doubt_unawares() -> None:
+    """Each kind the onboard tier's judges put in a veto (``vetoes.append(("kind", ...))`` in
+    companion/) is one of ``HAZARD_KINDS``, and only the soft ones leave a roof "doubted": a kind the
+    ledger did not know fell through to DOUBTED, which the fallback takes as acceptable (a hillside
+    launch landed on crops read as tree canopy, 2026-12-03)."""
+    import re
+    from pathlib import Path
+
+    from companion.reasoning.base import HAZARD_KINDS
+
+    root = Path(__file__).resolve().parents[1] / "companion"
+    pattern = re.compile(r'vetoes\.append\(\s*\(\s*"([a-z_]+)"')
+    kinds = {k for f in root.rglob("*.py") for k in pattern.findall(f.read_text())}
+    assert {"canopy", "water", "markings", "raised"} <= kinds  # the scan finds what it should
+    assert kinds <= set(HAZARD_KINDS), kinds - set(HAZARD_KINDS)
+    soft = {k for k in HAZARD_KINDS if hazard_of((k,), accepted=False, street_level=False, strip=False)
+            is Hazard.DOUBTED}  # fmt: skip
+    assert soft == {"hazard", "street_level"}, soft

@@ -140,6 +140,7 @@ HAZARD_KINDS = (
     "lidar_edge",
     "water",
     "vegetation",
+    "canopy",  # a tree's crown over the site: green and textured (the net judge's pixel measure)
     "markings",  # lane markings (a painted line at street level or on a deck)
     "street_asphalt",  # asphalt at street level or on a deck: a road, a car park
     "street_level",  # street level among buildings: sidewalks, plazas (people), kept as a last resort
