@@ -59,6 +59,9 @@ MAX_CANOPY_SHARE = 0.4  # of the window's pixels green and textured: a tree's cr
 CANOPY_EXG = 0.06  # excess green (2G - R - B) / (R + G + B) above which a pixel is vegetation ...
 CANOPY_TEXTURE = 8.0  # ... and the grey levels' standard deviation over 7 x 7 pixels above which it is leaves
 CANOPY_SIDE_PX = 192  # the window is judged at this size
+TINT_MIN_SATURATION = 0.2  # HSV saturation from which a pixel is tinted: soil, crops, brick (asphalt,
+#                            concrete and gravel are near grey: 0.06-0.09 in simbridge's renders)
+TINT_MIN_VALUE = 0.1  # darker pixels have no hue to speak of
 UNSURE_MARGIN = 0.15  # a clear-site probability this close to the threshold is a guess, either way ...
 UNSURE_SPREAD = 0.35  # ... as is one whose mirror-image views differ by this much
 FIRM_NOT_CLEAR_P = 0.2  # a clear-site probability under this: the net is sure it is no clear roof
@@ -90,6 +93,18 @@ def canopy_share(window: np.ndarray) -> float:
     mean = cv2.blur(grey, (7, 7))
     sd = np.sqrt(np.maximum(cv2.blur(grey * grey, (7, 7)) - mean * mean, 0.0))
     return float(((exg > CANOPY_EXG) & (sd > CANOPY_TEXTURE)).mean())
+
+
+def tinted_share(window: np.ndarray) -> float:
+    """Share of an RGB window whose colour is tinted (HSV saturation from ``TINT_MIN_SATURATION``):
+    bare soil, crops, brick, not asphalt or concrete. At street level the net's roof-like cells count
+    as paving, since a plain road looks like a tar roof from above; a ploughed field or a crop's rows
+    read so too (farmland's fields, 2026-12-03: "roof surface 88 %" from both packaged nets), but a road
+    is grey and a field is not. Judged at ``CANOPY_SIDE_PX``, as the canopy is."""
+    side = (CANOPY_SIDE_PX, CANOPY_SIDE_PX)
+    hsv = cv2.cvtColor(cv2.resize(window, side, interpolation=cv2.INTER_AREA), cv2.COLOR_RGB2HSV)
+    sat, val = hsv[..., 1], hsv[..., 2]
+    return float(((sat >= 255 * TINT_MIN_SATURATION) & (val >= 255 * TINT_MIN_VALUE)).mean())
 
 
 def site_window(h: int, w: int, override: float | None) -> float:
@@ -133,7 +148,8 @@ def confirm_reading(
         vetoes.append(("markings", f"{r.phrase('marking')} {where if street_level else ''}".rstrip()
                        + ": a road stays risky even when empty"))  # fmt: skip
         categorical = True
-    paved = _paved(r)
+    tint = tinted_share(window) if street_level else 0.0
+    paved = _paved(r, tint)
     if street_level and paved > p.max_street_asphalt:
         vetoes.append(("street_asphalt", f"{_paved_phrase(r, paved)} {where}: a road or a car park"))
     open_among = street_level and request.built_up and not vetoes and _wide_grass(r, request, p)
@@ -151,8 +167,8 @@ def confirm_reading(
     if not vetoes and (open_country or open_among or terrace):
         # the net's clear site means a clear roof, which a surface measured at street level is not: there
         # only level ground with nothing on it passes, whatever the clear-site probability
-        if not _open_ground(r, p, groups):
-            vetoes.append(_not_open_ground(r, groups, vegetation))
+        if not _open_ground(r, p, groups, tint):
+            vetoes.append(_not_open_ground(r, groups, vegetation, tint))
         elif (cramped := _cramped(request, p)) is not None:
             vetoes.append(("street_level", cramped))
         elif open_among:
@@ -183,11 +199,12 @@ def confirm_reading(
     return vetoes, categorical, note, r, open_country or open_among or terrace
 
 
-def _paved(r: SceneReading) -> float:
+def _paved(r: SceneReading, tint: float = 0.0) -> float:
     """Share of the window read as road or as roof surface. At street level both are paving where
     traffic runs: a plain asphalt road or car park looks like a tar roof from above (Surface ID's
-    height tells them apart, not the image)."""
-    return min(1.0, r.share("road") + r.share("roof"))
+    height tells them apart, not the image). Roof-like cells count in the share of the window that is
+    not tinted (:func:`tinted_share` ``tint``): a brown field read as roof is no road."""
+    return min(1.0, r.share("road") + r.share("roof") * (1.0 - tint))
 
 
 def _paved_phrase(r: SceneReading, paved: float) -> str:
@@ -195,7 +212,7 @@ def _paved_phrase(r: SceneReading, paved: float) -> str:
     return f"road or tar-like paving ({100 * paved:.0f} %: {where})"
 
 
-def _open_ground(r: SceneReading, p: ConfirmParams, groups: int) -> bool:
+def _open_ground(r: SceneReading, p: ConfirmParams, groups: int, tint: float = 0.0) -> bool:
     """A field, a yard or a lawn with nothing on it: no object, person, vehicle, water or marking seen,
     road or tar-like paving (:func:`_paved`) at most ``max_street_asphalt`` and trees at most
     ``max_vegetation`` of the window."""
@@ -203,7 +220,7 @@ def _open_ground(r: SceneReading, p: ConfirmParams, groups: int) -> bool:
     return (
         groups == 0
         and hazards == 0.0
-        and _paved(r) <= p.max_street_asphalt
+        and _paved(r, tint) <= p.max_street_asphalt
         and r.share("tree") <= p.max_vegetation
     )
 
@@ -234,11 +251,11 @@ def _cramped(request: ConfirmRequest, p: ConfirmParams) -> str | None:
     return None
 
 
-def _not_open_ground(r: SceneReading, groups: int, vegetation: float) -> tuple[str, str]:
+def _not_open_ground(r: SceneReading, groups: int, vegetation: float, tint: float = 0.0) -> tuple[str, str]:
     seen = [r.phrase(c) for c in ("person", "vehicle", "object") if r.count(c)]
     if r.share("tree") > 0.0:
         seen.append(r.phrase("tree"))
-    paved = _paved(r)
+    paved = _paved(r, tint)
     if paved > 0.0:
         seen.append(_paved_phrase(r, paved))
     what = ", ".join(seen[:4]) if seen else "nothing named"
