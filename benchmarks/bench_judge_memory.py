@@ -33,14 +33,12 @@ import companion.cli
 if sys.argv[1] == "daemon":
     companion.cli.limit_malloc_arenas()
 from companion.reasoning.landnet import DEFAULT_MODEL, LandNet
+from landfall_eval.processes import ProcessSample
 
 def mem():
-    d = {}
-    for line in open("/proc/self/status"):
-        key, value = line.split(":", 1)
-        if key in ("VmHWM", "RssAnon"):
-            d[key] = int(value.split()[0]) / 1024
-    return d
+    sample = ProcessSample(os.getpid())  # VmHWM, and RssAnon now
+    sample.sample()
+    return {"VmHWM": sample.peak_rss_mb, "RssAnon": sample.peak_anon_mb}
 
 after_imports = mem()
 net = LandNet.load(DEFAULT_MODEL)

@@ -152,10 +152,11 @@ def confirm_reading(
     paved = _paved(r, tint)
     if street_level and paved > p.max_street_asphalt:
         vetoes.append(("street_asphalt", f"{_paved_phrase(r, paved)} {where}: a road or a car park"))
-    open_among = street_level and request.built_up and not vetoes and _wide_grass(r, request, p)
+    wide_grass = not vetoes and _wide_grass(r, request, p)
+    open_among = street_level and request.built_up and wide_grass
     # level grass measured above its surroundings: a terrace or a meadow on a slope (the ground falls
     # away on one side), or a green roof; the clear-site probability means a clear roof, which it is not
-    terrace = not street_level and not vetoes and _wide_grass(r, request, p)
+    terrace = not street_level and wide_grass
     if street_level and request.built_up and not vetoes and not open_among:
         vetoes.append(
             ("street_level", f"{where} among buildings: people and traffic come back (a last resort only)")
