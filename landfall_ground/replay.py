@@ -172,6 +172,13 @@ def _note(kind: str, body: dict[str, Any]) -> str:
     if kind == "extend":
         return f"budget spent: {body.get('action', 'more rounds')}"
     if kind == "fallback_site":
+        instead = body.get("instead_of")
+        if isinstance(instead, dict):  # a site seen from afar proved worse from overhead
+            chosen = body.get("chosen") if isinstance(body.get("chosen"), dict) else {}
+            return (
+                f"{instead.get('label', 'the site')} from overhead: {instead.get('hazard', '?')}; "
+                f"landing at {chosen.get('label', 'the next site')} instead"
+            )
         return f"landing at the best site seen: {body.get('reason', '')}".rstrip(": ")
     return f"link back after {body.get('silent_s', '?')} s"
 

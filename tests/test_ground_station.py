@@ -200,6 +200,27 @@ async def test_replay_plays_seeks_and_pauses(tmp_path: Path) -> None:
         await asyncio.gather(player, return_exceptions=True)
 
 
+def test_replay_says_when_the_fallback_left_a_site_for_another(tmp_path: Path) -> None:
+    """The fallback's choice, then a site seen from afar that proved worse from overhead: two notes,
+    the second naming both sites."""
+    site0 = {"ned_m": [30.0, 0.0, 0.0], "hazard": "off_roof", "label": "site 0", "closeup": False}
+    with FlightRecord(tmp_path / "rec", 50, "20261203T000000Z-1") as rec:
+        rec.record_event("alarm", {"reason": "low battery", "code": "battery_low", "criticality": "high"})
+        rec.record_event(
+            "fallback_site", {"round": 4, "reason": "search ended", "chosen": site0, "sites": []}
+        )
+        rec.record_event(
+            "fallback_site",
+            {"round": 4, "reason": "search ended", "chosen": {**site0, "label": "site 3"}, "sites": [],
+             "instead_of": {**site0, "hazard": "obstructed", "closeup": True}},
+        )  # fmt: skip
+    notes = [m.body["state"] for m in load_record(tmp_path / "rec").messages if m.leaf == "state"]
+    assert notes == [
+        "landing at the best site seen: search ended",
+        "site 0 from overhead: obstructed; landing at site 3 instead",
+    ]
+
+
 @pytest.mark.parametrize("what", ["missing", "file", "empty", "no-events"])
 def test_replay_of_what_is_not_a_record_says_so(tmp_path: Path, what: str) -> None:
     path = tmp_path / "x"

@@ -19,6 +19,7 @@ from companion.alarms import Criticality
 from companion.flavour import Mode
 from companion.reasoning.onboard import OnboardReasoner
 from companion.recovery import Outcome, Recovery, RecoveryParams, State
+from companion.recovery import landing as landing_module
 from companion.recovery import looking as looking_module
 from companion.recovery.core import RecoveryContext, Site
 from companion.recovery.following import SiteFollower
@@ -204,6 +205,74 @@ def test_over_water_with_only_water_measured_the_lander_flies_home_and_lands_the
     assert lander.fallback_site().label == "here"  # type: ignore[union-attr]
     ctx.ledger.sites[-1] = LedgerSite((-118.0, 161.0, 2.0), Hazard.OFF_ROOF, "lawn", 2, True, label="site 3")
     assert lander.fallback_site().label == "site 3"  # type: ignore[union-attr]  # measured land first
+
+
+def _ground_sweep(site_ne_m: tuple[float, float], height_m: float, crop: bool, seed: int) -> Any:
+    """A level frame ``height_m`` over ``site_ne_m`` whose LiDAR sees flat ground there, or a crop in
+    rows 0.75 m apart (the ground seen between the rows); no camera image."""
+    rng = np.random.default_rng(seed)
+    north, east = rng.uniform(-4.0, 4.0, (2, 6000))
+    up = rng.normal(0.0, 0.02, north.size)
+    if crop:
+        up += np.where((east % 0.75) < 0.45, 0.6, 0.12)
+    frd = np.stack([north, east, height_m - up, np.full_like(up, 0.5)], axis=1).astype(np.float32)
+    pos = (site_ne_m[0], site_ne_m[1], -height_m)
+    return frame(lidar_frd=frd, pos_ned_m=pos, rangefinder_m=height_m)
+
+
+def test_lander_looks_at_a_site_seen_from_afar_and_leaves_crops_for_the_next_least_bad() -> None:
+    """Nothing accepted; two fields seen only from afar ("nothing seen against it"), the nearer first.
+    Over it the LiDAR finds a crop's rows: the lander says so, records the change and flies to the
+    other field, finds it level and lands there. Nothing measured under the vehicle at the start (no
+    frame to measure with)."""
+    ctx = context(
+        frame(),  # the look around: no image, no LiDAR (nothing noted)
+        frame(),  # the spot below: nothing measured
+        _ground_sweep((30.0, 0.0), 40.0, crop=True, seed=1),
+        _ground_sweep((0.0, 60.0), 40.0, crop=False, seed=2),
+        pos_ned_m=(0.0, 0.0, -40.0),
+    )
+    far = "nothing seen against it from afar"
+    ctx.ledger.add(LedgerSite((30.0, 0.0, 0.0), Hazard.OFF_ROOF, far, 1, False, label="site 0"))
+    ctx.ledger.add(LedgerSite((0.0, 60.0, 0.0), Hazard.OFF_ROOF, far, 2, False, label="site 3"))
+    outcome = asyncio.run(_parts(ctx)[2].land_at_best("search ended (window)"))
+    assert [g[:2] for g in _ctl(ctx).gotos] == [(30.0, 0.0), (0.0, 60.0)]
+    assert outcome.site_ned_m is not None
+    assert outcome.site_ned_m[:2] == (0.0, 60.0)
+    first, second = _record(ctx).of("fallback_site")
+    assert first["chosen"]["label"] == "site 0"
+    assert (second["chosen"]["label"], second["instead_of"]["label"]) == ("site 3", "site 0")
+    assert second["instead_of"]["hazard"] == "obstructed"
+    assert second["instead_of"]["closeup"]
+    assert any(t.startswith("Landfall: site 0 from overhead: obstructed (lidar_rough") for t in _said(ctx)), (
+        _said(ctx)
+    )
+    kept = ctx.ledger.near((0.0, 60.0))
+    assert kept is not None
+    assert (kept.hazard, kept.closeup) == (Hazard.OFF_ROOF, True)
+    assert ctx.state is State.LANDED
+
+
+def test_lander_lands_on_a_site_that_stays_the_least_bad_from_overhead_and_bounds_its_looks() -> None:
+    """A field seen from afar and level from overhead is landed on after one look; with every field a
+    crop the lander stops after FALLBACK_LOOKS sites and lands on the last one chosen, not looking on."""
+    ctx = context(
+        frame(), frame(), _ground_sweep((30.0, 0.0), 40.0, crop=False, seed=3), pos_ned_m=(0.0, 0.0, -40.0)
+    )
+    ctx.ledger.add(LedgerSite((30.0, 0.0, 0.0), Hazard.OFF_ROOF, "from afar", 1, False, label="site 0"))
+    asyncio.run(_parts(ctx)[2].land_at_best("round budget spent"))
+    assert _ctl(ctx).gotos == [(30.0, 0.0, -40.0)]
+    assert len(_record(ctx).of("fallback_site")) == 1
+
+    fields = [(30.0 * (k + 1), 0.0) for k in range(landing_module.FALLBACK_LOOKS + 1)]
+    sweeps = [_ground_sweep(ne, 40.0, crop=True, seed=10 + k) for k, ne in enumerate(fields)]
+    ctx = context(frame(), frame(), *sweeps, pos_ned_m=(0.0, 0.0, -40.0))
+    for k, (n, e) in enumerate(fields):
+        ctx.ledger.add(LedgerSite((n, e, 0.0), Hazard.OFF_ROOF, "from afar", 1, False, label=f"site {k}"))
+    asyncio.run(_parts(ctx)[2].land_at_best("round budget spent"))
+    looked = landing_module.FALLBACK_LOOKS
+    assert [g[:2] for g in _ctl(ctx).gotos] == fields[: looked + 1]
+    assert len(_record(ctx).of("fallback_site")) == looked + 1
 
 
 def test_lander_fallback_is_the_accepted_site_before_any_ledger_site() -> None:

@@ -16,6 +16,8 @@ from companion.recovery.following import SiteFollower
 from companion.recovery.looking import Looker, height_above_surroundings
 from companion.site_ledger import Hazard, LedgerSite, hazard_of
 
+FALLBACK_LOOKS = 3  # sites seen only from afar looked at from overhead before a fallback landing
+
 
 class Lander:
     """The landing and the least bad site (docs/recovery.md, "When it ends without an accepted site").
@@ -51,13 +53,15 @@ class Lander:
     async def land_at_best(self, reason: str, *, measure_here: bool = True) -> Outcome:
         """Land at the accepted site, else at the least bad one measured (:mod:`companion.site_ledger`),
         judging the spot under the vehicle too when sensors allow (``measure_here``); "here" only when
-        nothing at all was measured, and said so. The round's deferred candidate notes are the
-        ledger's sites: the caller has them taken first (``Searcher.observed_or_said``)."""
+        nothing at all was measured, and said so. A site only seen from afar is judged again from
+        overhead before the landing (:meth:`_look_over`): one that proves worse than another is left for
+        the next least bad, up to ``FALLBACK_LOOKS`` sites. The round's deferred candidate notes are
+        the ledger's sites: the caller has them taken first (``Searcher.observed_or_said``)."""
         ctx = self.ctx
         self.follower.forget()  # the site it lands on may not be the one last followed
         if measure_here and ctx.best is None:
             await self._look_around()
-            await self._measure_here()
+            await self._measure_at(None, "here")
         site = self.fallback_site()
         if site is None and not ctx.ledger.sites:
             ctx.say(4, f"{reason} with nothing measured: landing here")
@@ -68,18 +72,51 @@ class Lander:
             ctx.say(
                 4, f"{reason}: landing {where} ({site.hazard.name.lower().replace('_', ' ')}: {site.why})"
             )
-            ctx.record.record_event(
-                "fallback_site",
-                {
-                    "round": ctx.round,
-                    "reason": reason,
-                    "chosen": site.to_json(),
-                    "sites": [s.to_json() for s in ctx.ledger.sites],
-                },
-            )
-            await self.fly_over(site, "the chosen site")
+            self._record_choice(reason, site)
+            if measure_here:
+                site = await self._look_over(reason, site)
+            else:
+                await self.fly_over(site, "the chosen site")
         await self.land()
         return Outcome(State.LANDED, ctx.round, site.ned_m if site is not None else None, reason)
+
+    def _record_choice(self, reason: str, site: LedgerSite, looked_at: LedgerSite | None = None) -> None:
+        ctx = self.ctx
+        event: dict[str, object] = {
+            "round": ctx.round,
+            "reason": reason,
+            "chosen": site.to_json(),
+            "sites": [s.to_json() for s in ctx.ledger.sites],
+        }
+        if looked_at is not None:
+            event["instead_of"] = looked_at.to_json()
+        ctx.record.record_event("fallback_site", event)
+
+    async def _look_over(self, reason: str, site: LedgerSite) -> LedgerSite:
+        """Fly over ``site`` and, when it was only seen from afar (a rank crop, or home), judge it from
+        overhead (the LiDAR's check and the image judgement, as the spot below); when that look makes
+        another site the least bad (a field seen as grass from afar found to be standing crops), say
+        so and go there instead, until a site is looked at and stays the least bad, one was judged
+        close up before, or ``FALLBACK_LOOKS`` were spent. The site landed on."""
+        ctx = self.ctx
+        for _ in range(FALLBACK_LOOKS):
+            if not await self.fly_over(site, "the chosen site") or site.closeup:
+                return site
+            seen = await self._measure_at((site.ned_m[0], site.ned_m[1]), site.label)
+            if seen is None:
+                return site  # no frame: land on what was chosen
+            now = self.fallback_site()
+            if now is None or math.dist(now.ned_m[:2], site.ned_m[:2]) < ctx.ledger.same_site_m:
+                return site
+            ctx.say(
+                4,
+                f"{site.label} from overhead: {seen.hazard.name.lower().replace('_', ' ')} ({seen.why}); "
+                f"landing at {now.label} instead",
+            )
+            self._record_choice(reason, now, seen)
+            site = now
+        await self.fly_over(site, "the chosen site")
+        return site
 
     def fallback_site(self) -> LedgerSite | None:
         """The accepted site, else the ledger's least bad, else None."""
@@ -154,20 +191,23 @@ class Lander:
         candidates = await asyncio.to_thread(self.looker.surface_id, frame, camera)
         await asyncio.to_thread(self.looker.note_candidates, candidates, frame, camera)
 
-    async def _measure_here(self) -> None:
-        """Judge the spot under the vehicle (one frame, no waiting: a missing frame skips it) into the
-        ledger, so that "here" competes with the sites measured before on what is there."""
+    async def _measure_at(self, ne_m: tuple[float, float] | None, label: str) -> LedgerSite | None:
+        """Judge the spot at ``ne_m`` (None: under the vehicle) from one frame (no waiting: a missing
+        frame skips it) into the ledger as a close look labelled ``label``, so that it competes with the
+        sites measured before on what is there; the site as kept, or None when nothing was measured."""
         ctx = self.ctx
         try:
             frame = await ctx.frames()
         except FrameUnavailable:
-            return
+            return None
         n, e, d = ctx.tm.state.pos_ned_m
+        if ne_m is not None:
+            n, e = ne_m
         check = await asyncio.to_thread(check_site, frame.lidar_frd, frame.pos_ned_m, frame.quat_wxyz, (n, e))
         rng = frame.rangefinder_m if math.isfinite(frame.rangefinder_m) else ctx.tm.state.rangefinder_m
         ground_d = -check.surface_up_m if check.measured else d + rng
         if not math.isfinite(ground_d):
-            return
+            return None
         target = (n, e, ground_d)
         up_m = height_above_surroundings(frame, check) if check.measured else None
         kinds = await asyncio.to_thread(self.looker.judge, frame, check, target, up_m, False)
@@ -178,13 +218,13 @@ class Lander:
             strip=False,
             judged=check.measured or frame.image_rgb is not None,
         )
-        ctx.ledger.add(
+        return ctx.ledger.add(
             LedgerSite(
                 target,
                 hazard,
                 ", ".join(kinds) or "nothing seen against it",
                 ctx.round,
                 True,
-                label="here",
+                label=label,
             )
         )
