@@ -358,3 +358,76 @@ def test_the_final_approach_is_not_stopped_below_the_go_around_floor(monkeypatch
     assert asyncio.run(rec._confirm_and_descend((0.0, 0.0, 0.0), ground)) is True
     assert landings == ["landed"]
     assert len(watched) == 1  # the look before the approach only
+
+
+def _people_px(
+    frame: Any, people_ne_m: list[tuple[float, float]], down_m: float
+) -> tuple[tuple[float, float], ...]:
+    """Where people standing at ``people_ne_m`` (on the level ``down_m``) appear in ``frame``'s image."""
+    from companion.guidance.frames import PinholeCamera, quat_to_matrix
+
+    camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
+    rel = np.array([(n, e, down_m) for n, e in people_ne_m]) - np.asarray(frame.pos_ned_m)
+    uv, front = camera.project_frd(rel @ quat_to_matrix(frame.quat_wxyz))
+    assert front.all()
+    return tuple((float(u), float(v)) for u, v in uv)
+
+
+def test_a_point_aside_from_people_is_the_nearest_clear_one_on_the_same_surface() -> None:
+    """Two people 3-4 m from a site on a wide field (30 m from its edge): the point stepped aside to is
+    at least the margin and ASIDE_CLEAR_M from both, within the field less ASIDE_EDGE_KEEP_M, and no
+    farther than it must be; on a small surface, or with the people's places unknown, there is none."""
+    from companion.guidance.frames import PinholeCamera
+    from companion.recovery.core import ASIDE_CLEAR_M, ASIDE_EDGE_KEEP_M
+    from tests.recovery_fakes import context, frame
+
+    seen_from = frame(pos_ned_m=(0.0, 0.0, -30.0), camera=PinholeCamera.from_hfov(640, 480, 90.0))
+    people = [(3.0, 2.0), (4.0, -1.0)]
+    seen = PeopleSeen(6, 3.6, 1.0, _people_px(seen_from, people, 0.0))
+    ctx = context(seen_from)
+    looker = looking_module.Looker(ctx, reasoner=None, onboard=None, plan=None)  # type: ignore[arg-type]
+    field = Candidate(0, (0, 0, 10, 10), (5.0, 5.0), edge_distance_m=30.0, site_ned_m=(0.0, 0.0, 0.0))
+    aside = looker.aside_from_people(seen, seen_from, (0.0, 0.0, 0.0), field)
+    assert aside is not None
+    need = ctx.p.people_margin_m + ASIDE_CLEAR_M
+    assert min(math.dist(aside[:2], p) for p in people) >= need - 1e-6
+    assert math.hypot(aside[0], aside[1]) <= 30.0 - ASIDE_EDGE_KEEP_M
+    assert math.hypot(aside[0], aside[1]) <= need - 2.0  # away from both: less than the margin itself
+    assert aside[2] == 0.0
+    small = Candidate(0, (0, 0, 10, 10), (5.0, 5.0), edge_distance_m=8.0, site_ned_m=(0.0, 0.0, 0.0))
+    assert looker.aside_from_people(seen, seen_from, (0.0, 0.0, 0.0), small) is None
+    unplaced = PeopleSeen(6, 3.6, 1.0)
+    assert looker.aside_from_people(unplaced, seen_from, (0.0, 0.0, 0.0), field) is None
+
+
+def test_the_machine_steps_aside_from_people_on_a_wide_field_and_descends_there(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """People 3 m from a site on a field 40 m from its edge: instead of holding for them the vehicle
+    flies level to a point clear of them (said, recorded "step aside" with where), looks again there
+    twice without anyone, and that point becomes the site it descends onto."""
+
+    async def settle(_target: Any) -> Any:
+        raise _Stop
+
+    from tests.recovery_fakes import frame
+
+    seen_from = frame(pos_ned_m=(0.0, 0.0, -50.0), rangefinder_m=50.0)
+    people = PeopleSeen(3, 3.0, 1.0, _people_px(seen_from, [(3.0, 0.0)], 0.0))
+    quiet = PeopleSeen(0, None, 1.0)
+    rec, watched = _descent_on_fakes(monkeypatch, [people, quiet, quiet], settle)
+    ctx = rec.ctx
+    field = Candidate(0, (0, 0, 10, 10), (5.0, 5.0), height_above_m=0.1, edge_distance_m=40.0,
+                      site_ned_m=(0.0, 0.0, 0.0))  # fmt: skip
+    with pytest.raises(_Stop):
+        asyncio.run(rec._confirm_and_descend((0.0, 0.0, 0.0), field))
+    (event,) = [f for k, f in ctx.record.events if k == "people_watch"]
+    assert event["action"] == "step aside"
+    aside = tuple(event["aside_ned_m"])
+    assert math.dist(aside[:2], (3.0, 0.0)) >= ctx.p.people_margin_m
+    assert ctx.ctl.gotos[0] == pytest.approx((aside[0], aside[1], -50.0), abs=0.01)
+    assert ctx.best is not None
+    assert ctx.best.ned_m == pytest.approx(aside, abs=0.01)
+    assert any(t.startswith("Landfall: site 0: a person 3 m from the site") and t.endswith("m aside")
+               for t in ctx.announce.texts)  # fmt: skip
+    assert watched == [people, quiet, quiet]

@@ -36,11 +36,13 @@ PERSON = "person"
 @dataclass(frozen=True, slots=True)
 class PeopleSeen:
     """What :func:`people_near` found: person cells within the margin, the nearest one's distance from
-    the site (metres; None when none), and the share of the margin's disc the frame showed."""
+    the site (metres; None when none), the share of the margin's disc the frame showed, and where in
+    the image each person cell is (pixel centres u, v: where to step aside from)."""
 
     cells: int
     nearest_m: float | None
     seen_share: float
+    cells_px: tuple[tuple[float, float], ...] = ()
 
     def phrase(self, margin_m: float) -> str:
         if not self.cells:
@@ -74,6 +76,7 @@ def people_near(
     tile = max(MIN_TILE_PX, round(TILE_M * px_per_m))
     nearest = math.inf
     cells = 0
+    where: list[tuple[float, float]] = []
     for ty in _starts(y0, y1, tile):
         for tx in _starts(x0, x1, tile):
             part = image[ty : min(ty + tile, y1), tx : min(tx + tile, x1)]
@@ -94,7 +97,8 @@ def people_near(
             cells += int(inside.sum())
             if inside.any():
                 nearest = min(nearest, float(d[inside].min()))
-    return PeopleSeen(cells, None if cells == 0 else nearest, _seen_share(u, v, reach, w, h))
+                where.extend(zip(cu[inside].tolist(), cv[inside].tolist(), strict=True))
+    return PeopleSeen(cells, None if cells == 0 else nearest, _seen_share(u, v, reach, w, h), tuple(where))
 
 
 def _starts(a: int, b: int, tile: int) -> list[int]:

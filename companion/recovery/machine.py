@@ -45,7 +45,9 @@ from companion.guidance.frames import PinholeCamera, compass_point
 from companion.perception.site_check import check_site
 from companion.perception.surface_id import Candidate
 from companion.reasoning.base import Reasoner
+from companion.reasoning.people_watch import PeopleSeen
 from companion.recovery.core import (
+    ASIDE_MAX,
     GO_AROUND_M,
     PEOPLE_LOOK_AGAIN_S,
     QUIET_LOOKS,
@@ -407,11 +409,41 @@ class Recovery:
             await observing
         return await self._confirm_and_descend(target, choice)
 
+    async def _step_aside(
+        self,
+        seen: PeopleSeen,
+        frame: Any,
+        target: tuple[float, float, float],
+        aside: tuple[float, float, float],
+        choice: Candidate,
+    ) -> tuple[float, float, float]:
+        """Fly level to ``aside`` (:meth:`Looker.aside_from_people`), the site followed from there on
+        in the frame the people were seen in; the target as it ended (``aside``, or where the vehicle
+        stopped when it was not reached)."""
+        ctx = self.ctx
+        self.looker.stepped_aside(seen, target, aside, choice)
+        self.follower.follow_from(frame, aside)
+        self._descending = (aside, choice)
+        n, e, d = ctx.tm.state.pos_ned_m
+        try:
+            await ctx.ctl.goto(
+                aside[0],
+                aside[1],
+                d,
+                tolerance_m=ctx.p.arrival_tolerance_m,
+                speed_m_s=ctx.p.arrival_speed_m_s,
+                timeout_s=ctx.p.move_timeout(math.dist((n, e), aside[:2])),
+            )
+        except TargetTimeout as exc:
+            ctx.say(4, f"site {choice.index}: not reached aside ({exc.error_m:.1f} m off)")
+        return aside
+
     async def _confirm_and_descend(self, target: tuple[float, float, float], choice: Candidate) -> bool:
         ctx = self.ctx
         self._descending = (target, choice)  # what a link loss resumes: this site, confirmed again
         people_since: float | None = None  # when people were first seen near the site, autopilot seconds
         quiet_looks = 0  # looks in a row without anyone since people were seen there
+        asides = 0  # steps aside from people on this site
         while True:
             frame, check = await self.looker.measure_site(target)
             followed = await self.follower.follow(frame, target)
@@ -439,6 +471,13 @@ class Recovery:
                     now = ctx.clock_s()
                     people_since = now if people_since is None else people_since
                     quiet_looks = 0
+                    aside = None
+                    if asides < ASIDE_MAX:
+                        aside = self.looker.aside_from_people(seen, frame, target, choice)
+                    if aside is not None:  # room on the same open surface: there instead, looked at again
+                        asides += 1
+                        target = await self._step_aside(seen, frame, target, aside, choice)
+                        continue
                     if not await self.looker.hold_for_people(seen, target, choice, now - people_since):
                         return False
                     continue
