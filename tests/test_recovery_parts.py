@@ -350,6 +350,47 @@ def test_recovery_without_any_frame_lands_where_it_is_and_says_so() -> None:
     assert _record(ctx).of("state")[-1]["state"] == "landed"
 
 
+def test_an_autopilot_failsafe_during_the_fallback_landing_is_met_as_in_a_round(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """PX4's offboard-loss failsafe while the vehicle flies to the least bad site: not an abort. The
+    failsafe policy runs (here it clears) and the landing at the least bad site starts again; a
+    failsafe that lands the vehicle ends the recovery with the autopilot's outcome instead."""
+    from companion.control import AutopilotFailsafe
+
+    ctx = context()
+    rec = _recovery(ctx)
+    tries: list[str] = []
+    landed = Outcome(State.LANDED, 3, (1.0, 2.0, 0.0), "search ended")
+
+    async def land_at_best(reason: str, *, measure_here: bool = True) -> Outcome:
+        tries.append(reason)
+        if len(tries) == 1:
+            raise AutopilotFailsafe(196608)
+        return landed
+
+    met: list[int] = []
+
+    async def cleared(exc: AutopilotFailsafe) -> Outcome | None:
+        met.append(exc.custom_mode)
+        return None
+
+    monkeypatch.setattr(rec.lander, "land_at_best", land_at_best)
+    monkeypatch.setattr(rec.handover, "on_failsafe", cleared)
+    assert asyncio.run(rec._land_at_best("search ended")) is landed
+    assert (tries, met) == (["search ended", "search ended"], [196608])
+
+    handed = Outcome(State.ABORTED, 3, None, "the autopilot lands")
+
+    async def lands(exc: AutopilotFailsafe) -> Outcome | None:
+        return handed
+
+    tries.clear()
+    monkeypatch.setattr(rec.handover, "on_failsafe", lands)
+    assert asyncio.run(rec._land_at_best("search ended")) is handed
+    assert tries == ["search ended"]
+
+
 def test_recovery_search_flies_the_height_and_lidar_range_of_its_params() -> None:
     """The search plan is built from the recovery's parameters (``recovery.search_agl_m``,
     ``perception.lidar_range_m``), not from defaults of its own."""

@@ -268,9 +268,20 @@ class Recovery:
 
     async def _land_at_best(self, reason: str, *, measure_here: bool = True) -> Outcome:
         """:meth:`Lander.land_at_best` once the round's deferred work is done (the candidates noted
-        from afar are sites to land at)."""
+        from afar are sites to land at). The autopilot's own failsafe or a lost link on the way is met
+        by the same policies as in a round (:class:`Handover`): ridden out or re-engaged (a bounded
+        number of times), and the landing at the least bad site starts again from where the vehicle
+        is; a failsafe that lands or flies home keeps the vehicle."""
         await self.searcher.observed_or_said()
-        return await self.lander.land_at_best(reason, measure_here=measure_here)
+        while True:
+            try:
+                return await self.lander.land_at_best(reason, measure_here=measure_here)
+            except AutopilotFailsafe as exc:
+                ended = await self.handover.on_failsafe(exc)
+            except TelemetryLost as exc:
+                ended = await self.handover.ride_out_link_loss(exc)
+            if ended is not None:
+                return ended
 
     async def _engage_and_look(self) -> None:
         """Take control and ask for the first round's frame at the same time: the frame (render,
