@@ -174,7 +174,9 @@ def _note(kind: str, body: dict[str, Any]) -> str:
     if kind == "fallback_site":
         instead = body.get("instead_of")
         if isinstance(instead, dict):  # a site seen from afar proved worse from overhead
-            chosen = body.get("chosen") if isinstance(body.get("chosen"), dict) else {}
+            chosen = body.get("chosen")
+            if not isinstance(chosen, dict):
+                chosen = {}
             return (
                 f"{instead.get('label', 'the site')} from overhead: {instead.get('hazard', '?')}; "
                 f"landing at {chosen.get('label', 'the next site')} instead"
