@@ -117,6 +117,7 @@ def test_the_recovery_holds_for_people_then_strikes_the_site_off(monkeypatch: py
         round=2,
         record=record,
         ledger=ledger,
+        best=SimpleNamespace(ned_m=(10.5, 20.5, -0.2)),  # confirmed here before the people came
         say=lambda _sev, text: said.append(text),
         strike_off=lambda target, _choice: struck.append(target),
     )
@@ -126,6 +127,7 @@ def test_the_recovery_holds_for_people_then_strikes_the_site_off(monkeypatch: py
     site = Candidate(index=1, box_px=(0, 0, 10, 10), centre_px=(5.0, 5.0))
     assert asyncio.run(hold(looker, seen, target, site, 4.0)) is True  # type: ignore[arg-type]
     assert said[-1] == "site 1: a person 6 m from the site (within 10 m): holding"
+    assert ctx.best is None  # no longer the site confirmed for descent
     assert not struck
     assert asyncio.run(hold(looker, seen, target, site, 21.0)) is False  # type: ignore[arg-type]
     assert struck == [target]

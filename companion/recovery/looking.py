@@ -561,13 +561,15 @@ def _record_watch(
     aside: tuple[float, float, float] | None = None,
 ) -> None:
     """A ``people_watch`` event: what the look saw near the site, how long the vehicle has waited, and
-    what it does (``pause``, ``hold``, ``another site``). The site ledger keeps the site as obstructed
-    by people: its confirmation said nothing of them, and a landing where nothing else was accepted
-    must not come down among them (its next confirmation and a quiet watch make it the accepted
-    site again)."""
+    what it does (``pause``, ``step aside``, ``hold``, ``another site``). The site ledger keeps the site
+    as obstructed by people, and the site confirmed for descent, when it is this one, is forgotten: its
+    confirmation said nothing of them, and a landing where nothing else was accepted must not come down
+    among them (its next confirmation and a quiet watch make it the accepted site again)."""
     why, label = seen.phrase(ctx.p.people_margin_m), f"site {choice.index}"
     site = LedgerSite(target, Hazard.OBSTRUCTED, why, ctx.round, True, choice.edge_distance_m, label, choice)
     ctx.ledger.add(site)
+    if ctx.best is not None and math.dist(ctx.best.ned_m[:2], target[:2]) < ctx.p.rejected_radius_m:
+        ctx.best = None  # no longer the site confirmed for descent: not a fallback's first choice either
     ctx.record.record_event(
         "people_watch",
         {
