@@ -27,7 +27,7 @@ from companion.perception.surface_id import (
 )
 from companion.reasoning.base import ConfirmRequest, Decision, Ranking, RankRequest, Reasoner
 from companion.reasoning.onboard import OnboardReasoner, lidar_kind
-from companion.reasoning.people_watch import PeopleSeen, people_near
+from companion.reasoning.people_watch import PeopleSeen, people_in_frame
 from companion.recovery.core import (
     ASIDE_CLEAR_M,
     ASIDE_EDGE_KEEP_M,
@@ -397,7 +397,7 @@ class Looker:
         u, v = float(uv[0, 0]), float(uv[0, 1])
         if not front[0] or dist <= 0 or not (0 <= u < camera.width and 0 <= v < camera.height):
             return None
-        return await asyncio.to_thread(people_near, net, frame.image_rgb, (u, v), camera.fx / dist, margin)
+        return await asyncio.to_thread(people_in_frame, net, frame, camera, (u, v), camera.fx / dist, margin)
 
     def paused_for_people(
         self,
