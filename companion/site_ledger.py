@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import enum
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -126,10 +126,16 @@ class SiteLedger:
         self.sites.append(site)
         return site
 
-    def least_bad(self, here_ne_m: tuple[float, float] | None = None) -> LedgerSite | None:
-        """The site to land on when nothing better will come (module docstring), or None when the
-        ledger is empty."""
-        if not self.sites:
+    def least_bad(
+        self,
+        here_ne_m: tuple[float, float] | None = None,
+        *,
+        allowed: Callable[[LedgerSite], bool] | None = None,
+    ) -> LedgerSite | None:
+        """The site to land on when nothing better will come (module docstring), among those
+        ``allowed`` (all by default: e.g. not beyond the autopilot's fence), or None when there is none."""
+        sites = [s for s in self.sites if allowed is None or allowed(s)]
+        if not sites:
             return None
 
         def key(s: LedgerSite) -> tuple[float, ...]:
@@ -137,7 +143,7 @@ class SiteLedger:
             dist = math.dist(s.ned_m[:2], here_ne_m) if here_ne_m is not None else 0.0
             return (float(s.hazard), 0.0 if s.closeup else 1.0, -min(edge, 8.0), dist)
 
-        return min(self.sites, key=key)
+        return min(sites, key=key)
 
     def near(self, ne_m: tuple[float, float]) -> LedgerSite | None:
         """The site recorded within ``same_site_m`` of ``ne_m``, if any."""

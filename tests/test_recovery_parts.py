@@ -275,6 +275,26 @@ def test_lander_lands_on_a_site_that_stays_the_least_bad_from_overhead_and_bound
     assert len(_record(ctx).of("fallback_site")) == looked + 1
 
 
+def test_lander_never_falls_back_to_a_site_beyond_the_autopilots_fence() -> None:
+    """A field seen 140 m from home with a 130 m fence: PX4 refuses setpoints beyond its fence and
+    leaves offboard, over and over (a farmland launch looped so until it timed out). The nearer car
+    park, worse on its own, is the fallback; with no fence known the field is again."""
+    from companion.fence import Fence
+
+    ctx = context(pos_ned_m=(100.0, 0.0, -50.0))
+    ctx.ledger.add(LedgerSite((140.0, 0.0, 0.0), Hazard.OFF_ROOF, "a field", 1, True, label="site 0"))
+    ctx.ledger.add(LedgerSite((60.0, 0.0, 0.0), Hazard.OBSTRUCTED, "a car park", 1, True, label="site 1"))
+    ctx.ctl.fence = Fence(130.0, "test")  # keeps sites within 115 m of home
+    lander = _parts(ctx)[2]
+    site = lander.fallback_site()
+    assert site is not None
+    assert site.label == "site 1"
+    ctx.ctl.fence = None
+    site = lander.fallback_site()
+    assert site is not None
+    assert site.label == "site 0"
+
+
 def test_lander_fallback_is_the_accepted_site_before_any_ledger_site() -> None:
     ctx = context()
     ctx.ledger.add(LedgerSite((0.0, 5.0, 0.0), Hazard.DOUBTED, "a bit rough", 1, True))
@@ -389,6 +409,35 @@ def test_an_autopilot_failsafe_during_the_fallback_landing_is_met_as_in_a_round(
     monkeypatch.setattr(rec.handover, "on_failsafe", lands)
     assert asyncio.run(rec._land_at_best("search ended")) is handed
     assert tries == ["search ended"]
+
+
+def test_a_fallback_landing_interrupted_again_and_again_ends_in_the_autopilots_land_mode_here(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The failsafe clears each time and comes back at once (a setpoint the autopilot refuses): after
+    MAX_REENGAGE + 1 tries the companion asks for the autopilot's land mode where the vehicle is
+    instead of trying the same site forever."""
+    from companion.control import AutopilotFailsafe
+    from companion.recovery.core import MAX_REENGAGE
+
+    ctx = context()
+    rec = _recovery(ctx)
+    tries: list[str] = []
+
+    async def land_at_best(reason: str, *, measure_here: bool = True) -> Outcome:
+        tries.append(reason)
+        raise AutopilotFailsafe(196608)
+
+    async def cleared(exc: AutopilotFailsafe) -> Outcome | None:
+        return None
+
+    monkeypatch.setattr(rec.lander, "land_at_best", land_at_best)
+    monkeypatch.setattr(rec.handover, "on_failsafe", cleared)
+    outcome = asyncio.run(rec._land_at_best("search ended"))
+    assert len(tries) == MAX_REENGAGE + 1
+    assert outcome == Outcome(State.LANDED, 0, None, "search ended, then landed where it was")
+    assert _ctl(ctx).lands == [Mode.LAND]
+    assert any(f"interrupted {MAX_REENGAGE + 1} times: landing here" in t for t in _said(ctx))
 
 
 def test_recovery_search_flies_the_height_and_lidar_range_of_its_params() -> None:

@@ -223,10 +223,12 @@ class RecoveryContext:
     def outside_fence(self, c: Candidate) -> bool:
         """Whether ``c``'s site lies beyond what the autopilot's circular fence leaves the recovery
         (:mod:`companion.fence`): flying there would hand the vehicle to the fence's action."""
+        return c.site_ned_m is not None and self.beyond_fence(c.site_ned_m)
+
+    def beyond_fence(self, ned_m: tuple[float, float, float]) -> bool:
+        """:meth:`outside_fence` for a place (NED metres): False without a known fence."""
         fence = self.ctl.fence
-        if fence is None or c.site_ned_m is None:
-            return False
-        return not fence.inside((c.site_ned_m[0], c.site_ned_m[1]), self.home_ne_m())
+        return fence is not None and not fence.inside((ned_m[0], ned_m[1]), self.home_ne_m())
 
     def transit_d(self, to_ned: tuple[float, float, float]) -> float:
         """The height (NED down, metres) a level move from here to ``to_ned`` flies at: where the vehicle

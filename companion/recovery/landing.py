@@ -132,7 +132,8 @@ class Lander:
                 label=label,
             )
         n, e, _ = ctx.tm.state.pos_ned_m
-        site = ctx.ledger.least_bad((n, e))
+        # a site beyond the autopilot's fence is none: its setpoints are refused (PX4 then leaves offboard)
+        site = ctx.ledger.least_bad((n, e), allowed=lambda s: not ctx.beyond_fence(s.ned_m))
         if site is not None and site.hazard >= Hazard.WATER:
             home = self.home_site((n, e))
             if home is not None:

@@ -49,6 +49,7 @@ from companion.reasoning.people_watch import PeopleSeen
 from companion.recovery.core import (
     ASIDE_MAX,
     GO_AROUND_M,
+    MAX_REENGAGE,
     PEOPLE_LOOK_AGAIN_S,
     QUIET_LOOKS,
     SEVERITY_CRITICAL,
@@ -273,7 +274,7 @@ class Recovery:
         number of times), and the landing at the least bad site starts again from where the vehicle
         is; a failsafe that lands or flies home keeps the vehicle."""
         await self.searcher.observed_or_said()
-        while True:
+        for _ in range(MAX_REENGAGE + 1):
             try:
                 return await self.lander.land_at_best(reason, measure_here=measure_here)
             except AutopilotFailsafe as exc:
@@ -282,6 +283,11 @@ class Recovery:
                 ended = await self.handover.ride_out_link_loss(exc)
             if ended is not None:
                 return ended
+        # interrupted again and again (a setpoint the autopilot keeps refusing): its land mode here
+        self.ctx.say(4, f"{reason}: the landing was interrupted {MAX_REENGAGE + 1} times: landing here")
+        self.follower.forget()
+        await self.lander.final_land()
+        return Outcome(State.LANDED, self.ctx.round, None, f"{reason}, then landed where it was")
 
     async def _engage_and_look(self) -> None:
         """Take control and ask for the first round's frame at the same time: the frame (render,
