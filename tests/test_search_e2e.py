@@ -56,12 +56,13 @@ def test_launch_over_a_river_searches_and_lands_on_a_roof(
 ) -> None:
     """Launched 110 m over the middle of a 170 m river, every site in view is water or a road: the
     companion searches (legs a view wide, away from the water the camera shows) and lands on one of
-    the clear roofs 190 m east, never on the water or a road."""
+    the clear roofs 190 m east or on the wide park beyond the east bank (open ground clear of people is
+    a site of its own: docs/recovery.md), never on the water or a road."""
     record = tmp_path / "record"
     _rig, td, log = _fly(start_rig, record, "GPS spoofing", "high")
-    assert td["surface"] == "rooftop_clear", log[-3000:]
+    assert td["surface"] in ("rooftop_clear", "park"), log[-3000:]
     assert td["safe"] is True
-    assert float(td["pos_ned_m"][1]) > 180.0  # type: ignore[index]  # the east roofs
+    assert float(td["pos_ned_m"][1]) > 85.0  # type: ignore[index]  # beyond the river's east bank
     legs = _record(record, "search_leg")
     assert legs, log[-3000:]
     first = legs[0]
