@@ -263,7 +263,7 @@ def test_a_five_second_link_loss_during_descent_resumes_on_the_same_site(
 
     # "descending 62 m, <rationale>": the first descent step
     rig, _td, log = _land_through_a_link_blackout(
-        relays, alarmed, first_step="m, ", step_timeout_s=120, touchdown_timeout_s=200
+        relays, alarmed, first_step="descending ", step_timeout_s=120, touchdown_timeout_s=200
     )
     assert "link to the autopilot lost (no LOCAL_POSITION_NED for 3 s)" in log
     back = float(re.search(r"link back after ([0-9.]+) s", log).group(1))  # type: ignore[union-attr]

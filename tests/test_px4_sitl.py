@@ -381,7 +381,7 @@ def test_a_lost_companion_link_hands_real_px4_to_its_own_failsafe_then_the_compa
 
     # "descending 70 m, site clear: ...": the first step
     rig, td, log = _land_through_a_link_blackout(
-        relays, alarmed, first_step="m, site clear", step_timeout_s=300, touchdown_timeout_s=400
+        relays, alarmed, first_step="descending ", step_timeout_s=300, touchdown_timeout_s=400
     )
     _wait_event(rig.sim, "disarmed", 60)
     timed = [(e["t_s"], e["mode"]) for e in rig.sim.events("mode")]

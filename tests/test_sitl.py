@@ -354,7 +354,7 @@ def test_a_five_second_link_loss_on_real_arducopter_holds_then_lands_on_the_same
 
     # "descending 62 m, site clear: ...": the first step
     rig, _td, _log = _land_through_a_link_blackout(
-        relays, alarmed, first_step="m, site clear", step_timeout_s=300, touchdown_timeout_s=400
+        relays, alarmed, first_step="descending ", step_timeout_s=300, touchdown_timeout_s=400
     )
     _wait_event(rig.sim, "disarmed", 60)
     modes = [e.get("mode") for e in rig.sim.events("mode")]
