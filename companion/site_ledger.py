@@ -11,8 +11,11 @@ then ranks them by :class:`Hazard`, worst kinds last:
 ``ACCEPTED``    confirmed for descent: LiDAR clear and the reasoner's yes
 ``DOUBTED``     a roof whose LiDAR check was clear, refused only on the image's softer doubts (a hazard
                 score, a lone "no"), or never confirmed but with nothing seen against it
-``OFF_ROOF``    street level with no road markings or asphalt seen: a sidewalk, a plaza, a car park, a
-                lawn (people, parked cars, but no traffic lanes)
+``OFF_ROOF``    street level with no road markings or asphalt seen, judged as open ground: a lawn, a
+                field, a yard, a car park in open country; or open ground too small or too near its edge
+                (``cramped``)
+``STREET``      street level among buildings, refused as such (``street_level``): a sidewalk, a plaza,
+                where people and traffic come back
 ``OBSTRUCTED``  the LiDAR found an object in the rotor disc, rough ground or an edge; people, vehicles
                 or rooftop objects, pipes, trees or a tree's canopy on it; or the image judgement is sure it
                 is no clear roof (``not_clear``: clear-site confidence under 0.2), whatever it could name
@@ -23,9 +26,10 @@ then ranks them by :class:`Hazard`, worst kinds last:
 
 Within one kind, a site judged at confirmation (a close-up) comes before one only seen from afar, a
 site farther from its edge before a nearer one, and then the nearer to the vehicle. So water or a
-traffic lane is chosen only when nothing else was seen, and a sidewalk or a car park comes before a
-road. A site measured again (within ``same_site_m``) takes the newer verdict of the same or a closer
-look: a confirmation overrides what the rank crop suggested, never the other way round.
+traffic lane is chosen only when nothing else was seen, a lawn or a field before a sidewalk among
+buildings, and a sidewalk or a car park before a road. A site measured again (within
+``same_site_m``) takes the newer verdict of the same or a closer look: a confirmation overrides what
+the rank crop suggested, never the other way round.
 """
 
 from __future__ import annotations
@@ -45,10 +49,11 @@ class Hazard(enum.IntEnum):
     ACCEPTED = 0
     DOUBTED = 1
     OFF_ROOF = 2
-    OBSTRUCTED = 3
-    UNKNOWN = 4
-    TRAFFIC = 5
-    WATER = 6
+    STREET = 3
+    OBSTRUCTED = 4
+    UNKNOWN = 5
+    TRAFFIC = 6
+    WATER = 7
 
     @property
     def acceptable(self) -> bool:
@@ -77,8 +82,10 @@ def hazard_of(
         return Hazard.UNKNOWN
     if seen & _OBSTRUCTED or ("vegetation" in seen and not street_level):
         return Hazard.OBSTRUCTED  # vegetation up on a roof: tree crowns
-    if street_level:
-        return Hazard.OFF_ROOF  # a lawn at street level is vegetation, and as good as a plaza
+    if "street_level" in seen:
+        return Hazard.STREET  # a sidewalk or a plaza among buildings: people come back
+    if street_level or "cramped" in seen:
+        return Hazard.OFF_ROOF  # a lawn at street level is vegetation: open ground
     return Hazard.DOUBTED
 
 

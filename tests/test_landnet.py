@@ -524,6 +524,7 @@ def test_landnet_confirm_open_country_field_passes_but_not_among_buildings(
             ConfirmRequest(image, check=check, site_up_m=0.0, site_area_m2=area_m2, site_edge_m=edge_m)
         )
         assert not d.accept
+        assert d.hazards == ("cramped",)  # open ground, but a small one: before a sidewalk in the ledger
         assert f"open ground, but {why}" in d.rationale
     wide = ConfirmRequest(image, check=check, site_up_m=0.0, site_area_m2=3000.0, site_edge_m=12.0)
     assert judge.confirm_sync(wide).accept

@@ -55,8 +55,10 @@ def _looker(ctx: RecoveryContext, reasoner: FakeReasoner | None = None) -> Looke
     )
 
 
-def _parts(ctx: RecoveryContext) -> tuple[Looker, SiteFollower, Lander, Searcher]:
-    plan = SearchPlanner(ctx.criticality)
+def _parts(
+    ctx: RecoveryContext, plan: SearchPlanner | None = None
+) -> tuple[Looker, SiteFollower, Lander, Searcher]:
+    plan = plan or SearchPlanner(ctx.criticality)
     looker = Looker(ctx, reasoner=FakeReasoner(), onboard=OnboardReasoner(), plan=plan)
     follower = SiteFollower(ctx)
     lander = Lander(ctx, looker=looker, follower=follower)
@@ -251,6 +253,51 @@ def test_lander_looks_at_a_site_seen_from_afar_and_leaves_crops_for_the_next_lea
     assert kept is not None
     assert (kept.hazard, kept.closeup) == (Hazard.OFF_ROOF, True)
     assert ctx.state is State.LANDED
+
+
+def _paving_over(site_ne_m: tuple[float, float], height_m: float) -> Any:
+    """A level frame ``height_m`` over ``site_ne_m``: light, even paving in a 640 x 480 camera (90 deg)
+    and a LiDAR that finds it level."""
+    from companion.guidance.frames import PinholeCamera
+
+    image = np.clip(np.random.default_rng(5).normal(150, 6, (480, 640, 3)), 0, 255).astype(np.uint8)
+    sweep = _ground_sweep(site_ne_m, height_m, crop=False, seed=6)
+    return frame(
+        image=image,
+        lidar_frd=sweep.lidar_frd,
+        pos_ned_m=sweep.pos_ned_m,
+        rangefinder_m=height_m,
+        camera=PinholeCamera.from_hfov(640, 480, 90.0),
+    )
+
+
+def test_lander_judges_a_site_from_overhead_as_a_confirmation_would_among_buildings() -> None:
+    """Two street-level sites seen only from afar with nothing against them, the nearer among roofs the
+    LiDAR measured, the other in open country 300 m away. From overhead the same even paving is a
+    sidewalk or a plaza among buildings (refused as street level: people come back), and level open
+    ground out in the country: the lander leaves the first for the second and lands there. (Hillside,
+    launch 9: the first was judged as if in open country and the vehicle landed on a sidewalk.)"""
+    from tests.test_search import Frame, sweep
+
+    plan = SearchPlanner(Criticality.HIGH)
+    pos = (0.0, 0.0, -60.0)
+    plan.observe(Frame(pos, sweep(pos, [(40.0, 60.0, -10.0, 10.0, 12.0)]), 60.0))  # a roof 40-60 m N
+    ctx = context(
+        frame(), frame(), _paving_over((30.0, 0.0), 40.0), _paving_over((0.0, 300.0), 40.0), pos_ned_m=pos
+    )
+    far = "nothing seen against it from afar"
+    ctx.ledger.add(LedgerSite((30.0, 0.0, 0.0), Hazard.OFF_ROOF, far, 1, False, label="site 0"))
+    ctx.ledger.add(LedgerSite((0.0, 300.0, 0.0), Hazard.OFF_ROOF, far, 2, False, label="site 3"))
+    outcome = asyncio.run(_parts(ctx, plan)[2].land_at_best("search ended (window)"))
+    assert outcome.site_ned_m is not None
+    assert outcome.site_ned_m[:2] == (0.0, 300.0)
+    first, second = _record(ctx).of("fallback_site")
+    assert (second["chosen"]["label"], second["instead_of"]["label"]) == ("site 3", "site 0")
+    assert second["instead_of"]["hazard"] == "street"
+    assert "street_level" in second["instead_of"]["why"]
+    kept = ctx.ledger.near((0.0, 300.0))
+    assert kept is not None
+    assert (kept.hazard, kept.closeup) == (Hazard.OFF_ROOF, True)
 
 
 def test_lander_lands_on_a_site_that_stays_the_least_bad_from_overhead_and_bounds_its_looks() -> None:

@@ -93,7 +93,9 @@ def test_battery_at_its_reserve_lands_at_the_least_bad_site_at_once(
     assert ended[0]["reason"].startswith("battery")
     assert "recovery ended: landed after 1 rounds (search ended (battery" in log
     fallback = _record(record, "fallback_site")[0]
-    order = ["accepted", "doubted", "off_roof", "obstructed", "unknown", "traffic", "water"]
+    from companion.site_ledger import Hazard
+
+    order = [h.name.lower() for h in sorted(Hazard)]
     assert len(fallback["sites"]) >= 2  # the last look's candidates, and the spot below
     assert order.index(fallback["chosen"]["hazard"]) == min(
         order.index(x["hazard"]) for x in fallback["sites"]

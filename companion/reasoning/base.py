@@ -144,6 +144,7 @@ HAZARD_KINDS = (
     "markings",  # lane markings (a painted line at street level or on a deck)
     "street_asphalt",  # asphalt at street level or on a deck: a road, a car park
     "street_level",  # street level among buildings: sidewalks, plazas (people), kept as a last resort
+    "cramped",  # open ground, but too small or too near its edge (where people pass): a small garden
     "raised",  # people, vehicles, rooftop objects
     "raised_lines",  # pipes, rails
     "hazard",  # the total hazard score over its limit, or the net's clear-site confidence under its threshold

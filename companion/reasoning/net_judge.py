@@ -171,7 +171,7 @@ def confirm_reading(
         if not _open_ground(r, p, groups, tint):
             vetoes.append(_not_open_ground(r, groups, vegetation, tint))
         elif (cramped := _cramped(request, p)) is not None:
-            vetoes.append(("street_level", cramped))
+            vetoes.append(("cramped", cramped))
         elif open_among:
             note = (
                 f" (open ground among buildings: {request.site_area_m2:,.0f} m2 of it, "

@@ -10,7 +10,7 @@ import math
 from companion.control import TargetTimeout
 from companion.guidance.frames import PinholeCamera
 from companion.perception.site_check import check_site
-from companion.perception.surface_id import ROOF_HEIGHT_M
+from companion.perception.surface_id import ROOF_HEIGHT_M, Candidate
 from companion.recovery.core import FrameUnavailable, Outcome, RecoveryContext, State
 from companion.recovery.following import SiteFollower
 from companion.recovery.looking import Looker, height_above_surroundings
@@ -102,7 +102,7 @@ class Lander:
         for _ in range(FALLBACK_LOOKS):
             if not await self.fly_over(site, "the chosen site") or site.closeup:
                 return site
-            seen = await self._measure_at((site.ned_m[0], site.ned_m[1]), site.label)
+            seen = await self._measure_at((site.ned_m[0], site.ned_m[1]), site.label, site.candidate)
             if seen is None:
                 return site  # no frame: land on what was chosen
             now = self.fallback_site()
@@ -190,12 +190,16 @@ class Lander:
             return
         camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
         candidates = await asyncio.to_thread(self.looker.surface_id, frame, camera)
-        await asyncio.to_thread(self.looker.note_candidates, candidates, frame, camera)
+        await asyncio.to_thread(self.looker.notes_job(candidates, frame, camera))
 
-    async def _measure_at(self, ne_m: tuple[float, float] | None, label: str) -> LedgerSite | None:
+    async def _measure_at(
+        self, ne_m: tuple[float, float] | None, label: str, candidate: Candidate | None = None
+    ) -> LedgerSite | None:
         """Judge the spot at ``ne_m`` (None: under the vehicle) from one frame (no waiting: a missing
         frame skips it) into the ledger as a close look labelled ``label``, so that it competes with the
-        sites measured before on what is there; the site as kept, or None when nothing was measured."""
+        sites measured before on what is there; the site as kept, or None when nothing was measured.
+        It is judged as a confirmation would judge it: among buildings or not, and with the surface's
+        area and edge distance when Surface ID measured it (``candidate``)."""
         ctx = self.ctx
         try:
             frame = await ctx.frames()
@@ -211,7 +215,8 @@ class Lander:
             return None
         target = (n, e, ground_d)
         up_m = height_above_surroundings(frame, check) if check.measured else None
-        kinds = await asyncio.to_thread(self.looker.judge, frame, check, target, up_m, False)
+        among = self.looker.built_up((n, e))
+        kinds = await asyncio.to_thread(self.looker.judge, frame, check, target, up_m, candidate, among)
         hazard = hazard_of(
             kinds,
             accepted=False,

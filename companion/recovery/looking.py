@@ -4,10 +4,11 @@ confirmation, the LiDAR check of a site, and the chosen pixel placed in the worl
 from __future__ import annotations
 
 import asyncio
+import functools
 import itertools
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -235,7 +236,8 @@ class Looker:
         if decision.tier == self.onboard.name or image is None:
             kinds = decision.hazards or ((lidar_kind(check),) if check.measured and not check.clear else ())
         else:  # a remote tier decided: the ledger still wants the onboard tier's view of the site
-            kinds = await asyncio.to_thread(self.judge, frame, check, target, up_m, choice.strip)
+            among = self.built_up((target[0], target[1]))
+            kinds = await asyncio.to_thread(self.judge, frame, check, target, up_m, choice, among)
         hazard = hazard_of(
             kinds,
             accepted=decision.accept,
@@ -316,25 +318,45 @@ class Looker:
         check: SiteCheck,
         target: tuple[float, float, float],
         up_m: float | None,
-        strip: bool,
+        choice: Candidate | None,
+        built_up: bool,
     ) -> tuple[str, ...]:
         """What the onboard tier sees against a site (``Decision.hazards``), from the close-up of
-        ``frame`` around it and the LiDAR check; the LiDAR's kind alone without an image. A worker-
-        thread job."""
+        ``frame`` around it and the LiDAR check, asked as a confirmation of it would be (among
+        buildings or not, ``built_up``: :meth:`built_up`, read on the event loop; the surface's area and
+        edge distance when Surface ID measured it, ``choice``); the LiDAR's kind alone without an image.
+        A worker-thread job."""
         if frame.image_rgb is None:
             return (lidar_kind(check),) if check.measured and not check.clear else ()
         closeup = self.closeup(frame.image_rgb, frame, target)
-        request = ConfirmRequest(closeup, check if check.measured else None, site_up_m=up_m, site_strip=strip)
+        request = ConfirmRequest(
+            closeup,
+            check if check.measured else None,
+            site_up_m=up_m,
+            site_strip=choice is not None and choice.strip,
+            built_up=built_up,
+            site_area_m2=_measured(choice.landable_area_m2) if choice is not None else None,
+            site_edge_m=_measured(choice.edge_distance_m) if choice is not None else None,
+        )
         return self.onboard.confirm_sync(request).hazards
 
-    def note_candidates(self, candidates: list[Candidate], frame: Any, camera: PinholeCamera) -> None:
+    def notes_job(self, candidates: list[Candidate], frame: Any, camera: PinholeCamera) -> Callable[[], None]:
+        """:meth:`note_candidates` as a worker-thread job, whether each site lies among buildings
+        decided now: the search's map is read on the event loop, never from a worker thread."""
+        built = [c.site_ned_m is not None and self.built_up(c.site_ned_m[:2]) for c in candidates]
+        return functools.partial(self.note_candidates, candidates, frame, camera, built)
+
+    def note_candidates(
+        self, candidates: list[Candidate], frame: Any, camera: PinholeCamera, built_up: list[bool]
+    ) -> None:
         """Every measured candidate of a round into the ledger, judged from afar: the onboard tier's
-        view of the frame around its site, as a confirmation would see it (a worker-thread job)."""
-        for c in candidates:
+        view of the frame around its site, as a confirmation would see it (a worker-thread job; each
+        candidate's ``built_up`` from :meth:`notes_job`)."""
+        for c, among in zip(candidates, built_up, strict=True):
             if c.fallback or c.site_ned_m is None:
                 continue
             up_m = c.height_above_m if math.isfinite(c.height_above_m) else None
-            kinds = self.judge(frame, UNMEASURED, c.site_ned_m, up_m, c.strip)
+            kinds = self.judge(frame, UNMEASURED, c.site_ned_m, up_m, c, among)
             hazard = hazard_of(
                 kinds, accepted=False, street_level=not c.elevated and not c.strip, strip=c.strip
             )

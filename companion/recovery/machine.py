@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import functools
 import logging
 import math
 import time
@@ -383,7 +382,7 @@ class Recovery:
         ranking, chosen = await self.looker.rank(candidates, frame)
         choice = candidates[chosen] if chosen is not None else None
         if frame.image_rgb is not None:  # the ledger's view of every candidate from afar
-            notes = functools.partial(self.looker.note_candidates, candidates, frame, camera)
+            notes = self.looker.notes_job(candidates, frame, camera)
             if choice is not None and choice.elevated and not choice.strip:
                 self.searcher.later(notes)  # a roof: nothing before its move reads the notes
             else:
