@@ -156,5 +156,11 @@ class SiteLedger:
         """The site recorded within ``same_site_m`` of ``ne_m``, if any."""
         return next((s for s in self.sites if math.dist(s.ned_m[:2], ne_m) < self.same_site_m), None)
 
+    def name(self, site: LedgerSite) -> str:
+        """How ``site`` is named to people: its label, with its round when another site measured keeps
+        the same label (Surface ID numbers each round's candidates from 0: "site 1, round 7")."""
+        twins = [s for s in self.sites if s.label == site.label and s.round != site.round]
+        return f"{site.label}, round {site.round}" if twins and site.label.startswith("site") else site.label
+
     def best_hazard(self) -> Hazard | None:
         return min((s.hazard for s in self.sites), default=None)

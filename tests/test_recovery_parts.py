@@ -292,6 +292,7 @@ def test_lander_judges_a_site_from_overhead_as_a_confirmation_would_among_buildi
     assert outcome.site_ned_m is not None
     assert outcome.site_ned_m[:2] == (0.0, 300.0)
     first, second = _record(ctx).of("fallback_site")
+    assert first["chosen"]["label"] == "site 0"  # the nearer, both seen from afar alike
     assert (second["chosen"]["label"], second["instead_of"]["label"]) == ("site 3", "site 0")
     assert second["instead_of"]["hazard"] == "street"
     assert "street_level" in second["instead_of"]["why"]

@@ -137,3 +137,22 @@ def test_every_kind_a_judge_vetoes_with_is_a_known_hazard_kind_and_none_is_a_sof
     soft = {k for k in HAZARD_KINDS if hazard_of((k,), accepted=False, street_level=False, strip=False)
             is Hazard.DOUBTED}  # fmt: skip
     assert soft == {"hazard"}, soft
+
+
+def test_a_label_two_rounds_share_is_named_with_its_round() -> None:
+    """Surface ID numbers each round's candidates from 0: two "site 1"s measured in different rounds are
+    told apart by their round when said (a farmland fallback said "site 1 from overhead: obstructed;
+    landing at site 1 instead"); a label of its own is said as it is."""
+    ledger = SiteLedger()
+    first = LedgerSite((0.0, 0.0, 0.0), Hazard.OBSTRUCTED, "crops", 3, True, label="site 1")
+    ledger.add(first)
+    assert ledger.name(first) == "site 1"
+    second = LedgerSite((80.0, 0.0, 0.0), Hazard.OFF_ROOF, "from afar", 7, False, label="site 1")
+    ledger.add(second)
+    here = LedgerSite((160.0, 0.0, 0.0), Hazard.OFF_ROOF, "below", 7, True, label="here")
+    ledger.add(here)
+    assert (ledger.name(first), ledger.name(second), ledger.name(here)) == (
+        "site 1, round 3",
+        "site 1, round 7",
+        "here",
+    )

@@ -68,7 +68,7 @@ class Lander:
         elif site is None:
             ctx.say(4, f"{reason}, only water or traffic measured elsewhere: landing here")
         else:
-            where = "here" if site.label == "here" else f"at {site.label}"
+            where = "here" if site.label == "here" else f"at {ctx.ledger.name(site)}"
             ctx.say(
                 4, f"{reason}: landing {where} ({site.hazard.name.lower().replace('_', ' ')}: {site.why})"
             )
@@ -102,6 +102,7 @@ class Lander:
         for _ in range(FALLBACK_LOOKS):
             if not await self.fly_over(site, "the chosen site") or site.closeup:
                 return site
+            name = ctx.ledger.name(site)  # before the look replaces it in the ledger
             seen = await self._measure_at((site.ned_m[0], site.ned_m[1]), site.label, site.candidate)
             if seen is None:
                 return site  # no frame: land on what was chosen
@@ -110,8 +111,8 @@ class Lander:
                 return site
             ctx.say(
                 4,
-                f"{site.label} from overhead: {seen.hazard.name.lower().replace('_', ' ')} ({seen.why}); "
-                f"landing at {now.label} instead",
+                f"{name} from overhead: {seen.hazard.name.lower().replace('_', ' ')} "
+                f"({seen.why}); landing at {ctx.ledger.name(now)} instead",
             )
             self._record_choice(reason, now, seen)
             site = now
