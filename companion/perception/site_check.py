@@ -31,6 +31,8 @@ MIN_SITE_RETURNS = 5  # LiDAR returns within the rotor-clearance disc needed to 
 # through a canopy or the foot of a step: more than this share of the disc's returns there is rough
 SUNKEN_BAND_M = (0.2, 1.0)
 MAX_SUNKEN_SHARE = 0.1
+MIN_PLANE_RETURNS = 10  # surface returns in the disc needed to fit its plane (fewer: taken as level)
+MIN_PLANE_SPREAD_M = 1.0  # and their spread north and east, so that the tilt is measured, not guessed
 
 
 @dataclass(frozen=True, slots=True)
@@ -44,6 +46,7 @@ class SiteCheck:
     edge_distance_m: float  # to the nearest drop of more than 1 m (inf when none is seen)
     reasons: tuple[str, ...]
     sunken_share: float = math.nan  # share of the disc's returns SUNKEN_BAND_M below the surface
+    slope_deg: float = math.nan  # of the plane fitted to the surface's returns in the disc
 
     @property
     def clear(self) -> bool:
@@ -97,8 +100,13 @@ def check_site(
     max_obstacle_m: float = 0.3,
     max_roughness_m: float = 0.08,
     min_edge_m: float = 1.5,
+    max_slope_deg: float = 8.0,
 ) -> SiteCheck:
     """Slope/roughness, obstacles in the rotor disc and distance to an edge around ``site_ne_m``.
+
+    Heights are measured from the plane fitted to the surface's returns in the disc
+    (:func:`_surface_plane`), so a gentle slope is neither rough nor an obstacle; it is refused over
+    ``max_slope_deg`` (Surface ID's limit: ``perception.max_slope_deg``).
 
     Never raises for a sweep: no sweep, an empty one or one that is not an (N, 3+) array of body FRD
     metres is a check that measured nothing (``measured`` False), rows with a NaN are dropped.
@@ -119,15 +127,20 @@ def check_site(
         )
     up = -world[:, 2]
     core = up[d <= clearance_m * 0.5] if (d <= clearance_m * 0.5).sum() >= 3 else up[disc]
-    surface = float(np.median(core))
-    obstacle = float(up[disc].max() - surface)
-    on_surface = up[disc][np.abs(up[disc] - surface) < max_obstacle_m]
+    dn, de = world[:, 0] - site_ne_m[0], world[:, 1] - site_ne_m[1]
+    level = _surface_plane(dn, de, up, disc, float(np.median(core)), max_obstacle_m)
+    # heights above the surface's plane: a lawn on a 7 degree slope is level in them, not 12 cm rough
+    rel = up - (level[0] * dn + level[1] * de + level[2])
+    surface = level[2]
+    slope = math.degrees(math.atan(math.hypot(level[0], level[1])))
+    obstacle = float(rel[disc].max())
+    on_surface = rel[disc][np.abs(rel[disc]) < max_obstacle_m]
     # No return near the median level (the disc holds two levels, a step or a ramp): nothing there
     # is a surface, so its roughness is the spread of the whole disc, not the std of nothing (NaN).
     rough = float(np.std(on_surface if len(on_surface) else up[disc]))
-    below = surface - up[disc]
+    below = -rel[disc]
     sunken = float(np.mean((below > SUNKEN_BAND_M[0]) & (below <= SUNKEN_BAND_M[1])))
-    edge = _edge_distance(world, d, up, site_ne_m, surface, clearance_m + 4.0)
+    edge = _edge_distance(world, d, rel, site_ne_m, 0.0, clearance_m + 4.0)
     reasons = []
     if obstacle > max_obstacle_m:
         reasons.append(f"object {obstacle:.1f} m tall within {clearance_m:.0f} m")
@@ -141,4 +154,26 @@ def check_site(
         )
     if edge < min_edge_m:
         reasons.append(f"{edge:.1f} m from an edge")
-    return SiteCheck(int(disc.sum()), surface, rough, obstacle, edge, tuple(reasons), sunken)
+    if slope > max_slope_deg:
+        reasons.append(f"sloped {slope:.0f} deg")
+    return SiteCheck(int(disc.sum()), surface, rough, obstacle, edge, tuple(reasons), sunken, slope)
+
+
+def _surface_plane(
+    dn: np.ndarray, de: np.ndarray, up: np.ndarray, disc: np.ndarray, level: float, band_m: float
+) -> tuple[float, float, float]:
+    """The plane ``up = a * dn + b * de + c`` (north and east from the site) through the surface's
+    returns in the rotor disc: those within ``band_m`` of ``level`` (the median height at the site),
+    then, fitted once, those within ``band_m`` of that plane (the far side of a slope steeper than the
+    band). Objects on it, a step's other level and the ground seen through a crop lie outside the band
+    and do not tilt it. Level at ``level`` when too few returns, or too little spread, to fit one."""
+    sel = disc & (np.abs(up - level) < band_m)
+    plane = (0.0, 0.0, level)
+    for _ in range(2):
+        if sel.sum() < MIN_PLANE_RETURNS or min(np.ptp(dn[sel]), np.ptp(de[sel])) < MIN_PLANE_SPREAD_M:
+            return plane
+        a = np.column_stack([dn[sel], de[sel], np.ones(int(sel.sum()))])
+        coef = np.linalg.lstsq(a, up[sel], rcond=None)[0]
+        plane = (float(coef[0]), float(coef[1]), float(coef[2]))
+        sel = disc & (np.abs(up - (plane[0] * dn + plane[1] * de + plane[2])) < band_m)
+    return plane
