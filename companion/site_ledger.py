@@ -62,7 +62,16 @@ class Hazard(enum.IntEnum):
 
 
 _TRAFFIC = {"markings", "street_asphalt"}
-_OBSTRUCTED = {"lidar_obstacle", "lidar_rough", "lidar_edge", "raised", "raised_lines", "not_clear", "canopy"}
+_OBSTRUCTED = {
+    "lidar_obstacle",
+    "lidar_rough",
+    "lidar_slope",
+    "lidar_edge",
+    "raised",
+    "raised_lines",
+    "not_clear",
+    "canopy",
+}
 
 
 def hazard_of(

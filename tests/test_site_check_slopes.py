@@ -14,6 +14,8 @@ import numpy as np
 import pytest
 
 from companion.perception.site_check import check_site
+from companion.reasoning.onboard import lidar_kind
+from companion.site_ledger import Hazard, hazard_of
 from simbridge.geo import euler_to_quat
 from simbridge.world.hillside import generate_hillside
 from simbridge.world.live import LiveWorld
@@ -48,8 +50,14 @@ def test_a_smooth_slope_up_to_surface_ids_limit_is_clear_and_measured(deg: float
 
 @pytest.mark.parametrize("deg", [9.0, 12.0, 20.0])
 def test_a_slope_over_eight_degrees_is_refused_as_sloped(deg: float) -> None:
+    """Refused as sloped, and named so: the veto's kind is ``lidar_slope`` (an obstructed site in the
+    recovery's ledger), not an edge."""
     check = check_site(*_slope(deg, np.random.default_rng(2)), DOWN, (0.0, 0.0))
-    assert f"sloped {deg:.0f} deg" in check.reasons, check
+    assert check.reasons == (f"sloped {deg:.0f} deg",), check
+    assert lidar_kind(check) == "lidar_slope"
+    assert (
+        hazard_of((lidar_kind(check),), accepted=False, street_level=True, strip=False) is Hazard.OBSTRUCTED
+    )
 
 
 @pytest.mark.parametrize("deg", [0.0, 6.0])

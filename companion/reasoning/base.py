@@ -137,6 +137,7 @@ class Decision:
 HAZARD_KINDS = (
     "lidar_obstacle",  # the LiDAR check: an object in the rotor disc
     "lidar_rough",
+    "lidar_slope",  # the surface's plane sloped over the limit (8 degrees)
     "lidar_edge",
     "water",
     "vegetation",

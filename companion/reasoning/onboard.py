@@ -394,12 +394,14 @@ def _lidar_vetoes(check: SiteCheck | None) -> list[tuple[str, str]]:
 
 def lidar_kind(check: SiteCheck) -> str:
     """The ``Decision.hazards`` kind of a LiDAR veto: an object in the rotor disc before roughness
-    before an edge (the worst of what the check found)."""
+    before a slope before an edge (the worst of what the check found)."""
     text = " ".join(check.reasons)
     if "object" in text:
         return "lidar_obstacle"
     if "rough" in text:
         return "lidar_rough"
+    if "sloped" in text:
+        return "lidar_slope"
     return "lidar_edge"
 
 
@@ -411,7 +413,8 @@ def _geometry_phrase(check: SiteCheck | None) -> str:
         if math.isinf(check.edge_distance_m)
         else f"{check.edge_distance_m:.1f} m to an edge"
     )
-    return f"LiDAR {check.points} returns, {100 * check.roughness_m:.0f} cm rough, {edge}"
+    slope = f", sloped {check.slope_deg:.0f} deg" if check.slope_deg >= 1.5 else ""  # NaN: not fitted
+    return f"LiDAR {check.points} returns, {100 * check.roughness_m:.0f} cm rough{slope}, {edge}"
 
 
 def _describe(site: _Site, limit: int) -> str:
