@@ -119,7 +119,8 @@ def check_site(
             0, math.nan, math.nan, math.nan, math.nan, (f"LiDAR sweep of shape {shape}, not (N, 3+)",)
         )
     world = world_points(lidar_frd, pos_ned_m, quat)
-    d = np.hypot(world[:, 0] - site_ne_m[0], world[:, 1] - site_ne_m[1])
+    dn, de = world[:, 0] - site_ne_m[0], world[:, 1] - site_ne_m[1]
+    d = np.hypot(dn, de)
     disc = d <= clearance_m
     if disc.sum() < MIN_SITE_RETURNS:
         return SiteCheck(
@@ -127,7 +128,6 @@ def check_site(
         )
     up = -world[:, 2]
     core = up[d <= clearance_m * 0.5] if (d <= clearance_m * 0.5).sum() >= 3 else up[disc]
-    dn, de = world[:, 0] - site_ne_m[0], world[:, 1] - site_ne_m[1]
     level = _surface_plane(dn, de, up, disc, float(np.median(core)), max_obstacle_m)
     # heights above the surface's plane: a lawn on a 7 degree slope is level in them, not 12 cm rough
     rel = up - (level[0] * dn + level[1] * de + level[2])
