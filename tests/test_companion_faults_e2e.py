@@ -270,7 +270,14 @@ def test_a_five_second_link_loss_during_descent_resumes_on_the_same_site(
     assert 4.5 < back < 10.0
     failsafes = [f["reason"] for f in rig.sim.events("failsafe")]
     if autopilot == "px4":  # PX4's own offboard-loss failsafe held it (POSCTL), then gave OFFBOARD back
-        assert failsafes == ["offboard_loss"]
+        holds = _offboard_holds_s(rig)
+        # one long hold, across the blackout. At 4x PX4's 1 s COM_OF_LOSS_T is 0.25 s of wall time:
+        # on a loaded machine a stalled relay or event loop can add a brief loss, given back as soon
+        # as the next setpoint arrives
+        assert set(failsafes) == {"offboard_loss"}
+        assert len(holds) == len(failsafes), holds  # every hold ended with OFFBOARD given back
+        assert holds[0] > 3.0, holds
+        assert max(holds[1:], default=0.0) < 3.0, holds
         modes = [e["mode"] for e in rig.sim.events("mode")]
         taken = modes.index("OFFBOARD")
         assert modes[taken : taken + 3] == ["OFFBOARD", "POSCTL", "OFFBOARD"], modes
@@ -292,6 +299,21 @@ def test_a_five_second_link_loss_during_descent_resumes_on_the_same_site(
     assert math.dist(confirms[-1]["site_ned_m"][:2], before[-1]["site_ned_m"][:2]) < 1.5
     assert events[-1]["kind"] == "outcome"
     assert events[-1]["state"] == "landed"
+
+
+def _offboard_holds_s(rig: Rig) -> list[float]:
+    """The simulated seconds of each offboard-loss hold, from PX4's failsafe to OFFBOARD given back
+    (an unended hold is left out, so its count falls short of the failsafes')."""
+    holds, since = [], None
+    for e in rig.sim.events():
+        if e.get("event") == "failsafe" and e.get("reason") == "offboard_loss":
+            since = float(e["t_s"])  # type: ignore[arg-type]
+        elif (
+            e.get("event") == "failsafe_cleared" and e.get("reason") == "offboard_loss" and since is not None
+        ):
+            holds.append(float(e["t_s"]) - since)  # type: ignore[arg-type]
+            since = None
+    return holds
 
 
 def test_a_link_lost_for_good_leaves_the_vehicle_in_the_autopilots_hold(
