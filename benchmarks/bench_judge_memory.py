@@ -1,5 +1,5 @@
 """Peak memory of the onboard judge reading ranks and confirmations with glibc's malloc as it comes, as
-the daemon sets it (``companion.cli.limit_malloc_arenas``: two arenas; this process's reads run on one
+the daemon sets it (``companion.memory.limit_malloc_arenas``: two arenas; this process's reads run on one
 thread, so it should change nothing here) and with a fixed 1 MiB mmap threshold (large freed blocks go
 back to the system at once: less memory, more page faults).
 
@@ -29,9 +29,9 @@ import json, os, statistics, sys, time
 import numpy as np
 from landfall_eval.timing import pin_one_core
 pin_one_core()
-import companion.cli
+import companion.cli  # the daemon's imports, companion.memory among them
 if sys.argv[1] == "daemon":
-    companion.cli.limit_malloc_arenas()
+    companion.memory.limit_malloc_arenas()
 from companion.reasoning.landnet import DEFAULT_MODEL, LandNet
 from landfall_eval.processes import ProcessSample
 

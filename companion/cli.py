@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import ctypes
 import gc
 import logging
 import os
@@ -19,35 +18,13 @@ from companion.config import ConfigError, load_config
 from companion.config_schema import DEFAULTS, CompanionConfig
 from companion.daemon import Companion
 from companion.ground import GroundFeed, GroundParams
+from companion.memory import limit_malloc_arenas
 from companion.operator import InhibitSwitch
 from companion.perception.depth import DepthError
 from companion.reasoning.tiers import BUILTIN_PROFILES, ONBOARD, build_cascade, secrets
 from companion.recovery import RecoveryParams
 from companion.redact import redact_logs
 from landfall_link.mavlink import URL_FORMS
-
-M_ARENA_MAX = -8  # glibc's malloc.h: mallopt's parameter for the most malloc arenas
-MALLOC_ARENAS = 2  # the daemon's: the event loop's thread and one for its worker threads
-
-
-def limit_malloc_arenas(arenas: int = MALLOC_ARENAS) -> bool:
-    """At most ``arenas`` glibc malloc arenas in this process, unless ``MALLOC_ARENA_MAX`` (or glibc's
-    tunable ``glibc.malloc.arena_max``) is set: the operator's choice wins; True when set. glibc gives
-    each thread that allocates while another holds the lock an arena of its own, up to eight per core,
-    and each keeps what it freed: the reasoner's and the record's worker threads add theirs to the
-    daemon's peak. Call it before the first thread starts. Other C libraries (musl) have no such
-    arenas: nothing to set, False. (A fixed 1 MiB mmap threshold as well, so that large freed blocks go
-    back to the system, took 17 MB off the peak of a process reading LandNet-E's ranks and
-    confirmations, 214 to 197 MB, but made its reads 1.56 times slower: benchmarks/bench_judge_memory.py,
-    docs/performance.md; not taken.)"""
-    if os.environ.get("MALLOC_ARENA_MAX") or "malloc.arena_max" in os.environ.get("GLIBC_TUNABLES", ""):
-        return False
-    try:
-        mallopt = ctypes.CDLL(None).mallopt
-    except (OSError, AttributeError):
-        return False
-    mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
-    return bool(mallopt(M_ARENA_MAX, arenas))
 
 
 def build_parser() -> argparse.ArgumentParser:

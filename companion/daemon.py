@@ -19,6 +19,7 @@ from companion.control import VehicleController
 from companion.fence import read_fence
 from companion.frame_source import FrameSource
 from companion.ground import GroundFeed, TeeRecord, telemetry_snapshot
+from companion.memory import trim_malloc
 from companion.operator import MAV_CMD_USER_2, InhibitSwitch, OperatorControls
 from companion.params import Binding, ParamServer
 from companion.precision import check_precision_landing
@@ -497,6 +498,7 @@ class Companion:
             self.log.warning("warm-up failed (%s: %s): the first alarm pays the first-call costs",
                              type(exc).__name__, exc)  # fmt: skip
             return
+        trim_malloc()  # what the first reads freed goes back to the system: the flight builds on less
         self.log.info("warmed up in %.0f ms: Surface ID and the onboard tier", (time.monotonic() - t0) * 1e3)
 
     # ------------------------------------------------------------------ lifetime

@@ -24,6 +24,7 @@ sim = ("simbridge", "landfall_eval", "jsbsim", "numba", "tqdm")
 loaded = sorted(m for m, mod in sys.modules.items() if mod is not None and m.split(".")[0] in sim)
 print("LOADED", loaded)
 print("SCIPY", "scipy" in sys.modules)  # 37 MB of the vehicle's memory (companion/guidance/ipm.py)
+print("HTTPX", "httpx" in sys.modules)  # about 10 MB: imported when an LVLM tier is built
 """
 
 
@@ -32,6 +33,7 @@ def test_the_companion_imports_no_simulator_module() -> None:
     assert out.returncode == 0, out.stderr[-3000:]
     assert "LOADED []" in out.stdout
     assert "SCIPY False" in out.stdout
+    assert "HTTPX False" in out.stdout
 
 
 def test_no_companion_module_imports_the_simulator_even_lazily() -> None:

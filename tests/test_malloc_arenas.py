@@ -1,7 +1,8 @@
-"""The daemon's glibc malloc arenas (companion.cli.limit_malloc_arenas): at most two, so that freed
+"""The daemon's glibc malloc arenas (companion.memory.limit_malloc_arenas): at most two, so that freed
 memory held by each worker thread's own arena does not add to the vehicle's peak; an operator's
 MALLOC_ARENA_MAX (or glibc's tunable) wins. Counted by glibc's own malloc_stats in a fresh process whose
-threads allocate."""
+threads allocate. And companion.memory.trim_malloc, which the daemon calls after its warm-up: freed
+memory that glibc kept goes back to the system."""
 
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ pytestmark = pytest.mark.skipif(
 
 SCRIPT = """
 import ctypes, sys, threading
-from companion.cli import limit_malloc_arenas
+from companion.memory import limit_malloc_arenas
 print(limit_malloc_arenas() if sys.argv[1] == "limit" else "unset", flush=True)
 kept = []
 together = threading.Barrier(8)  # every thread alive at once: none hands its arena on to the next
@@ -66,3 +67,37 @@ def test_glibcs_own_tunable_wins_too() -> None:
     said, arenas = _arenas("limit", tunables="glibc.malloc.arena_max=4")
     assert said == "False"
     assert 2 < arenas <= 4, arenas
+
+
+TRIM = """
+import ctypes, threading
+from companion.memory import limit_malloc_arenas, trim_malloc
+limit_malloc_arenas()
+
+def anon_mb():
+    return next(int(l.split()[1]) for l in open("/proc/self/status") if l.startswith("RssAnon")) / 1024
+
+def work():  # as a reasoner's worker thread: 60 MB in 64 kB blocks, written, then freed but the last
+    libc = ctypes.CDLL(None)
+    libc.malloc.restype = ctypes.c_void_p
+    libc.free.argtypes = (ctypes.c_void_p,)
+    blocks = [libc.malloc(1 << 16) for _ in range(960)]
+    for b in blocks:
+        ctypes.memset(b, 1, 1 << 16)
+    for b in blocks[:-1]:  # the last keeps the heap's top in use: glibc cannot shrink it by itself
+        libc.free(b)
+
+t = threading.Thread(target=work)
+t.start()
+t.join()
+before = anon_mb()
+trimmed = trim_malloc()
+print(before, anon_mb(), trimmed)
+"""
+
+
+def test_trimming_hands_back_what_a_worker_thread_freed() -> None:
+    out = subprocess.run([sys.executable, "-c", TRIM], capture_output=True, text=True, timeout=60, check=True)
+    before, after, trimmed = out.stdout.split()
+    assert trimmed == "True"
+    assert float(before) - float(after) > 40.0, out.stdout  # of the 60 MB freed

@@ -30,10 +30,9 @@ import os
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import cv2
-import httpx
 import numpy as np
 
 from companion.reasoning.base import (
@@ -53,6 +52,9 @@ from companion.reasoning.base import (
     TruncatedAnswer,
     Unreachable,
 )
+
+if TYPE_CHECKING:  # httpx is imported when an LVLM tier is built: the onboard tier alone does without it
+    import httpx
 from companion.reasoning.parsing import parse_confirm, parse_rank
 from companion.reasoning.prompts import (
     SYSTEM_PROMPT,
@@ -171,6 +173,8 @@ class LvlmReasoner:
         client: httpx.AsyncClient | None = None,
         env: Mapping[str, str] | None = None,
     ) -> None:
+        import httpx  # here, not at the top: ~10 MB and 60 ms that an onboard-only daemon never needs
+
         self.profile = profile
         self._own_client = client is None
         self._client = client or httpx.AsyncClient()
@@ -329,6 +333,8 @@ class LvlmReasoner:
         return None  # deadline, refusal, empty/truncated/malformed: the next tier, not the same again
 
     async def _attempt(self, body: dict[str, Any], headers: dict[str, str], timeout_s: float) -> str | None:
+        import httpx
+
         try:
             async with asyncio.timeout(timeout_s):
                 resp = await self._client.post(

@@ -14,9 +14,7 @@ import contextlib
 import dataclasses
 import logging
 from collections.abc import Callable, Mapping
-from typing import Any
-
-import httpx
+from typing import TYPE_CHECKING, Any
 
 from companion.config import ConfigError
 from companion.config_schema import CompanionConfig, LvlmProfileConfig, ReasonerConfig
@@ -26,6 +24,9 @@ from companion.reasoning.landnet import LandNet, LandNetError
 from companion.reasoning.lvlm import LvlmProfile, LvlmReasoner
 from companion.reasoning.onboard import OnboardReasoner
 from companion.reasoning.onboard_params import ConfirmParams
+
+if TYPE_CHECKING:
+    import httpx
 
 __all__ = ["BUILTIN_PROFILES", "ONBOARD", "build_cascade", "resolve_profile", "secrets", "tier_names"]
 
