@@ -19,6 +19,7 @@ from tests.conftest import Rig
 from tests.test_companion_e2e import (
     _clean_relay,
     _events,
+    _offboard_holds_s,
     _raise_alarm,
     _sim_port,
     _via,
@@ -93,7 +94,13 @@ def test_a_battery_failsafe_that_lands_keeps_the_vehicle_and_the_companion_stand
     _set_params(rig, {"BAT_LOW_THR": (0.5, REAL32), "BAT_CRIT_THR": (0.45, REAL32)}, bytewise=True)
     td = _wait_touchdown(rig, timeout_s=200)
     log = rig.wait_log("recovery ended", timeout_s=60)
-    failsafes = rig.sim.events("failsafe")
+    # at 4x PX4's 1 s COM_OF_LOSS_T is 0.25 s of wall time: a loaded machine's stalled event loop can
+    # cost a brief offboard loss, given back with the next setpoint; none is what this test is about
+    losses = [f for f in rig.sim.events("failsafe") if f["reason"] == "offboard_loss"]
+    holds = _offboard_holds_s(rig)
+    assert len(holds) == len(losses), holds
+    assert max(holds, default=0.0) < 3.0, holds
+    failsafes = [f for f in rig.sim.events("failsafe") if f["reason"] != "offboard_loss"]
     # PX4 holds while its action waits (COM_BAT_ACT_T), then lands
     assert [(f["reason"], f["action"]) for f in failsafes] == [
         ("battery_critical", "AUTO.LOITER"),
@@ -151,8 +158,13 @@ def test_an_offboard_loss_set_to_land_clears_when_the_link_returns_and_the_recov
     finally:
         for r in relays:
             r.close()
-    assert [f["action"] for f in rig.sim.events("failsafe")] == ["AUTO.LAND"], rig.sim.events("failsafe")
-    assert [f["mode"] for f in rig.sim.events("failsafe_cleared")] == ["OFFBOARD"]
+    # the uplink's blackout: PX4's AUTO.LAND, given back to OFFBOARD. At 4x PX4's 1 s COM_OF_LOSS_T is
+    # 0.25 s of wall time: a loaded machine's stalled relay can add a brief loss, given back the same way
+    actions = [f["action"] for f in rig.sim.events("failsafe")]
+    holds = _offboard_holds_s(rig)
+    assert set(actions) == {"AUTO.LAND"}, rig.sim.events("failsafe")
+    assert [f["mode"] for f in rig.sim.events("failsafe_cleared")] == ["OFFBOARD"] * len(actions)
+    assert max(holds[1:], default=0.0) < 3.0, holds
     assert "the autopilot keeps control" not in log
     assert "the autopilot's failsafe cleared (AUTO.LAND -> back to the companion): going on" in log
     assert "recovery ended: landed after" in log

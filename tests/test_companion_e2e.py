@@ -62,6 +62,21 @@ def _land_through_a_link_blackout(
     return rig, td, log
 
 
+def _offboard_holds_s(rig: Rig) -> list[float]:
+    """The simulated seconds of each offboard-loss hold, from PX4's failsafe to OFFBOARD given back
+    (an unended hold is left out, so its count falls short of the failsafes')."""
+    holds, since = [], None
+    for e in rig.sim.events():
+        if e.get("event") == "failsafe" and e.get("reason") == "offboard_loss":
+            since = float(e["t_s"])  # type: ignore[arg-type]
+        elif (
+            e.get("event") == "failsafe_cleared" and e.get("reason") == "offboard_loss" and since is not None
+        ):
+            holds.append(float(e["t_s"]) - since)  # type: ignore[arg-type]
+            since = None
+    return holds
+
+
 def _wait_for_companion(rig: Rig) -> None:
     """Until the companion accepts alarms, trigger_alarm.py reports 'refused for now' (exit 1)."""
     rig.wait_log("sensor stream connected", timeout_s=60)

@@ -23,6 +23,7 @@ from tests.test_companion_e2e import (
     _events_in,
     _land_through_a_link_blackout,
     _lvlm_rig,
+    _offboard_holds_s,
     _raise_alarm,
     _via,
     _wait_for_companion,
@@ -299,21 +300,6 @@ def test_a_five_second_link_loss_during_descent_resumes_on_the_same_site(
     assert math.dist(confirms[-1]["site_ned_m"][:2], before[-1]["site_ned_m"][:2]) < 1.5
     assert events[-1]["kind"] == "outcome"
     assert events[-1]["state"] == "landed"
-
-
-def _offboard_holds_s(rig: Rig) -> list[float]:
-    """The simulated seconds of each offboard-loss hold, from PX4's failsafe to OFFBOARD given back
-    (an unended hold is left out, so its count falls short of the failsafes')."""
-    holds, since = [], None
-    for e in rig.sim.events():
-        if e.get("event") == "failsafe" and e.get("reason") == "offboard_loss":
-            since = float(e["t_s"])  # type: ignore[arg-type]
-        elif (
-            e.get("event") == "failsafe_cleared" and e.get("reason") == "offboard_loss" and since is not None
-        ):
-            holds.append(float(e["t_s"]) - since)  # type: ignore[arg-type]
-            since = None
-    return holds
 
 
 def test_a_link_lost_for_good_leaves_the_vehicle_in_the_autopilots_hold(
