@@ -3,7 +3,7 @@ a margin of a site, read in tiles of a frame at about the scale it learnt people
 on a lawn 4-8 m from the site is seen in most frames, one 12 m away is not counted, an empty lawn shows
 no one;
 bad scales are refused; the recovery holds for people and then strikes the site off
-(Looker.hold_for_people)."""
+(PeopleWatch.hold_for_people)."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ import pytest
 from companion.perception.surface_id import Candidate
 from companion.reasoning.landnet import PACKAGED, LandNet
 from companion.reasoning.people_watch import PeopleSeen, people_near
-from companion.recovery import looking as looking_module
+from companion.recovery.watching import PeopleWatch
 from simbridge.world.live import LiveWorld
 from simbridge.world.scenario_file import load_scenario_file
 from tests.recovery_fakes import KeptRecord
@@ -147,11 +147,11 @@ def test_the_recovery_holds_for_people_then_strikes_the_site_off(monkeypatch: py
     """Held for people, then struck off; the site ledger, where the confirmation had made the site the
     accepted one, keeps it as obstructed by them: a landing where nothing else was accepted does not
     come down among them (it did: a suburban launch landed there when its round budget ran out)."""
-    from companion.recovery import core, looking
+    from companion.recovery import core, watching
     from companion.recovery.core import RecoveryParams
     from companion.site_ledger import Hazard, LedgerSite, SiteLedger
 
-    monkeypatch.setattr(looking, "PEOPLE_LOOK_AGAIN_S", 0.0)
+    monkeypatch.setattr(watching, "PEOPLE_LOOK_AGAIN_S", 0.0)
     said: list[str] = []
     struck: list[tuple[float, float, float]] = []
     record = KeptRecord()
@@ -168,15 +168,15 @@ def test_the_recovery_holds_for_people_then_strikes_the_site_off(monkeypatch: py
         say=lambda _sev, text: said.append(text),
         strike_off=lambda target, _choice: struck.append(target),
     )
-    looker = SimpleNamespace(ctx=ctx)
-    hold = looking.Looker.hold_for_people
+    watch = watching.PeopleWatch(ctx, looker=None, follower=None, lander=None)  # type: ignore[arg-type]
+    hold = watch.hold_for_people
     seen = PeopleSeen(3, 6.4, 1.0)
     site = Candidate(index=1, box_px=(0, 0, 10, 10), centre_px=(5.0, 5.0))
-    assert asyncio.run(hold(looker, seen, target, site, 4.0)) is True  # type: ignore[arg-type]
+    assert asyncio.run(hold(seen, target, site, 4.0)) is True
     assert said[-1] == "site 1: a person 6 m from the site (within 10 m): holding"
     assert ctx.best is None  # no longer the site confirmed for descent
     assert not struck
-    assert asyncio.run(hold(looker, seen, target, site, 21.0)) is False  # type: ignore[arg-type]
+    assert asyncio.run(hold(seen, target, site, 21.0)) is False
     assert struck == [target]
     assert said[-1] == "site 1: a person 6 m from the site (within 10 m) for 21 s: another site"
     actions = [(k, f["action"], f["nearest_m"], f["waited_s"]) for k, f in record.events]
@@ -211,7 +211,7 @@ def _descent_on_fakes(
     from companion.recovery import Recovery, machine, watching
     from tests.recovery_fakes import FakeReasoner, context, frame
 
-    for module in (machine, looking_module):
+    for module in (machine, watching):
         monkeypatch.setattr(module, "PEOPLE_LOOK_AGAIN_S", 0.0)
     monkeypatch.setattr(watching, "PEOPLE_WATCH_STEP_S", 0.0)
     here = (0.0, 0.0, -height_m)
@@ -434,9 +434,9 @@ def test_a_point_aside_from_people_is_the_nearest_clear_one_on_the_same_surface(
     people = [(3.0, 2.0), (4.0, -1.0)]
     seen = PeopleSeen(6, 3.6, 1.0, _people_px(seen_from, people, 0.0))
     ctx = context(seen_from)
-    looker = looking_module.Looker(ctx, reasoner=None, onboard=None, plan=None)  # type: ignore[arg-type]
+    watch = PeopleWatch(ctx, looker=None, follower=None, lander=None)  # type: ignore[arg-type]
     field = Candidate(0, (0, 0, 10, 10), (5.0, 5.0), edge_distance_m=30.0, site_ned_m=(0.0, 0.0, 0.0))
-    aside = looker.aside_from_people(seen, seen_from, (0.0, 0.0, 0.0), field)
+    aside = watch.aside_from_people(seen, seen_from, (0.0, 0.0, 0.0), field)
     assert aside is not None
     need = ctx.p.people_margin_m + ASIDE_CLEAR_M
     assert min(math.dist(aside[:2], p) for p in people) >= need - 1e-6
@@ -444,9 +444,9 @@ def test_a_point_aside_from_people_is_the_nearest_clear_one_on_the_same_surface(
     assert math.hypot(aside[0], aside[1]) <= need - 2.0  # away from both: less than the margin itself
     assert aside[2] == 0.0
     small = Candidate(0, (0, 0, 10, 10), (5.0, 5.0), edge_distance_m=8.0, site_ned_m=(0.0, 0.0, 0.0))
-    assert looker.aside_from_people(seen, seen_from, (0.0, 0.0, 0.0), small) is None
+    assert watch.aside_from_people(seen, seen_from, (0.0, 0.0, 0.0), small) is None
     unplaced = PeopleSeen(6, 3.6, 1.0)
-    assert looker.aside_from_people(unplaced, seen_from, (0.0, 0.0, 0.0), field) is None
+    assert watch.aside_from_people(unplaced, seen_from, (0.0, 0.0, 0.0), field) is None
 
 
 def test_the_machine_steps_aside_from_people_on_a_wide_field_and_descends_there(

@@ -18,7 +18,8 @@ Its parts, as ``Recovery.<attribute>``:
 - ``searcher``: :class:`~companion.recovery.searching.Searcher`, whether the search goes on, its legs
   and the exploring step, and the round's work deferred until the vehicle moves.
 - ``watch``: :class:`~companion.recovery.watching.PeopleWatch`, the look for people near a site off
-  the roofs through each descent step and the final approach;
+  the roofs through each descent step and the final approach, and what follows someone seen (hold,
+  step aside, or another site);
 - ``handover``: :class:`~companion.recovery.handover.Handover`, the policies for the autopilot's own
   failsafes (ridden out, re-engaged, or left to the autopilot) and a lost link.
 

@@ -433,11 +433,11 @@ class Recovery:
         aside: tuple[float, float, float],
         choice: Candidate,
     ) -> tuple[float, float, float]:
-        """Fly level to ``aside`` (:meth:`Looker.aside_from_people`), the site followed from there on
+        """Fly level to ``aside`` (:meth:`PeopleWatch.aside_from_people`), the site followed from there on
         in the frame the people were seen in; the target as it ended (``aside``, or where the vehicle
         stopped when it was not reached)."""
         ctx = self.ctx
-        self.looker.stepped_aside(seen, target, aside, choice)
+        self.watch.stepped_aside(seen, target, aside, choice)
         self.follower.follow_from(frame, aside)
         self._descending = (aside, choice)
         n, e, d = ctx.tm.state.pos_ned_m
@@ -489,12 +489,12 @@ class Recovery:
                     quiet_looks = 0
                     aside = None
                     if asides < ASIDE_MAX:
-                        aside = self.looker.aside_from_people(seen, frame, target, choice)
+                        aside = self.watch.aside_from_people(seen, frame, target, choice)
                     if aside is not None:  # room on the same open surface: there instead, looked at again
                         asides += 1
                         target = await self._step_aside(seen, frame, target, aside, choice)
                         continue
-                    if not await self.looker.hold_for_people(seen, target, choice, now - people_since):
+                    if not await self.watch.hold_for_people(seen, target, choice, now - people_since):
                         return False
                     continue
                 if people_since is not None and quiet_looks + 1 < QUIET_LOOKS:
@@ -530,7 +530,7 @@ class Recovery:
                     return True
                 now = ctx.clock_s()
                 people_since, quiet_looks = (now if people_since is None else people_since), 0
-                self.looker.paused_for_people(seen, target, choice, go_around_m=GO_AROUND_M)
+                self.watch.paused_for_people(seen, target, choice, go_around_m=GO_AROUND_M)
                 continue
             ctx.set_state(State.DESCEND)
             ctx.fault.check("descend", ctx.round)
@@ -553,4 +553,4 @@ class Recovery:
             if seen is not None:  # someone came within the margin on the way down: stopped, look again
                 now = ctx.clock_s()
                 people_since, quiet_looks = (now if people_since is None else people_since), 0
-                self.looker.paused_for_people(seen, target, choice)
+                self.watch.paused_for_people(seen, target, choice)

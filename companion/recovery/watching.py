@@ -2,20 +2,31 @@
 approach runs, a frame of its own every ``PEOPLE_WATCH_STEP_S`` and a look for people within
 ``people_margin_m`` of the site (:meth:`Looker.watch_people`). Someone seen stops the step where the
 vehicle is, or turns the final approach into a climb to ``GO_AROUND_M`` above the site, and the
-machine (:mod:`companion.recovery.machine`) looks again before the next step."""
+machine (:mod:`companion.recovery.machine`) looks again before the next step. The policies for what
+comes next live here too: hold and look again, step aside on the same open surface, or strike the
+site off; each is said and recorded as a ``people_watch`` event."""
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import math
 from collections.abc import Coroutine
 from typing import Any, TypeVar
 
+import numpy as np
+
 from companion.control import TargetTimeout
+from companion.guidance.frames import PinholeCamera
+from companion.guidance.ipm import IpmError, pixel_to_ned_flat
+from companion.perception.surface_id import Candidate
 from companion.reasoning.people_watch import PeopleSeen
 from companion.recovery.core import (
+    ASIDE_CLEAR_M,
+    ASIDE_EDGE_KEEP_M,
     GO_AROUND_M,
     GO_AROUND_MIN_M,
+    PEOPLE_LOOK_AGAIN_S,
     PEOPLE_WATCH_STEP_S,
     FrameUnavailable,
     RecoveryContext,
@@ -24,13 +35,14 @@ from companion.recovery.core import (
 from companion.recovery.following import SiteFollower
 from companion.recovery.landing import Lander
 from companion.recovery.looking import Looker
+from companion.site_ledger import Hazard, LedgerSite
 
 T = TypeVar("T")
 
 
 class PeopleWatch:
-    """The people watch (module docstring) on the recovery's context, with the looker that looks, the
-    follower that flies the steps and the lander that flies the final approach."""
+    """The people watch and its policies (module docstring) on the recovery's context, with the looker
+    that looks, the follower that flies the steps and the lander that flies the final approach."""
 
     def __init__(
         self, ctx: RecoveryContext, *, looker: Looker, follower: SiteFollower, lander: Lander
@@ -129,3 +141,123 @@ class PeopleWatch:
             seen = await self.looker.watch_people(frame, site)
             if seen is not None and seen.cells:
                 return seen
+
+    def paused_for_people(
+        self,
+        seen: PeopleSeen,
+        target: tuple[float, float, float],
+        choice: Candidate,
+        *,
+        go_around_m: float | None = None,
+    ) -> None:
+        """Policy: someone came within the margin while the vehicle descended onto the site: the step
+        stopped where it was, or (``go_around_m``) the final approach stopped and the vehicle climbed
+        back that high above the site. Said, and recorded as a ``people_watch`` event (action ``pause``
+        or ``go-around``); the look before the next step decides whether to hold or go on
+        (:meth:`hold_for_people`)."""
+        action = "pause" if go_around_m is None else "go-around"
+        _record_watch(self.ctx, seen, target, choice, 0.0, action)
+        done = "descent paused" if go_around_m is None else f"landing stopped, back up to {go_around_m:.0f} m"
+        self.ctx.say(4, f"site {choice.index}: {seen.phrase(self.ctx.p.people_margin_m)}: {done}")
+
+    async def hold_for_people(
+        self, seen: PeopleSeen, target: tuple[float, float, float], choice: Candidate, waited_s: float
+    ) -> bool:
+        """Policy: people seen within the margin of a site about to be descended onto. Hold where the
+        vehicle is and look again (True) for up to ``people_wait_s``; then strike the site off, for
+        the next round to choose another (False). Said, and recorded as a ``people_watch`` event."""
+        ctx = self.ctx
+        margin = ctx.p.people_margin_m
+        give_up = waited_s >= ctx.p.people_wait_s
+        _record_watch(ctx, seen, target, choice, waited_s, "another site" if give_up else "hold")
+        if give_up:
+            ctx.strike_off(target, choice)
+            ctx.say(4, f"site {choice.index}: {seen.phrase(margin)} for {waited_s:.0f} s: another site")
+            return False
+        ctx.say(4, f"site {choice.index}: {seen.phrase(margin)}: holding")
+        await asyncio.sleep(PEOPLE_LOOK_AGAIN_S)
+        return True
+
+    def aside_from_people(
+        self, seen: PeopleSeen, frame: Any, target: tuple[float, float, float], choice: Candidate
+    ) -> tuple[float, float, float] | None:
+        """Policy: a point of the same open surface clear of the people seen near the site (SafeLand's
+        reroute within a field): ``people_margin_m`` plus ``ASIDE_CLEAR_M`` from every person cell seen
+        (placed on the site's level through the camera), no farther from the site Surface ID chose
+        than its edge distance less ``ASIDE_EDGE_KEEP_M``, the nearest such point to ``target``. None
+        when the people's places are not known, the surface is too small or no point is clear: the
+        vehicle holds for them instead. The point is confirmed like any site before a descent."""
+        margin = self.ctx.p.people_margin_m
+        origin = choice.site_ned_m or target
+        room = choice.edge_distance_m - ASIDE_EDGE_KEEP_M
+        if not seen.cells_px or not math.isfinite(room) or room <= 0 or margin <= 0:
+            return None
+        camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
+        people = []
+        for u, v in seen.cells_px:
+            try:
+                p = pixel_to_ned_flat(u, v, camera, frame.pos_ned_m, frame.quat_wxyz, target[2])
+            except IpmError:
+                return None  # one person not placed: a step may go toward them
+            people.append((float(p[0]), float(p[1])))
+        at = np.asarray(people)
+        need = margin + ASIDE_CLEAR_M
+        best: tuple[float, float] | None = None
+        for r in np.arange(1.0, room + 1e-6, 1.0):  # nearest first: the smallest step that clears them
+            bearings = np.linspace(0.0, 2 * math.pi, max(8, int(2 * math.pi * r)), endpoint=False)
+            pts = np.stack([target[0] + r * np.cos(bearings), target[1] + r * np.sin(bearings)], axis=1)
+            inside = np.hypot(pts[:, 0] - origin[0], pts[:, 1] - origin[1]) <= room
+            clear = np.hypot(pts[:, None, 0] - at[None, :, 0], pts[:, None, 1] - at[None, :, 1]).min(axis=1)
+            ok = inside & (clear >= need)
+            if ok.any():
+                k = int(np.argmax(np.where(ok, clear, -np.inf)))
+                best = (float(pts[k, 0]), float(pts[k, 1]))
+                break
+        return None if best is None else (best[0], best[1], target[2])
+
+    def stepped_aside(
+        self,
+        seen: PeopleSeen,
+        target: tuple[float, float, float],
+        aside: tuple[float, float, float],
+        choice: Candidate,
+    ) -> None:
+        """Said and recorded (a ``people_watch`` event, action ``step aside``, with where to)."""
+        ctx = self.ctx
+        step = math.dist(target[:2], aside[:2])
+        _record_watch(ctx, seen, target, choice, 0.0, "step aside", aside)
+        ctx.say(4, f"site {choice.index}: {seen.phrase(ctx.p.people_margin_m)}: moving {step:.0f} m aside")
+
+
+def _record_watch(
+    ctx: RecoveryContext,
+    seen: PeopleSeen,
+    target: tuple[float, float, float],
+    choice: Candidate,
+    waited_s: float,
+    action: str,
+    aside: tuple[float, float, float] | None = None,
+) -> None:
+    """A ``people_watch`` event: what the look saw near the site, how long the vehicle has waited, and
+    what it does (``pause``, ``step aside``, ``hold``, ``another site``). The site ledger keeps the site
+    as obstructed by people, and the site confirmed for descent, when it is this one, is forgotten: its
+    confirmation said nothing of them, and a landing where nothing else was accepted must not come down
+    among them (its next confirmation and a quiet watch make it the accepted site again)."""
+    why, label = seen.phrase(ctx.p.people_margin_m), f"site {choice.index}"
+    site = LedgerSite(target, Hazard.OBSTRUCTED, why, ctx.round, True, choice.edge_distance_m, label, choice)
+    ctx.ledger.add(site)
+    if ctx.best is not None and math.dist(ctx.best.ned_m[:2], target[:2]) < ctx.p.rejected_radius_m:
+        ctx.best = None  # no longer the site confirmed for descent: not a fallback's first choice either
+    ctx.record.record_event(
+        "people_watch",
+        {
+            "round": ctx.round,
+            "site_ned_m": list(target),
+            "person_cells": seen.cells,
+            "nearest_m": None if seen.nearest_m is None else round(seen.nearest_m, 1),
+            "seen_share": round(seen.seen_share, 2),
+            "waited_s": round(waited_s, 1),
+            "action": action,
+            **({"aside_ned_m": [round(v, 2) for v in aside]} if aside is not None else {}),
+        },
+    )
