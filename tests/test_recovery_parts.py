@@ -511,3 +511,28 @@ def test_recovery_parts_share_its_context_and_the_package_docstring_lists_them()
     assert named == {f"companion.recovery.{p.stem}" for p in package.glob("*.py") if p.stem != "__init__"}
     for part in owned:  # the machine's class docstring names the same parts
         assert f"``{part}``" in (Recovery.__doc__ or "")
+
+
+def test_a_moves_map_is_built_before_freed_memory_is_handed_back_off_the_event_loop(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """During a round's move: the search's map of the round's frame, then companion.memory.trim_malloc
+    in a worker thread (the setpoint stream runs on the event loop: it must not wait on the walk)."""
+    from companion.recovery import machine
+
+    ctx = context()
+    rec = Recovery(
+        ctx.alarm, control=ctx.ctl, telemetry=ctx.tm, frames=ctx.frames, reasoner=FakeReasoner(),
+        announce=ctx.announce, params=ctx.p, record=ctx.record,
+    )  # fmt: skip
+    done: list[tuple[str, threading.Thread]] = []
+
+    async def observed() -> None:
+        done.append(("map", threading.current_thread()))
+
+    monkeypatch.setattr(rec.searcher, "observed", observed)
+    monkeypatch.setattr(machine, "trim_malloc", lambda: done.append(("trim", threading.current_thread())))
+    asyncio.run(rec._observe_and_trim())
+    assert [what for what, _ in done] == ["map", "trim"]
+    assert done[0][1] is threading.main_thread()
+    assert done[1][1] is not threading.main_thread()

@@ -41,6 +41,7 @@ from companion.control import (
 from companion.faults import FaultHook
 from companion.guidance.descent import height_above_site
 from companion.guidance.frames import PinholeCamera, compass_point
+from companion.memory import trim_malloc
 from companion.perception.site_check import check_site
 from companion.perception.surface_id import Candidate
 from companion.reasoning.base import Reasoner
@@ -407,7 +408,7 @@ class Recovery:
         ctx.say(6, ranking.rationale[:200])
         ctx.set_state(State.MOVE)
         ctx.fault.check("move", ctx.round)
-        observing = asyncio.create_task(self.searcher.observed(), name="observe")  # once the setpoint is out
+        observing = asyncio.create_task(self._observe_and_trim(), name="observe")  # once the setpoint is out
         try:
             d = await ctx.climb_for_transit(target)
             await ctx.ctl.goto(
@@ -424,6 +425,13 @@ class Recovery:
         finally:
             await observing
         return await self._confirm_and_descend(target, choice)
+
+    async def _observe_and_trim(self) -> None:
+        """During the move: the search's map of this round's frame, then what the round's reads freed
+        handed back to the system (:func:`companion.memory.trim_malloc`, a few milliseconds in a worker
+        thread while nothing waits on it), so that the next round's reads build on less."""
+        await self.searcher.observed()
+        await asyncio.to_thread(trim_malloc)
 
     async def _step_aside(
         self,
