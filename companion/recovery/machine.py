@@ -392,7 +392,7 @@ class Recovery:
             await self.searcher.observed()  # the search's next leg is planned on it
             self._new_vantage = await self.searcher.explore()
             return False
-        if await self.searcher.search_instead(choice):
+        if await self.searcher.search_instead(choice, built_up=self._built_up(choice)):
             return False
         target = await asyncio.to_thread(self.looker.ipm, choice, frame, camera)
         if target is None:
@@ -425,6 +425,10 @@ class Recovery:
         finally:
             await observing
         return await self._confirm_and_descend(target, choice)
+
+    def _built_up(self, choice: Candidate) -> bool:
+        site = choice.site_ned_m
+        return True if site is None else self.looker.built_up((site[0], site[1]))
 
     async def _observe_and_trim(self) -> None:
         """During the move: the search's map of this round's frame, then what the round's reads freed

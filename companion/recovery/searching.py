@@ -112,16 +112,23 @@ class Searcher:
         to_site = math.dist(site.ned_m[:2], (n, e)) if site is not None else 0.0
         return self.plan.verdict(self._clock_s(), s.battery_pct, s.rangefinder_m, to_site), site
 
-    async def search_instead(self, choice: Candidate) -> bool:
+    async def search_instead(self, choice: Candidate, *, built_up: bool = True) -> bool:
         """Policy: the best candidate in view, at street level or on an elevated strip, already looks
         like water or traffic from afar (the ledger's judgement of its rank crop): while the search
         may go on, it is struck off and a search leg flies instead of a round spent flying there to
-        refuse it close up. A roof always gets its close look. True when it did so."""
+        refuse it close up. A roof always gets its close look. So does open ground in open country
+        (``built_up`` False: :meth:`Looker.built_up`) that is read as traffic from afar but is as large
+        and wide as open ground a confirmation accepts (the onboard tier's ``open_ground_area_m2`` and
+        ``open_ground_edge_m``): no road is that wide, and a ploughed field's furrows read as markings
+        from afar; the close look's own markings veto still stands. True when it searched instead."""
         ctx = self.ctx
         if choice.site_ned_m is None or (choice.elevated and not choice.strip):
             return False  # from afar a marking on a roof may be a shadow or a painted helipad
         seen = ctx.ledger.near((choice.site_ned_m[0], choice.site_ned_m[1]))
         if seen is None or seen.hazard < Hazard.TRAFFIC or not self._verdict()[0].search:
+            return False
+        if seen.hazard == Hazard.TRAFFIC and not built_up and self._wide_open(choice):
+            ctx.say(6, f"site {choice.index} reads as traffic from afar, but wide open ground: a close look")
             return False
         what = seen.hazard.name.lower()
         ctx.reject(seen.ned_m, choice)
@@ -132,6 +139,18 @@ class Searcher:
         ctx.say(5, f"site {choice.index} looks like {what} from afar ({seen.why[:60]}): searching instead")
         await self.leg()
         return True
+
+    def _wide_open(self, choice: Candidate) -> bool:
+        """Surface ID measured the candidate as large and wide as open ground the onboard tier's
+        confirmation accepts (not a strip: an elevated deck or a road is long and narrow)."""
+        p = self.onboard.confirm_params
+        return (
+            not choice.strip
+            and math.isfinite(choice.area_m2)
+            and math.isfinite(choice.edge_distance_m)
+            and choice.area_m2 >= p.open_ground_area_m2
+            and choice.edge_distance_m >= p.open_ground_edge_m
+        )
 
     def go_on(self) -> bool:
         """Policy: whether another round (or search leg and round) starts. The first look always does.
