@@ -111,6 +111,7 @@ class LedgerSite:
     label: str = ""  # how it is named to people: "site 2", "here"
     candidate: Any = field(default=None, repr=False)  # Surface ID's candidate, to confirm it later
     looked: bool = False  # a closer look was tried (flown to): not tried again
+    kinds: tuple[str, ...] = ()  # what the onboard tier saw against it (``HAZARD_KINDS``), when it judged
 
     def to_json(self) -> dict[str, object]:
         return {

@@ -366,17 +366,19 @@ def test_searcher_ends_the_search_at_the_battery_reserve_and_says_why() -> None:
 
 
 @pytest.mark.parametrize(
-    ("hazard", "area_m2", "edge_m", "built_up", "searched"),
+    ("hazard", "kinds", "area_m2", "edge_m", "built_up", "searched"),
     [
-        (Hazard.TRAFFIC, 1000.0, 15.0, False, False),  # a ploughed field read as markings: a close look
-        (Hazard.TRAFFIC, 1000.0, 15.0, True, True),  # among buildings: a plaza's markings are trusted
-        (Hazard.TRAFFIC, 1000.0, 4.0, False, True),  # narrow enough for a road
-        (Hazard.TRAFFIC, 300.0, 15.0, False, True),  # smaller than open ground a confirmation accepts
-        (Hazard.WATER, 5000.0, 40.0, False, True),  # a lake is wide: water from afar is trusted
+        (Hazard.TRAFFIC, ("markings",), 1000.0, 15.0, False, False),  # a ploughed field: a close look
+        (Hazard.TRAFFIC, ("markings",), 1000.0, 15.0, True, True),  # among buildings: trusted
+        (Hazard.TRAFFIC, ("markings",), 1000.0, 4.0, False, True),  # narrow enough for a road
+        (Hazard.TRAFFIC, ("markings",), 300.0, 15.0, False, True),  # smaller than open ground accepted
+        (Hazard.TRAFFIC, ("markings", "street_asphalt"), 4000.0, 13.0, False, True),  # a car park
+        (Hazard.TRAFFIC, ("markings", "raised"), 4000.0, 13.0, False, True),  # vehicles on it
+        (Hazard.WATER, ("water",), 5000.0, 40.0, False, True),  # a lake is wide: water is trusted
     ],
 )
 def test_searcher_gives_wide_open_ground_read_as_traffic_from_afar_its_close_look_in_open_country(
-    hazard: Hazard, area_m2: float, edge_m: float, built_up: bool, searched: bool
+    hazard: Hazard, kinds: tuple[str, ...], area_m2: float, edge_m: float, built_up: bool, searched: bool
 ) -> None:
     """The farmland flight that fell back onto crops had struck off a 942 m2 ploughed field, 14.6 m
     from its edge, as "traffic from afar (markings)"; a ploughed field's furrows read so from 75 m."""
@@ -384,7 +386,7 @@ def test_searcher_gives_wide_open_ground_read_as_traffic_from_afar_its_close_loo
     searcher = _parts(ctx)[3]
     searcher.start()
     site = (40.0, 0.0, 0.0)
-    ctx.ledger.add(LedgerSite(site, hazard, "markings from afar", 1, False, edge_m, "site 0"))
+    ctx.ledger.add(LedgerSite(site, hazard, ", ".join(kinds), 1, False, edge_m, "site 0", kinds=kinds))
     choice = candidate(0, site, area_m2=area_m2, edge_distance_m=edge_m)
     assert asyncio.run(searcher.search_instead(choice, built_up=built_up)) is searched
     assert bool(_record(ctx).of("search_instead")) is searched

@@ -360,7 +360,15 @@ class Looker:
             why = ", ".join(kinds) or "nothing seen against it from afar"
             self.ctx.ledger.add(
                 LedgerSite(
-                    c.site_ned_m, hazard, why, self.ctx.round, False, c.edge_distance_m, f"site {c.index}", c
+                    c.site_ned_m,
+                    hazard,
+                    why,
+                    self.ctx.round,
+                    False,
+                    c.edge_distance_m,
+                    f"site {c.index}",
+                    c,
+                    kinds=tuple(kinds),
                 )
             )
 

@@ -117,17 +117,18 @@ class Searcher:
         like water or traffic from afar (the ledger's judgement of its rank crop): while the search
         may go on, it is struck off and a search leg flies instead of a round spent flying there to
         refuse it close up. A roof always gets its close look. So does open ground in open country
-        (``built_up`` False: :meth:`Looker.built_up`) that is read as traffic from afar but is as large
-        and wide as open ground a confirmation accepts (the onboard tier's ``open_ground_area_m2`` and
-        ``open_ground_edge_m``): no road is that wide, and a ploughed field's furrows read as markings
-        from afar; the close look's own markings veto still stands. True when it searched instead."""
+        (``built_up`` False: :meth:`Looker.built_up`) on which markings alone were seen from afar (no
+        asphalt, no vehicles) and that is as large and wide as open ground a confirmation accepts (the
+        onboard tier's ``open_ground_area_m2`` and ``open_ground_edge_m``): no road is that wide, and a
+        ploughed field's furrows read as markings from afar; the close look's own markings veto still
+        stands. True when it searched instead."""
         ctx = self.ctx
         if choice.site_ned_m is None or (choice.elevated and not choice.strip):
             return False  # from afar a marking on a roof may be a shadow or a painted helipad
         seen = ctx.ledger.near((choice.site_ned_m[0], choice.site_ned_m[1]))
         if seen is None or seen.hazard < Hazard.TRAFFIC or not self._verdict()[0].search:
             return False
-        if seen.hazard == Hazard.TRAFFIC and not built_up and self._wide_open(choice):
+        if seen.hazard == Hazard.TRAFFIC and not built_up and self._wide_open(choice, seen.kinds):
             ctx.say(6, f"site {choice.index} reads as traffic from afar, but wide open ground: a close look")
             return False
         what = seen.hazard.name.lower()
@@ -140,12 +141,16 @@ class Searcher:
         await self.leg()
         return True
 
-    def _wide_open(self, choice: Candidate) -> bool:
+    def _wide_open(self, choice: Candidate, kinds: tuple[str, ...]) -> bool:
         """Surface ID measured the candidate as large and wide as open ground the onboard tier's
-        confirmation accepts (not a strip: an elevated deck or a road is long and narrow)."""
+        confirmation accepts (not a strip: an elevated deck or a road is long and narrow), and from
+        afar the onboard tier saw markings on it but no asphalt and nothing raised (a car park's
+        vehicles): a field's furrows, not a car park."""
         p = self.onboard.confirm_params
         return (
-            not choice.strip
+            "markings" in kinds
+            and not {"street_asphalt", "raised"} & set(kinds)
+            and not choice.strip
             and math.isfinite(choice.area_m2)
             and math.isfinite(choice.edge_distance_m)
             and choice.area_m2 >= p.open_ground_area_m2
