@@ -13,7 +13,7 @@ from companion.fence import KEEP_IN_M, Fence, read_fence
 from companion.recovery.core import RecoveryContext
 from companion.site_ledger import SiteLedger
 from companion.telemetry import MAV_AUTOPILOT_ARDUPILOTMEGA, MAV_AUTOPILOT_PX4, TelemetryCache
-from tests.recovery_fakes import candidate, context
+from tests.recovery_fakes import candidate, context, frame
 from tests.test_precision_landing import _Params
 from tests.test_search import Frame, planner, sweep
 
@@ -151,3 +151,37 @@ def test_a_leg_that_makes_no_headway_is_not_planned_again() -> None:
     said = " ".join(ctx.announce.texts)  # type: ignore[attr-defined]
     assert "search leg 1 made no headway (0 of 132 m): not again" in said
     assert searcher.plan.blocked[0] == first.target_ned_m[:2]  # and the second, refused as well
+
+
+def test_a_field_cut_by_the_fence_is_kept_with_its_site_moved_inside_on_the_same_surface() -> None:
+    """A pasture whose widest point lies 20 m beyond the circle the fence leaves the recovery, 40 m
+    from its edge: its site moves 22 m toward home (2 m inside), its pixel with it (IPM places that
+    pixel back on the moved site) and its edge distance less the move; one only 25 m from its edge is
+    left out (moved in, less than the open-ground 10 m would stay), as is one out of the camera's
+    view. (Farmland launch 15 flew beside a 17,700 m2 pasture for 300 s, its site beyond the fence.)"""
+    from companion.guidance.frames import PinholeCamera
+    from tests.test_recovery_parts import _parts
+
+    ctx = context(pos_ned_m=(0.0, 90.0, -75.0))
+    ctx.ctl.fence = Fence(115.0, "test")  # sites keep within 100 m of home
+    ctx.tm.state.home_ned_m = (0.0, 0.0, 0.0)
+    looker = _parts(ctx)[0]
+    seen = frame(
+        pos_ned_m=(0.0, 90.0, -75.0), rangefinder_m=75.0, camera=PinholeCamera.from_hfov(640, 480, 90.0)
+    )
+    camera = PinholeCamera(seen.width, seen.height, seen.fx, seen.fy, seen.cx, seen.cy)
+    field = candidate(0, site_ned_m=(0.0, 120.0, 0.0), edge_distance_m=40.0, area_m2=6000.0)
+    assert ctx.outside_fence(field)
+    pulled = looker.pull_inside_fence(field, seen, camera)
+    assert pulled is not None
+    assert pulled.site_ned_m is not None
+    assert pulled.site_ned_m == pytest.approx((0.0, 98.0, 0.0))
+    assert not ctx.outside_fence(pulled)
+    assert pulled.edge_distance_m == pytest.approx(18.0)
+    placed = looker.ipm(pulled, seen, camera)  # no LiDAR: flat ground at the rangefinder's 75 m
+    assert placed is not None
+    assert placed[:2] == pytest.approx((0.0, 98.0), abs=0.05)
+    narrow = candidate(1, site_ned_m=(0.0, 120.0, 0.0), edge_distance_m=25.0, area_m2=3000.0)
+    assert looker.pull_inside_fence(narrow, seen, camera) is None
+    unseen = candidate(2, site_ned_m=(200.0, 120.0, 0.0), edge_distance_m=400.0, area_m2=9e5)
+    assert looker.pull_inside_fence(unseen, seen, camera) is None

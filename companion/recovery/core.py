@@ -41,6 +41,10 @@ SEVERITY_CRITICAL = 2  # MAV_SEVERITY_CRITICAL: a defect of the companion's own
 MAX_REJECTED_RADIUS_M = 15.0  # water or traffic rules out at most this far around a rejected site
 # a site at street level with roofs measured this close is among buildings (people and traffic come back)
 BUILT_UP_RADIUS_M = 200.0
+# a site beyond the fence's circle whose surface reaches inside it is moved inside (Looker.pull_inside_fence)
+# where it then stays this far from the surface's edge (the onboard tier's default open-ground edge) ...
+PULLED_EDGE_M = DEFAULTS.reasoner.open_ground_edge_m
+PULL_SPARE_M = 2.0  # ... and this far inside the circle
 
 
 class FrameUnavailable(Exception):

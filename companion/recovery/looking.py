@@ -4,6 +4,7 @@ confirmation, the LiDAR check of a site, and the chosen pixel placed in the worl
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import functools
 import itertools
 import math
@@ -31,6 +32,8 @@ from companion.reasoning.onboard import OnboardReasoner, lidar_kind
 from companion.reasoning.people_watch import PeopleSeen, people_in_frame
 from companion.recovery.core import (
     BUILT_UP_RADIUS_M,
+    PULL_SPARE_M,
+    PULLED_EDGE_M,
     SENSOR_RETRY_S,
     SITE_RETRIES,
     FrameUnavailable,
@@ -425,6 +428,35 @@ class Looker:
         if not front[0] or dist <= 0 or not (0 <= u < camera.width and 0 <= v < camera.height):
             return None
         return await asyncio.to_thread(people_in_frame, net, frame, camera, (u, v), camera.fx / dist, margin)
+
+    def pull_inside_fence(self, c: Candidate, frame: Any, camera: PinholeCamera) -> Candidate | None:
+        """Policy: a candidate whose site lies beyond the circle the autopilot's fence leaves the
+        recovery (:meth:`RecoveryContext.fence_bounds`) but whose surface reaches inside it: its site
+        moved straight toward home until inside, where the disc Surface ID measured clear around the
+        site (``edge_distance_m``) still leaves the moved site ``PULLED_EDGE_M`` from the surface's
+        edge, so that it stays on the surface, as open ground must; its pixel moved with it (IPM places
+        the pixel) and its edge distance less the move. None when it cannot be: too little of it
+        inside, not measured, or out of the camera's view. A field cut by the fence's circle is a field
+        a farmland flight may land on (docs/recovery.md)."""
+        bounds = self.ctx.fence_bounds()
+        if bounds is None or c.site_ned_m is None or not math.isfinite(c.edge_distance_m):
+            return None
+        (hn, he), keep = bounds
+        sn, se, sd = c.site_ned_m
+        out = math.hypot(sn - hn, se - he)
+        move = out - keep + PULL_SPARE_M
+        if out <= 0 or move <= 0 or c.edge_distance_m - move < PULLED_EDGE_M:
+            return None
+        k = (out - move) / out
+        site = (hn + k * (sn - hn), he + k * (se - he), sd)
+        rel = np.asarray(site, dtype=float) - np.asarray(frame.pos_ned_m, dtype=float)
+        uv, front = camera.project_frd((rel @ quat_to_matrix(frame.quat_wxyz))[None, :])
+        u, v = float(uv[0, 0]), float(uv[0, 1])
+        if not front[0] or not (0 <= u < camera.width and 0 <= v < camera.height):
+            return None
+        return dataclasses.replace(
+            c, site_ned_m=site, centre_px=(u, v), edge_distance_m=c.edge_distance_m - move
+        )
 
     def ipm(self, c: Candidate, frame: Any, camera: PinholeCamera) -> tuple[float, float, float] | None:
         """The chosen pixel -> world point through the LiDAR; the flat-ground fallback without it;

@@ -368,10 +368,7 @@ class Recovery:
         # a roof in view makes it a built-up area; so do roofs the LiDAR saw near a site (Looker.built_up)
         self.looker.roofs_in_view = any(c.elevated for c in candidates)
         candidates = [c for c in candidates if not ctx.near_rejected(c)]
-        beyond = [c.index for c in candidates if ctx.outside_fence(c)]
-        if beyond:
-            ctx.say(6, f"site {', '.join(map(str, beyond))} beyond the autopilot's fence: not considered")
-            candidates = [c for c in candidates if c.index not in beyond]
+        candidates = self._within_fence(candidates, frame, camera)
         if frame.image_rgb is not None:  # JPEG encoding off the event loop: the setpoint stream runs there
             # (before the ranking: a ground feed boxes the ranking's candidates on this frame)
             await asyncio.to_thread(ctx.record.save_image, f"round{ctx.round:02d}-acquire", frame.image_rgb)
@@ -425,6 +422,31 @@ class Recovery:
         finally:
             await observing
         return await self._confirm_and_descend(target, choice)
+
+    def _within_fence(
+        self, candidates: list[Candidate], frame: Any, camera: PinholeCamera
+    ) -> list[Candidate]:
+        """The candidates whose sites lie inside what the autopilot's fence leaves the recovery, those
+        beyond it moved inside where their surface reaches in (:meth:`Looker.pull_inside_fence`), the
+        rest left out; each said."""
+        ctx = self.ctx
+        kept, beyond = [], []
+        for c in candidates:
+            if not ctx.outside_fence(c):
+                kept.append(c)
+                continue
+            pulled = self.looker.pull_inside_fence(c, frame, camera)
+            if pulled is None:
+                beyond.append(c.index)
+                continue
+            moved = c.edge_distance_m - pulled.edge_distance_m
+            ctx.say(
+                6, f"site {c.index} beyond the autopilot's fence, its surface within: moved {moved:.0f} m in"
+            )
+            kept.append(pulled)
+        if beyond:
+            ctx.say(6, f"site {', '.join(map(str, beyond))} beyond the autopilot's fence: not considered")
+        return kept
 
     def _built_up(self, choice: Candidate) -> bool:
         site = choice.site_ned_m
