@@ -437,7 +437,7 @@ class Looker:
         edge, so that it stays on the surface, as open ground must; its pixel moved with it (IPM places
         the pixel) and its edge distance less the move. None when it cannot be: too little of it
         inside, not measured, or out of the camera's view. A field cut by the fence's circle is a field
-        a farmland flight may land on (docs/recovery.md)."""
+        a farmland flight may land on (docs/companion.md, "The autopilot's fence")."""
         bounds = self.ctx.fence_bounds()
         if bounds is None or c.site_ned_m is None or not math.isfinite(c.edge_distance_m):
             return None
