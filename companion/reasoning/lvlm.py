@@ -52,9 +52,6 @@ from companion.reasoning.base import (
     TruncatedAnswer,
     Unreachable,
 )
-
-if TYPE_CHECKING:  # httpx is imported when an LVLM tier is built: the onboard tier alone does without it
-    import httpx
 from companion.reasoning.parsing import parse_confirm, parse_rank
 from companion.reasoning.prompts import (
     SYSTEM_PROMPT,
@@ -63,6 +60,9 @@ from companion.reasoning.prompts import (
     rank_prompt,
     response_format,
 )
+
+if TYPE_CHECKING:  # httpx is imported when an LVLM tier is built: the onboard tier alone does without it
+    import httpx
 
 __all__ = ["LvlmProfile", "LvlmReasoner", "encode_image"]
 

@@ -421,12 +421,10 @@ class Looker:
         if frame.image_rgb is None or net is None or margin <= 0:
             return None
         camera = PinholeCamera(frame.width, frame.height, frame.fx, frame.fy, frame.cx, frame.cy)
-        rel = np.asarray(target, dtype=float) - np.asarray(frame.pos_ned_m, dtype=float)
-        uv, front = camera.project_frd((rel @ quat_to_matrix(frame.quat_wxyz))[None, :])
-        dist = float(np.linalg.norm(rel))
-        u, v = float(uv[0, 0]), float(uv[0, 1])
-        if not front[0] or dist <= 0 or not (0 <= u < camera.width and 0 <= v < camera.height):
+        seen = in_view(camera, frame.pos_ned_m, frame.quat_wxyz, target)
+        if seen is None:
             return None
+        u, v, dist = seen
         return await asyncio.to_thread(people_in_frame, net, frame, camera, (u, v), camera.fx / dist, margin)
 
     def pull_inside_fence(self, c: Candidate, frame: Any, camera: PinholeCamera) -> Candidate | None:
@@ -449,13 +447,11 @@ class Looker:
             return None
         k = (out - move) / out
         site = (hn + k * (sn - hn), he + k * (se - he), sd)
-        rel = np.asarray(site, dtype=float) - np.asarray(frame.pos_ned_m, dtype=float)
-        uv, front = camera.project_frd((rel @ quat_to_matrix(frame.quat_wxyz))[None, :])
-        u, v = float(uv[0, 0]), float(uv[0, 1])
-        if not front[0] or not (0 <= u < camera.width and 0 <= v < camera.height):
+        seen = in_view(camera, frame.pos_ned_m, frame.quat_wxyz, site)
+        if seen is None:
             return None
         return dataclasses.replace(
-            c, site_ned_m=site, centre_px=(u, v), edge_distance_m=c.edge_distance_m - move
+            c, site_ned_m=site, centre_px=seen[:2], edge_distance_m=c.edge_distance_m - move
         )
 
     def ipm(self, c: Candidate, frame: Any, camera: PinholeCamera) -> tuple[float, float, float] | None:
@@ -488,13 +484,27 @@ def site_closeup(
 ) -> np.ndarray:
     """The part of a camera frame within ``half_m`` of the site, centred on it (``site_box``), or the
     whole frame when the site is not in view: what the confirm stage judges."""
-    rel = np.asarray(target_ned_m, dtype=float) - np.asarray(pos_ned_m, dtype=float)
+    seen = in_view(camera, pos_ned_m, quat_wxyz, target_ned_m)
+    if seen is None:
+        return image
+    u, v, dist = seen
+    half = int(camera.fx * half_m / dist)
+    return crop(image, site_box(u, v, half, camera.width, camera.height))
+
+
+def in_view(
+    camera: PinholeCamera, pos_ned_m: Any, quat_wxyz: Any, point_ned_m: Any
+) -> tuple[float, float, float] | None:
+    """Where a world point (NED, metres) falls in a frame taken at ``pos_ned_m`` / ``quat_wxyz``: its
+    pixel and its distance from the camera, or None when it is behind the camera, outside the image or
+    at the camera itself."""
+    rel = np.asarray(point_ned_m, dtype=float) - np.asarray(pos_ned_m, dtype=float)
     uv, front = camera.project_frd((rel @ quat_to_matrix(quat_wxyz))[None, :])
     dist = float(np.linalg.norm(rel))
-    if not front[0] or not (0 <= uv[0, 0] < camera.width and 0 <= uv[0, 1] < camera.height) or dist <= 0:
-        return image
-    half = int(camera.fx * half_m / dist)
-    return crop(image, site_box(uv[0, 0], uv[0, 1], half, camera.width, camera.height))
+    u, v = float(uv[0, 0]), float(uv[0, 1])
+    if not front[0] or dist <= 0 or not (0 <= u < camera.width and 0 <= v < camera.height):
+        return None
+    return u, v, dist
 
 
 UNMEASURED = SiteCheck(0, math.nan, math.nan, math.nan, math.nan, ("not measured",))
