@@ -26,6 +26,9 @@ STREAM_HZ = 20.0  # >= 10 Hz on a real vehicle; 20 keeps PX4's 2 Hz rule at 4x s
 MAV_STATE_CRITICAL = 5
 MAV_RESULT_ACCEPTED, MAV_RESULT_TEMPORARILY_REJECTED = 0, 1
 LINK_SILENCE_S = 3.0  # wall seconds without LOCAL_POSITION_NED before the link counts as lost
+# a link coming back: heartbeats in another mode with no position this long after them mean the
+# estimator lost the position (not a position still on its way)
+HEARD_WITHOUT_POSITION_S = 1.0
 
 
 class ControlError(RuntimeError):
@@ -391,26 +394,32 @@ class VehicleController:
         after the wait began has come (the mode the autopilot is in *now*). The setpoint stream keeps
         running meanwhile. Returns the seconds since the last position before the silence; raises
         ``TelemetryLost`` when nothing came within ``timeout_s``, and ``AutopilotFailsafe`` or
-        ``OperatorTakeover`` when heartbeats say the autopilot left the companion's mode meanwhile
-        (the link is up, its estimator lost the position)."""
+        ``OperatorTakeover`` when heartbeats say the autopilot left the companion's mode and no
+        position follows them within ``HEARD_WITHOUT_POSITION_S`` (the link is up, its estimator lost
+        the position). A link that comes back with the autopilot in its own failsafe (PX4's offboard
+        loss) returns as any other: the heartbeat often comes a moment before the first position,
+        and the caller then sees the failsafe with the link up."""
         start = time.monotonic()
         last_heard = self.tm.state.stamps.get("position", start - LINK_SILENCE_S)
         deadline = start + timeout_s
+        interrupted_at: float | None = None
         while True:
-            # heartbeats without a position: the link is up but the estimator has none (a GPS loss);
-            # the autopilot's own failsafe taking the vehicle then is seen as at any time
-            if self.failsafe is not None:
-                raise self.failsafe
-            if self.takeover is not None:
-                raise self.takeover
+            now = time.monotonic()
             fresh = self.tm.age_s("position") < LINK_SILENCE_S / 3
             if fresh and self.tm.state.stamps.get("heartbeat", 0.0) > start:
-                return time.monotonic() - last_heard
-            remaining = deadline - time.monotonic()
+                return now - last_heard
+            # heartbeats without a position: the link is up but the estimator has none (a GPS loss);
+            # the autopilot's own failsafe taking the vehicle then is seen as at any time
+            interruption = self.failsafe if self.failsafe is not None else self.takeover
+            if interruption is not None:
+                interrupted_at = now if interrupted_at is None else interrupted_at
+                if now - interrupted_at >= HEARD_WITHOUT_POSITION_S:
+                    raise interruption
+            remaining = deadline - now
             if remaining <= 0:
                 raise TelemetryLost(f"no telemetry for {timeout_s + LINK_SILENCE_S:.0f} s")
             with contextlib.suppress(TimeoutError):
-                await self.tm.wait_update(min(remaining, 1.0))
+                await self.tm.wait_update(min(remaining, 0.1 if interruption is not None else 1.0))
 
     def set_target(self, n: float, e: float, d: float, yaw: float | None = None) -> None:
         if not all(math.isfinite(v) for v in (n, e, d)):
