@@ -37,6 +37,8 @@ MAV_AUTOPILOT_INVALID = 8
 MAV_STATE_STANDBY, MAV_STATE_ACTIVE = 3, 4
 SEVERITY_WARNING = 4  # MAV_SEVERITY_WARNING: autopilot texts this grave or graver go into a recovery's record
 RESULT_ACCEPTED, RESULT_TEMP_REJECTED, RESULT_DENIED, RESULT_UNSUPPORTED, RESULT_IN_PROGRESS = 0, 1, 2, 3, 5
+# the sensor stream not up yet: tried again after this, then twice as long each time up to the maximum
+SENSOR_RETRY_FIRST_S, SENSOR_RETRY_MAX_S = 0.2, 1.0
 RESUME_WAIT_S = 60.0  # after a restart mid-recovery: how long to wait for telemetry and sensors
 # What the companion needs from the autopilot, Hz: real ArduPilot sends none of it unasked (PX4 and the
 # emulation stream it anyway; asking is harmless there). Asked on the first heartbeat and again while
@@ -467,12 +469,14 @@ class Companion:
             self._own_pending = (alarm, until if until is not None else time.monotonic() + OWN_ALARM_RETRY_S)
 
     async def _connect_sensors(self, stack: contextlib.AsyncExitStack, client_cls: Any) -> None:
-        """Connect to the sensor stream, retrying every second: it may come up after us. Alarms
-        are answered TEMPORARILY_REJECTED until it is there."""
+        """Connect to the sensor stream, retrying after ``SENSOR_RETRY_FIRST_S``, then twice as long
+        each time up to a second: it may come up after us, usually within moments (both started at
+        boot). Alarms are answered TEMPORARILY_REJECTED until it is there."""
         from landfall_link.sensorstream import SensorStreamError
 
         assert self._sensors is not None
         warned = False
+        wait_s = SENSOR_RETRY_FIRST_S
         while True:
             try:
                 client = client_cls(self._sensors[0], self._sensors[1], timeout_s=self._frame_timeout_s)
@@ -483,9 +487,12 @@ class Companion:
                 return
             except SensorStreamError as exc:
                 if not warned:
-                    self.log.warning("sensor stream not available yet (%s); retrying every second", exc)
+                    self.log.warning(
+                        "sensor stream not available yet (%s); retrying, every second at most", exc
+                    )
                     warned = True
-                await asyncio.sleep(1.0)
+                await asyncio.sleep(wait_s)
+                wait_s = min(2 * wait_s, SENSOR_RETRY_MAX_S)
 
     async def _warm_up(self) -> None:
         """Surface ID and the onboard tier once, in a worker thread, so that the first alarm does not

@@ -149,21 +149,10 @@ def test_a_camera_alone_lands_with_the_autopilots_rangefinder(
     print(json.dumps({"touchdown": td}))
 
 
-@pytest.mark.parametrize(
-    ("sends", "reads"),
-    [
-        ("raw+udp://127.0.0.1:{port}", "udp://127.0.0.1:{port}"),
-        ("raw+tcp://127.0.0.1:{port}", "tcp://127.0.0.1:{port}"),
-    ],
-    ids=["udp", "tcp"],
-)
-def test_raw_h264_as_a_raspberry_pi_camera_sends_it_lands_on_the_clear_roof(
-    start_rig: Callable[..., Rig], tmp_path: Path, sends: str, reads: str
-) -> None:
-    """simbridge sends its camera as ``rpicam-vid --inline`` does, raw H.264 without RTP: datagrams
-    (``-o udp://``), read as ``companion --camera udp://...``, which tells it from RTP by the first
-    datagrams; or a TCP server (``--listen -o tcp://``), read as ``--camera tcp://...``. Frames without
-    presentation times are dated by their decoding; the landing is on the clear roof."""
+def _raw_h264_rig(start_rig: Callable[..., Rig], tmp_path: Path, sends: str, reads: str) -> tuple[Rig, str]:
+    """simbridge sending its camera as ``rpicam-vid --inline`` does (raw H.264 without RTP) to
+    ``sends`` and the companion reading ``reads``, once its first frame is decoded at the calibration's
+    size: the rig and the URL read."""
     info = _camera_info(tmp_path)
     port = free_udp_port()  # a free TCP port is as good
     rig = start_rig(
@@ -172,7 +161,29 @@ def test_raw_h264_as_a_raspberry_pi_camera_sends_it_lands_on_the_clear_roof(
         ["--camera", reads.format(port=port), "--camera-info", str(info)],
         env={"LANDFALL_CAMERA_LATENCY_MS": "0", "LANDFALL_SENSORS_MAX_FRAME_AGE_S": "3"},
     )  # fmt: skip
-    rig.wait_log("camera: first frame from", timeout_s=60)
-    if reads.startswith("udp"):
-        rig.wait_log(f"camera {reads.format(port=port)}: raw H.264", timeout_s=5)
+    url = reads.format(port=port)
+    rig.wait_log(f"camera: first frame from {url}", timeout_s=60)
+    size = dict(line.split(": ", 1) for line in info.read_text().splitlines()[:2])
+    first = f"camera: first frame from {url} ({size['image_width']} x {size['image_height']})"
+    assert first in rig.log_text(), rig.log_text()[-2000:]  # decoded at the calibration's size
+    return rig, url
+
+
+def test_raw_h264_as_a_raspberry_pi_camera_sends_it_lands_on_the_clear_roof(
+    start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """Raw H.264 datagrams (``rpicam-vid --inline -o udp://``), read as ``companion --camera
+    udp://...``, which tells them from RTP by the first datagrams. Frames without presentation times
+    are dated by their decoding; the landing is on the clear roof."""
+    rig, url = _raw_h264_rig(start_rig, tmp_path, "raw+udp://127.0.0.1:{port}", "udp://127.0.0.1:{port}")
+    rig.wait_log(f"camera {url}: raw H.264", timeout_s=5)
     _alarm_lands_on_the_clear_roof(rig)
+
+
+def test_raw_h264_from_a_tcp_server_as_a_raspberry_pi_camera_listens_is_read(
+    start_rig: Callable[..., Rig], tmp_path: Path
+) -> None:
+    """``rpicam-vid --inline --listen -o tcp://``: a TCP server the companion dials (``--camera
+    tcp://...``). Its frames are decoded at the calibration's size; what follows a decoded frame (its
+    dating without presentation times, the flight on it) is the raw datagrams' path, flown above."""
+    _raw_h264_rig(start_rig, tmp_path, "raw+tcp://127.0.0.1:{port}", "tcp://127.0.0.1:{port}")

@@ -172,3 +172,46 @@ def test_the_daemon_warms_up_once_at_start_and_a_failed_warm_up_only_costs_its_t
         assert "warm-up failed (RuntimeError: no model file)" in caplog.text
     else:
         assert "warmed up in" in caplog.text
+
+
+def test_a_sensor_stream_not_up_yet_is_dialled_again_soon_then_once_a_second(
+    caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Both processes start at boot and the stream is usually up moments after the daemon: it is dialled
+    again after 0.2 s, then twice as long each time up to a second; said once, connected in the end."""
+    import contextlib
+
+    from landfall_link.sensorstream import SensorStreamError
+
+    attempts = itertools.count()
+
+    class LateStream:
+        def __init__(self, host: str, port: int, *, timeout_s: float) -> None:
+            if next(attempts) < 6:
+                raise SensorStreamError(f"sensor stream {host}:{port}: cannot connect")
+
+        async def __aenter__(self) -> LateStream:
+            return self
+
+        async def __aexit__(self, *exc: object) -> None:
+            return None
+
+    waits: list[float] = []
+    real_sleep = asyncio.sleep
+
+    async def sleep(seconds: float) -> None:
+        waits.append(seconds)
+        await real_sleep(0)
+
+    c = Companion(mavlink_url="udpout:127.0.0.1:9", sensors=("127.0.0.1", 9), watch_battery_pct=None)
+
+    async def connect() -> None:
+        monkeypatch.setattr(asyncio, "sleep", sleep)
+        async with contextlib.AsyncExitStack() as stack:
+            await c._connect_sensors(stack, LateStream)
+
+    with caplog.at_level(logging.INFO):
+        asyncio.run(connect())
+    assert waits == [0.2, 0.4, 0.8, 1.0, 1.0, 1.0]
+    assert caplog.text.count("sensor stream not available yet") == 1
+    assert "sensor stream connected: 127.0.0.1:9" in caplog.text
