@@ -372,6 +372,9 @@ def test_searcher_ends_the_search_at_the_battery_reserve_and_says_why() -> None:
         (Hazard.TRAFFIC, ("markings",), 1000.0, 15.0, True, True),  # among buildings: trusted
         (Hazard.TRAFFIC, ("markings",), 1000.0, 4.0, False, True),  # narrow enough for a road
         (Hazard.TRAFFIC, ("markings",), 300.0, 15.0, False, True),  # smaller than open ground accepted
+        (Hazard.TRAFFIC, ("street_asphalt",), 1000.0, 15.0, False, False),  # a field greyed by fog
+        (Hazard.TRAFFIC, ("street_asphalt",), 1000.0, 15.0, True, True),  # among buildings: a square
+        (Hazard.TRAFFIC, ("street_asphalt",), 1000.0, 4.0, False, True),  # a country road
         (Hazard.TRAFFIC, ("markings", "street_asphalt"), 4000.0, 13.0, False, True),  # a car park
         (Hazard.TRAFFIC, ("markings", "raised"), 4000.0, 13.0, False, True),  # vehicles on it
         (Hazard.WATER, ("water",), 5000.0, 40.0, False, True),  # a lake is wide: water is trusted
@@ -381,7 +384,9 @@ def test_searcher_gives_wide_open_ground_read_as_traffic_from_afar_its_close_loo
     hazard: Hazard, kinds: tuple[str, ...], area_m2: float, edge_m: float, built_up: bool, searched: bool
 ) -> None:
     """The farmland flight that fell back onto crops had struck off a 942 m2 ploughed field, 14.6 m
-    from its edge, as "traffic from afar (markings)"; a ploughed field's furrows read so from 75 m."""
+    from its edge, as "traffic from afar (markings)"; a ploughed field's furrows read so from 75 m. In
+    fog, farmland's fields read from afar as asphalt, and flights that struck every one of them off
+    landed where they were, on crops."""
     ctx = context()
     searcher = _parts(ctx)[3]
     searcher.start()

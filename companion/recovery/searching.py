@@ -117,11 +117,12 @@ class Searcher:
         like water or traffic from afar (the ledger's judgement of its rank crop): while the search
         may go on, it is struck off and a search leg flies instead of a round spent flying there to
         refuse it close up. A roof always gets its close look. So does open ground in open country
-        (``built_up`` False: :meth:`Looker.built_up`) on which markings alone were seen from afar (no
-        asphalt, no vehicles) and that is as large and wide as open ground a confirmation accepts (the
-        onboard tier's ``open_ground_area_m2`` and ``open_ground_edge_m``): no road is that wide, and a
-        ploughed field's furrows read as markings from afar; the close look's own markings veto still
-        stands. True when it searched instead."""
+        (``built_up`` False: :meth:`Looker.built_up`) on which markings alone or asphalt alone were seen
+        from afar (not both, no vehicles) and that is as large and wide as open ground a confirmation
+        accepts (the onboard tier's ``open_ground_area_m2`` and ``open_ground_edge_m``): no road is that
+        wide, a ploughed field's furrows read as markings from afar, and a field seen through fog or
+        haze as grey paving; the close look's own markings and paving vetoes still stand. True when it
+        searched instead."""
         ctx = self.ctx
         if choice.site_ned_m is None or (choice.elevated and not choice.strip):
             return False  # from afar a marking on a roof may be a shadow or a painted helipad
@@ -144,12 +145,12 @@ class Searcher:
     def _wide_open(self, choice: Candidate, kinds: tuple[str, ...]) -> bool:
         """Surface ID measured the candidate as large and wide as open ground the onboard tier's
         confirmation accepts (not a strip: an elevated deck or a road is long and narrow), and from
-        afar the onboard tier saw markings on it but no asphalt and nothing raised (a car park's
-        vehicles): a field's furrows, not a car park."""
+        afar the onboard tier saw markings or asphalt on it, not both (painted bays on asphalt: a car
+        park), and nothing raised (a car park's vehicles): a field's furrows, or a field greyed by fog."""
         p = self.onboard.confirm_params
         return (
-            "markings" in kinds
-            and not {"street_asphalt", "raised"} & set(kinds)
+            len({"markings", "street_asphalt"} & set(kinds)) == 1
+            and "raised" not in kinds
             and not choice.strip
             and math.isfinite(choice.area_m2)
             and math.isfinite(choice.edge_distance_m)
