@@ -323,6 +323,36 @@ def test_lander_lands_on_a_site_that_stays_the_least_bad_from_overhead_and_bound
     assert len(_record(ctx).of("fallback_site")) == looked + 1
 
 
+def test_lander_after_its_looks_lands_on_level_ground_measured_close_up_not_on_another_unseen_field() -> None:
+    """Every field seen from afar is a crop from overhead; level ground at street level was measured
+    close up earlier (refused then as among buildings, people coming back). After FALLBACK_LOOKS crops
+    the fourth field, seen only from afar, is no surer: the lander says so and lands on the measured
+    ground. (Farmland city 21, launch 8: the fourth field was a crop too, 36 m from safe ground.)"""
+    fields = [(30.0 * (k + 1), 0.0) for k in range(landing_module.FALLBACK_LOOKS + 1)]
+    sweeps = [_ground_sweep(ne, 40.0, crop=True, seed=10 + k) for k, ne in enumerate(fields)]
+    ctx = context(frame(), frame(), *sweeps, pos_ned_m=(0.0, 0.0, -40.0))
+    for k, (n, e) in enumerate(fields):
+        ctx.ledger.add(LedgerSite((n, e, 0.0), Hazard.OFF_ROOF, "from afar", 1, False, label=f"site {k}"))
+    street = LedgerSite((-40.0, 20.0, 0.0), Hazard.STREET, "street_level", 2, True, 20.0, label="site 7")
+    ctx.ledger.add(street)
+    outcome = asyncio.run(_parts(ctx)[2].land_at_best("search ended (window)"))
+    looked = landing_module.FALLBACK_LOOKS
+    assert [g[:2] for g in _ctl(ctx).gotos] == [*fields[:looked], (-40.0, 20.0)]
+    assert outcome.site_ned_m == street.ned_m
+    last = _record(ctx).of("fallback_site")[-1]
+    assert (last["chosen"]["label"], last["instead_of"]["label"]) == ("site 7", f"site {looked}")
+    said = " ".join(_said(ctx))
+    assert "only seen from afar after 3 looks that proved worse: landing at site 7 instead" in said, said
+
+    # measured close up only as traffic: the fourth field it is, as before
+    ctx = context(frame(), frame(), *sweeps, pos_ned_m=(0.0, 0.0, -40.0))
+    for k, (n, e) in enumerate(fields):
+        ctx.ledger.add(LedgerSite((n, e, 0.0), Hazard.OFF_ROOF, "from afar", 1, False, label=f"site {k}"))
+    ctx.ledger.add(LedgerSite((-40.0, 20.0, 0.0), Hazard.TRAFFIC, "street_asphalt", 2, True, label="site 7"))
+    asyncio.run(_parts(ctx)[2].land_at_best("search ended (window)"))
+    assert [g[:2] for g in _ctl(ctx).gotos] == fields[: looked + 1]
+
+
 def test_lander_never_falls_back_to_a_site_beyond_the_autopilots_fence() -> None:
     """A field seen 140 m from home with a 130 m fence: PX4 refuses setpoints beyond its fence and
     leaves offboard, over and over (a farmland launch looped so until it timed out). The nearer car

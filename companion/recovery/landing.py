@@ -17,6 +17,9 @@ from companion.recovery.looking import Looker, height_above_surroundings
 from companion.site_ledger import Hazard, LedgerSite, hazard_of
 
 FALLBACK_LOOKS = 3  # sites seen only from afar looked at from overhead before a fallback landing
+# ... after which the least bad site measured close up is landed on instead of another seen only from
+# afar, when it is no worse than this (level ground at street level, refused where people come back)
+MEASURED_AFTER_LOOKS = Hazard.STREET
 
 
 class Lander:
@@ -97,7 +100,11 @@ class Lander:
         overhead (the LiDAR's check and the image judgement, as the spot below); when that look makes
         another site the least bad (a field seen as grass from afar found to be standing crops), say
         so and go there instead, until a site is looked at and stays the least bad, one was judged
-        close up before, or ``FALLBACK_LOOKS`` were spent. The site landed on."""
+        close up before, or ``FALLBACK_LOOKS`` were spent. Then a site seen only from afar is no surer
+        than the ones that proved worse: the least bad site measured close up is landed on instead
+        when it is no worse than ``MEASURED_AFTER_LOOKS`` (farmland: three fields that were crops from
+        overhead, a fourth one landed on unseen, also crops, and level ground measured at street level
+        passed over). The site landed on."""
         ctx = self.ctx
         for _ in range(FALLBACK_LOOKS):
             if not await self.fly_over(site, "the chosen site") or site.closeup:
@@ -116,8 +123,32 @@ class Lander:
             )
             self._record_choice(reason, now, seen)
             site = now
+        measured = self._measured_instead(site)
+        if measured is not None:
+            ctx.say(
+                4,
+                f"{ctx.ledger.name(site)} only seen from afar after {FALLBACK_LOOKS} looks that proved "
+                f"worse: landing at {ctx.ledger.name(measured)} instead, measured close up "
+                f"({measured.hazard.name.lower()}: {measured.why})",
+            )
+            self._record_choice(reason, measured, site)
+            site = measured
         await self.fly_over(site, "the chosen site")
         return site
+
+    def _measured_instead(self, site: LedgerSite) -> LedgerSite | None:
+        """Once the looks are spent: the least bad site measured close up, within the fence and no
+        worse than ``MEASURED_AFTER_LOOKS``, when ``site`` was only seen from afar; else None."""
+        ctx = self.ctx
+        if site.closeup or site.label == "home":
+            return None
+        n, e, _ = ctx.tm.state.pos_ned_m
+        return ctx.ledger.least_bad(
+            (n, e),
+            allowed=lambda s: (
+                s.closeup and s.hazard <= MEASURED_AFTER_LOOKS and not ctx.beyond_fence(s.ned_m)
+            ),
+        )
 
     def fallback_site(self) -> LedgerSite | None:
         """The accepted site, else the ledger's least bad, else None."""
