@@ -333,24 +333,29 @@ def test_lander_after_its_looks_lands_on_level_ground_measured_close_up_not_on_a
     ctx = context(frame(), frame(), *sweeps, pos_ned_m=(0.0, 0.0, -40.0))
     for k, (n, e) in enumerate(fields):
         ctx.ledger.add(LedgerSite((n, e, 0.0), Hazard.OFF_ROOF, "from afar", 1, False, label=f"site {k}"))
-    street = LedgerSite((-40.0, 20.0, 0.0), Hazard.STREET, "street_level", 2, True, 20.0, label="site 7")
+    street = LedgerSite((60.0, 40.0, 0.0), Hazard.STREET, "street_level", 2, True, 20.0, label="site 7")
     ctx.ledger.add(street)
     outcome = asyncio.run(_parts(ctx)[2].land_at_best("search ended (window)"))
     looked = landing_module.FALLBACK_LOOKS
-    assert [g[:2] for g in _ctl(ctx).gotos] == [*fields[:looked], (-40.0, 20.0)]
+    assert [g[:2] for g in _ctl(ctx).gotos] == [*fields[:looked], (60.0, 40.0)]
     assert outcome.site_ned_m == street.ned_m
     last = _record(ctx).of("fallback_site")[-1]
     assert (last["chosen"]["label"], last["instead_of"]["label"]) == ("site 7", f"site {looked}")
     said = " ".join(_said(ctx))
     assert "only seen from afar after 3 looks that proved worse: landing at site 7 instead" in said, said
 
-    # measured close up only as traffic: the fourth field it is, as before
-    ctx = context(frame(), frame(), *sweeps, pos_ned_m=(0.0, 0.0, -40.0))
-    for k, (n, e) in enumerate(fields):
-        ctx.ledger.add(LedgerSite((n, e, 0.0), Hazard.OFF_ROOF, "from afar", 1, False, label=f"site {k}"))
-    ctx.ledger.add(LedgerSite((-40.0, 20.0, 0.0), Hazard.TRAFFIC, "street_asphalt", 2, True, label="site 7"))
-    asyncio.run(_parts(ctx)[2].land_at_best("search ended (window)"))
-    assert [g[:2] for g in _ctl(ctx).gotos] == fields[: looked + 1]
+    # measured close up only as traffic, or level ground 170 m farther than the fourth field (the
+    # battery was counted for the field): the fourth field it is, as before
+    for measured in (
+        LedgerSite((60.0, 40.0, 0.0), Hazard.TRAFFIC, "street_asphalt", 2, True, label="site 7"),
+        LedgerSite((-80.0, 0.0, 0.0), Hazard.STREET, "street_level", 2, True, 20.0, label="site 7"),
+    ):
+        ctx = context(frame(), frame(), *sweeps, pos_ned_m=(0.0, 0.0, -40.0))
+        for k, (n, e) in enumerate(fields):
+            ctx.ledger.add(LedgerSite((n, e, 0.0), Hazard.OFF_ROOF, "from afar", 1, False, label=f"site {k}"))
+        ctx.ledger.add(measured)
+        asyncio.run(_parts(ctx)[2].land_at_best("search ended (window)"))
+        assert [g[:2] for g in _ctl(ctx).gotos] == fields[: looked + 1]
 
 
 def test_lander_never_falls_back_to_a_site_beyond_the_autopilots_fence() -> None:

@@ -20,6 +20,7 @@ FALLBACK_LOOKS = 3  # sites seen only from afar looked at from overhead before a
 # ... after which the least bad site measured close up is landed on instead of another seen only from
 # afar, when it is no worse than this (level ground at street level, refused where people come back)
 MEASURED_AFTER_LOOKS = Hazard.STREET
+MEASURED_EXTRA_M = 50.0  # ... and no farther from the vehicle than the site it replaces plus this
 
 
 class Lander:
@@ -137,16 +138,22 @@ class Lander:
         return site
 
     def _measured_instead(self, site: LedgerSite) -> LedgerSite | None:
-        """Once the looks are spent: the least bad site measured close up, within the fence and no
-        worse than ``MEASURED_AFTER_LOOKS``, when ``site`` was only seen from afar; else None."""
+        """Once the looks are spent: the least bad site measured close up, within the fence, no worse
+        than ``MEASURED_AFTER_LOOKS`` and at most ``MEASURED_EXTRA_M`` farther than ``site`` (the
+        search's end counted the battery for that far), when ``site`` was only seen from afar; else
+        None."""
         ctx = self.ctx
         if site.closeup or site.label == "home":
             return None
         n, e, _ = ctx.tm.state.pos_ned_m
+        reach_m = math.dist(site.ned_m[:2], (n, e)) + MEASURED_EXTRA_M
         return ctx.ledger.least_bad(
             (n, e),
             allowed=lambda s: (
-                s.closeup and s.hazard <= MEASURED_AFTER_LOOKS and not ctx.beyond_fence(s.ned_m)
+                s.closeup
+                and s.hazard <= MEASURED_AFTER_LOOKS
+                and math.dist(s.ned_m[:2], (n, e)) <= reach_m
+                and not ctx.beyond_fence(s.ned_m)
             ),
         )
 
