@@ -301,6 +301,21 @@ def test_lander_judges_a_site_from_overhead_as_a_confirmation_would_among_buildi
     assert (kept.hazard, kept.closeup) == (Hazard.OFF_ROOF, True)
 
 
+FIELDS = [(30.0 * (k + 1), 0.0) for k in range(landing_module.FALLBACK_LOOKS + 1)]  # one more than looked at
+
+
+def _fields_all_crops(measured: LedgerSite | None = None) -> Any:
+    """A context 40 m up at the origin whose ledger holds ``FIELDS``, each seen only from afar and a
+    crop from overhead (their LiDAR sweeps queued in that order), and ``measured`` when given."""
+    sweeps = [_ground_sweep(ne, 40.0, crop=True, seed=10 + k) for k, ne in enumerate(FIELDS)]
+    ctx = context(frame(), frame(), *sweeps, pos_ned_m=(0.0, 0.0, -40.0))
+    for k, (n, e) in enumerate(FIELDS):
+        ctx.ledger.add(LedgerSite((n, e, 0.0), Hazard.OFF_ROOF, "from afar", 1, False, label=f"site {k}"))
+    if measured is not None:
+        ctx.ledger.add(measured)
+    return ctx
+
+
 def test_lander_lands_on_a_site_that_stays_the_least_bad_from_overhead_and_bounds_its_looks() -> None:
     """A field seen from afar and level from overhead is landed on after one look; with every field a
     crop the lander stops after FALLBACK_LOOKS sites and lands on the last one chosen, not looking on."""
@@ -312,14 +327,10 @@ def test_lander_lands_on_a_site_that_stays_the_least_bad_from_overhead_and_bound
     assert _ctl(ctx).gotos == [(30.0, 0.0, -40.0)]
     assert len(_record(ctx).of("fallback_site")) == 1
 
-    fields = [(30.0 * (k + 1), 0.0) for k in range(landing_module.FALLBACK_LOOKS + 1)]
-    sweeps = [_ground_sweep(ne, 40.0, crop=True, seed=10 + k) for k, ne in enumerate(fields)]
-    ctx = context(frame(), frame(), *sweeps, pos_ned_m=(0.0, 0.0, -40.0))
-    for k, (n, e) in enumerate(fields):
-        ctx.ledger.add(LedgerSite((n, e, 0.0), Hazard.OFF_ROOF, "from afar", 1, False, label=f"site {k}"))
+    ctx = _fields_all_crops()
     asyncio.run(_parts(ctx)[2].land_at_best("round budget spent"))
     looked = landing_module.FALLBACK_LOOKS
-    assert [g[:2] for g in _ctl(ctx).gotos] == fields[: looked + 1]
+    assert [g[:2] for g in _ctl(ctx).gotos] == FIELDS[: looked + 1]
     assert len(_record(ctx).of("fallback_site")) == looked + 1
 
 
@@ -328,16 +339,11 @@ def test_lander_after_its_looks_lands_on_level_ground_measured_close_up_not_on_a
     close up earlier (refused then as among buildings, people coming back). After FALLBACK_LOOKS crops
     the fourth field, seen only from afar, is no surer: the lander says so and lands on the measured
     ground. (Farmland city 21, launch 8: the fourth field was a crop too, 36 m from safe ground.)"""
-    fields = [(30.0 * (k + 1), 0.0) for k in range(landing_module.FALLBACK_LOOKS + 1)]
-    sweeps = [_ground_sweep(ne, 40.0, crop=True, seed=10 + k) for k, ne in enumerate(fields)]
-    ctx = context(frame(), frame(), *sweeps, pos_ned_m=(0.0, 0.0, -40.0))
-    for k, (n, e) in enumerate(fields):
-        ctx.ledger.add(LedgerSite((n, e, 0.0), Hazard.OFF_ROOF, "from afar", 1, False, label=f"site {k}"))
     street = LedgerSite((60.0, 40.0, 0.0), Hazard.STREET, "street_level", 2, True, 20.0, label="site 7")
-    ctx.ledger.add(street)
+    ctx = _fields_all_crops(street)
     outcome = asyncio.run(_parts(ctx)[2].land_at_best("search ended (window)"))
     looked = landing_module.FALLBACK_LOOKS
-    assert [g[:2] for g in _ctl(ctx).gotos] == [*fields[:looked], (60.0, 40.0)]
+    assert [g[:2] for g in _ctl(ctx).gotos] == [*FIELDS[:looked], (60.0, 40.0)]
     assert outcome.site_ned_m == street.ned_m
     last = _record(ctx).of("fallback_site")[-1]
     assert (last["chosen"]["label"], last["instead_of"]["label"]) == ("site 7", f"site {looked}")
@@ -350,12 +356,9 @@ def test_lander_after_its_looks_lands_on_level_ground_measured_close_up_not_on_a
         LedgerSite((60.0, 40.0, 0.0), Hazard.TRAFFIC, "street_asphalt", 2, True, label="site 7"),
         LedgerSite((-80.0, 0.0, 0.0), Hazard.STREET, "street_level", 2, True, 20.0, label="site 7"),
     ):
-        ctx = context(frame(), frame(), *sweeps, pos_ned_m=(0.0, 0.0, -40.0))
-        for k, (n, e) in enumerate(fields):
-            ctx.ledger.add(LedgerSite((n, e, 0.0), Hazard.OFF_ROOF, "from afar", 1, False, label=f"site {k}"))
-        ctx.ledger.add(measured)
+        ctx = _fields_all_crops(measured)
         asyncio.run(_parts(ctx)[2].land_at_best("search ended (window)"))
-        assert [g[:2] for g in _ctl(ctx).gotos] == fields[: looked + 1]
+        assert [g[:2] for g in _ctl(ctx).gotos] == FIELDS[: looked + 1]
 
 
 def test_lander_never_falls_back_to_a_site_beyond_the_autopilots_fence() -> None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import contextlib
 import itertools
 import logging
 import socket
@@ -179,8 +180,6 @@ def test_a_sensor_stream_not_up_yet_is_dialled_again_soon_then_once_a_second(
 ) -> None:
     """Both processes start at boot and the stream is usually up moments after the daemon: it is dialled
     again after 0.2 s, then twice as long each time up to a second; said once, connected in the end."""
-    import contextlib
-
     from landfall_link.sensorstream import SensorStreamError
 
     attempts = itertools.count()
