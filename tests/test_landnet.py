@@ -615,14 +615,16 @@ def _write(path: Path, text: str) -> Path:
     return path
 
 
+@pytest.mark.parametrize("weather", ["clear", "fog"])
 @pytest.mark.parametrize("ground", ["soil", "paving"])
 def test_landnet_confirm_refuses_a_plain_road_at_street_level_in_open_country(
-    judge: OnboardReasoner, tmp_path: Path, ground: str
+    judge: OnboardReasoner, tmp_path: Path, ground: str, weather: str
 ) -> None:
     """A wide asphalt road with no markings through open country: from above it looks like a tar roof
     (the net may read it so, with a high clear-site probability), but Surface ID measured it at street
     level, where roof-like paving is a road or a car park. Never a landing site, with or without a clear
-    LiDAR disc; the same window off a roof (no geometry) is the net's to judge."""
+    LiDAR disc, in clear air or fog (whose light must not tint grey asphalt); the same window off a roof
+    (no geometry) is the net's to judge."""
     from simbridge.world.scenario_file import load_scenario_file
 
     path = tmp_path / "open_road.toml"
@@ -632,7 +634,7 @@ def test_landnet_confirm_refuses_a_plain_road_at_street_level_in_open_country(
         "markings = false\n"
     )
     road = LiveWorld(load_scenario_file(path))
-    frame, check = close_up(road, (0.0, 0.0), 0.0, HEIGHT_M)
+    frame, check = close_up(road, (0.0, 0.0), 0.0, HEIGHT_M, weather=weather)
     assert check.clear  # flat, smooth, nothing in the rotor disc: only what it is says no
     image = site_cut(road, frame, HEIGHT_M)
     d = judge.confirm_sync(ConfirmRequest(image, check=check, site_up_m=0.0, built_up=False))

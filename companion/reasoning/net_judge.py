@@ -61,6 +61,10 @@ CANOPY_TEXTURE = 8.0  # ... and the grey levels' standard deviation over 7 x 7 p
 CANOPY_SIDE_PX = 192  # the window is judged at this size
 TINT_MIN_SATURATION = 0.2  # HSV saturation from which a pixel is tinted: soil, crops, brick (asphalt,
 #                            concrete and gravel are near grey: 0.06-0.09 in simbridge's renders)
+TINT_MIN_CHROMA = 0.08  # ... or chroma (max - min of R, G, B) from which it is: haze adds a near-grey light
+#                        that leaves chroma scaled by the transmission but lifts the value, so saturation
+#                        falls under fog where chroma holds (a ploughed field 40 m below in simbridge's fog:
+#                        saturation 0.1, chroma 0.1; grey paving stays under 0.06 in any weather)
 TINT_MIN_VALUE = 0.1  # darker pixels have no hue to speak of
 UNSURE_MARGIN = 0.15  # a clear-site probability this close to the threshold is a guess, either way ...
 UNSURE_SPREAD = 0.35  # ... as is one whose mirror-image views differ by this much
@@ -96,15 +100,20 @@ def canopy_share(window: np.ndarray) -> float:
 
 
 def tinted_share(window: np.ndarray) -> float:
-    """Share of an RGB window whose colour is tinted (HSV saturation from ``TINT_MIN_SATURATION``):
-    bare soil, crops, brick, not asphalt or concrete. At street level the net's roof-like cells count
-    as paving, since a plain road looks like a tar roof from above; a ploughed field or a crop's rows
-    read so too (farmland's fields, 2026-12-03: "roof surface 88 %" from both packaged nets), but a road
-    is grey and a field is not. Judged at ``CANOPY_SIDE_PX``, as the canopy is."""
+    """Share of an RGB window whose colour is tinted (HSV saturation from ``TINT_MIN_SATURATION`` or
+    chroma from ``TINT_MIN_CHROMA``): bare soil, crops, brick, not asphalt or concrete. At street level
+    the net's roof-like cells count as paving, since a plain road looks like a tar roof from above; a
+    ploughed field or a crop's rows read so too (farmland's fields: "roof surface 88 %" from both
+    packaged nets), but a road is grey and a field is not. Fog greys a field's saturation (haze adds
+    light of its own, near grey) but not its chroma, which grey paving lacks in any weather. Judged at
+    ``CANOPY_SIDE_PX``, as the canopy is."""
     side = (CANOPY_SIDE_PX, CANOPY_SIDE_PX)
-    hsv = cv2.cvtColor(cv2.resize(window, side, interpolation=cv2.INTER_AREA), cv2.COLOR_RGB2HSV)
+    small = cv2.resize(window, side, interpolation=cv2.INTER_AREA)
+    hsv = cv2.cvtColor(small, cv2.COLOR_RGB2HSV)
     sat, val = hsv[..., 1], hsv[..., 2]
-    return float(((sat >= 255 * TINT_MIN_SATURATION) & (val >= 255 * TINT_MIN_VALUE)).mean())
+    chroma = small.max(axis=2).astype(np.int16) - small.min(axis=2)
+    tinted = (sat >= 255 * TINT_MIN_SATURATION) | (chroma >= 255 * TINT_MIN_CHROMA)
+    return float((tinted & (val >= 255 * TINT_MIN_VALUE)).mean())
 
 
 def site_window(h: int, w: int, override: float | None) -> float:
