@@ -33,6 +33,8 @@ SUNKEN_BAND_M = (0.2, 1.0)
 MAX_SUNKEN_SHARE = 0.1
 MIN_PLANE_RETURNS = 10  # surface returns in the disc needed to fit its plane (fewer: taken as level)
 MIN_PLANE_SPREAD_M = 1.0  # and their spread north and east, so that the tilt is measured, not guessed
+NEAR_M = 6.0  # around the site as far as the confirmation's close-up shows (recovery closeup_half_m) ...
+MIN_NEAR_RETURNS = 50  # ... the tallest return there is measured from this many returns
 
 
 @dataclass(frozen=True, slots=True)
@@ -47,6 +49,9 @@ class SiteCheck:
     reasons: tuple[str, ...]
     sunken_share: float = math.nan  # share of the disc's returns SUNKEN_BAND_M below the surface
     slope_deg: float = math.nan  # of the plane fitted to the surface's returns in the disc
+    # tallest return above the surface's plane within NEAR_M of the site: a tree's crown, a wall, a
+    # vehicle near it (NaN: fewer than MIN_NEAR_RETURNS there)
+    tallest_near_m: float = math.nan
 
     @property
     def clear(self) -> bool:
@@ -141,6 +146,8 @@ def check_site(
     below = -rel[disc]
     sunken = float(np.mean((below > SUNKEN_BAND_M[0]) & (below <= SUNKEN_BAND_M[1])))
     edge = _edge_distance(world, d, rel, site_ne_m, 0.0, clearance_m + 4.0)
+    near = d <= NEAR_M
+    tallest = float(rel[near].max()) if near.sum() >= MIN_NEAR_RETURNS else math.nan
     reasons = []
     if obstacle > max_obstacle_m:
         reasons.append(f"object {obstacle:.1f} m tall within {clearance_m:.0f} m")
@@ -156,7 +163,7 @@ def check_site(
         reasons.append(f"{edge:.1f} m from an edge")
     if slope > max_slope_deg:
         reasons.append(f"sloped {slope:.0f} deg")
-    return SiteCheck(int(disc.sum()), surface, rough, obstacle, edge, tuple(reasons), sunken, slope)
+    return SiteCheck(int(disc.sum()), surface, rough, obstacle, edge, tuple(reasons), sunken, slope, tallest)
 
 
 def _surface_plane(

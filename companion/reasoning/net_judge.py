@@ -43,6 +43,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from companion.perception.site_check import SiteCheck
 from companion.reasoning.base import ConfirmRequest, RankRequest
 from companion.reasoning.image_cues import CueParams, centre, check_rgb
 from companion.reasoning.landnet import COUNTED, LandNet, SceneReading
@@ -70,6 +71,7 @@ UNSURE_MARGIN = 0.15  # a clear-site probability this close to the threshold is 
 UNSURE_SPREAD = 0.35  # ... as is one whose mirror-image views differ by this much
 FIRM_NOT_CLEAR_P = 0.2  # a clear-site probability under this: the net is sure it is no clear roof
 OPEN_GRASS_SHARE = 0.5  # of the window's cells grass: open ground among buildings (_wide_grass)
+TREE_MIN_M = 2.0  # the net's tree cells are trees when the LiDAR saw something this tall near the site
 
 
 def unsure(r: SceneReading, threshold: float) -> str:
@@ -177,7 +179,7 @@ def confirm_reading(
     if not vetoes and (open_country or open_among or terrace):
         # the net's clear site means a clear roof, which a surface measured at street level is not: there
         # only level ground with nothing on it passes, whatever the clear-site probability
-        if not _open_ground(r, p, groups, tint):
+        if not _open_ground(r, p, groups, tint, _nothing_tall(request.check)):
             vetoes.append(_not_open_ground(r, groups, vegetation, tint))
         elif (cramped := _cramped(request, p)) is not None:
             vetoes.append(("cramped", cramped))
@@ -222,17 +224,29 @@ def _paved_phrase(r: SceneReading, paved: float) -> str:
     return f"road or tar-like paving ({100 * paved:.0f} %: {where})"
 
 
-def _open_ground(r: SceneReading, p: ConfirmParams, groups: int, tint: float = 0.0) -> bool:
+def _open_ground(
+    r: SceneReading, p: ConfirmParams, groups: int, tint: float = 0.0, nothing_tall: bool = False
+) -> bool:
     """A field, a yard or a lawn with nothing on it: no object, person, vehicle, water or marking seen,
     road or tar-like paving (:func:`_paved`) at most ``max_street_asphalt`` and trees at most
-    ``max_vegetation`` of the window."""
+    ``max_vegetation`` of the window, unless the LiDAR found nothing tall near the site
+    (``nothing_tall``, :func:`_nothing_tall`): a tree stands metres above the ground, and a lawn the
+    net reads as trees is still a lawn."""
     hazards = r.share("water") + r.share("marking")
     return (
         groups == 0
         and hazards == 0.0
         and _paved(r, tint) <= p.max_street_asphalt
-        and r.share("tree") <= p.max_vegetation
+        and (r.share("tree") <= p.max_vegetation or nothing_tall)
     )
+
+
+def _nothing_tall(check: SiteCheck | None) -> bool:
+    """The close-up's LiDAR sweep measured the ground around the site as far as the close-up shows and
+    nothing on it stands ``TREE_MIN_M`` tall: no tree there, whatever the image's cells say. Rain darkens
+    a lawn into what the net reads as tree cover (suburb lawns 30 m below in simbridge's rain: 16-35 %
+    of the window); a tree's crown is metres above the ground and in every sweep."""
+    return check is not None and check.measured and check.tallest_near_m < TREE_MIN_M
 
 
 def _wide_grass(r: SceneReading, request: ConfirmRequest, p: ConfirmParams) -> bool:
