@@ -125,3 +125,18 @@ def test_in_rain_a_lawn_beside_a_tree_the_lidar_measures_is_still_refused(
             seen += 1
             assert not d.accept, d.rationale
     assert seen >= 2, "fewer than two lawns beside a measured tree read as trees: the test needs other points"
+
+
+def test_open_ground_refused_for_a_little_water_says_water() -> None:
+    """Water under the veto's share still keeps a site from being open ground; the rationale named only
+    the trees then ("trees (1 %: bottom)"), which is not why it was refused."""
+    from companion.reasoning.landnet import SceneReading
+    from companion.reasoning.net_judge import _not_open_ground
+
+    r = SceneReading(
+        "landnet-e", (100, 100), (16, 16), 0.9,
+        (("low_vegetation", 0.98), ("tree", 0.01), ("water", 0.02)),
+        (("tree", ("bottom",)), ("water", ("left",))), (),
+    )  # fmt: skip
+    _kind, text = _not_open_ground(r, 0, 0.99)
+    assert "water (2 %: left)" in text, text

@@ -277,6 +277,8 @@ def _cramped(request: ConfirmRequest, p: ConfirmParams) -> str | None:
 
 def _not_open_ground(r: SceneReading, groups: int, vegetation: float, tint: float = 0.0) -> tuple[str, str]:
     seen = [r.phrase(c) for c in ("person", "vehicle", "object") if r.count(c)]
+    if r.share("water") > 0.0:  # under the water veto's share, but open ground has none
+        seen.append(r.phrase("water"))
     if r.share("tree") > 0.0:
         seen.append(r.phrase("tree"))
     paved = _paved(r, tint)
