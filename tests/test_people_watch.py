@@ -8,6 +8,7 @@ bad scales are refused; the recovery holds for people and then strikes the site 
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import math
 from pathlib import Path
 from types import SimpleNamespace
@@ -343,6 +344,23 @@ def test_a_person_coming_near_during_a_descent_step_stops_it_where_the_vehicle_i
     assert watched == []
 
 
+def _stopped_the_first_time(approaches: list[str]) -> Any:
+    """A fake autopilot landing: the first one comes down until the watch stops it (cancelled), the
+    next ones land; each start and stop noted in ``approaches``."""
+
+    async def land() -> bool:
+        approaches.append("started")
+        if len(approaches) == 1:
+            try:
+                await asyncio.sleep(3600)  # coming down: the watch stops it
+            except asyncio.CancelledError:
+                approaches.append("stopped")
+                raise
+        return True
+
+    return land
+
+
 def test_a_person_coming_near_during_the_final_approach_stops_it_and_the_vehicle_climbs_back(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
@@ -362,15 +380,7 @@ def test_a_person_coming_near_during_the_final_approach_stops_it_and_the_vehicle
     approaches: list[str] = []
     engaged: list[tuple[float, float, float]] = []
 
-    async def land() -> bool:
-        approaches.append("started")
-        if len(approaches) == 1:
-            try:
-                await asyncio.sleep(3600)  # coming down: the watch stops it
-            except asyncio.CancelledError:
-                approaches.append("stopped")
-                raise
-        return True
+    land = _stopped_the_first_time(approaches)
 
     async def engage() -> None:
         engaged.append(ctx.tm.state.pos_ned_m)
@@ -480,3 +490,76 @@ def test_the_machine_steps_aside_from_people_on_a_wide_field_and_descends_there(
     assert any(t.startswith("Landfall: site 0: a person 3 m from the site") and t.endswith("m aside")
                for t in ctx.announce.texts)  # fmt: skip
     assert watched == [people, quiet, quiet]
+
+
+def _fallback_on_fakes(
+    monkeypatch: pytest.MonkeyPatch, looks: list[PeopleSeen], *, clock_step_s: float = 1.0
+) -> tuple[Any, list[PeopleSeen], list[str]]:
+    """A Recovery on fakes 20 m above a lawn whose people watch sees ``looks`` one by one (then no
+    one), whose autopilot clock moves ``clock_step_s`` at each reading, and whose autopilot landing is
+    stopped by the watch the first time (then lands). Returns it, the looks taken and the landings."""
+    from companion.recovery import landing
+
+    async def settle(target: Any) -> Any:
+        return target
+
+    rec, watched = _descent_on_fakes(monkeypatch, looks, settle, height_m=20.0)
+    ctx = rec.ctx
+    clock = iter(range(10_000))
+    monkeypatch.setattr(type(ctx), "clock_s", lambda _self: clock_step_s * next(clock))
+    approaches: list[str] = []
+
+    land = _stopped_the_first_time(approaches)
+
+    async def engage() -> None:
+        pass
+
+    monkeypatch.setattr(rec.lander, "land", land)
+    monkeypatch.setattr(ctx.ctl, "engage", engage)
+    assert landing.Lander  # the fallback's landing is the Lander's, watched by the PeopleWatch
+    return rec, watched, approaches
+
+
+def test_the_fallback_landing_is_watched_and_goes_around_for_a_person_walking_in(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The search ended and the vehicle lands where it is, a site never confirmed free of people
+    (farmland in fog: a person 3 m away at touchdown, the autopilot's land mode unwatched). Now a person
+    seen within the margin on the way down stops the landing, the vehicle climbs back and holds, and
+    comes down again once a look sees no one."""
+    from companion.recovery import watching
+
+    people, quiet = PeopleSeen(1, 6.0, 1.0), PeopleSeen(0, None, 1.0)
+    rec, watched, approaches = _fallback_on_fakes(monkeypatch, [people, people, quiet])
+    ctx = rec.ctx
+    asyncio.run(rec.lander._final_approach(None))  # "landing here": the ground by the rangefinder
+    assert approaches == ["started", "stopped", "started"]
+    assert ctx.ctl.gotos == [(0.0, 0.0, -watching.GO_AROUND_M)]  # 15 m above the ground 20 m below
+    assert watched[:3] == [people, people, quiet]
+    events = [f for k, f in ctx.record.events if k == "people_watch"]
+    assert [(f["site"], f["action"]) for f in events] == [("fallback", "go-around"), ("fallback", "hold")]
+    assert events[0]["site_ned_m"] == [0.0, 0.0, 0.0]
+    assert any("landing stopped, back up to 15 m" in t for t in ctx.announce.texts)
+
+
+def test_the_fallback_landing_holds_for_people_only_so_long(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Someone who never leaves: the vehicle holds ``FALLBACK_PEOPLE_WAIT_S`` in all (the autopilot's
+    clock), then lands all the same, and says so: the search has ended, the battery is the limit."""
+    from companion.recovery.core import FALLBACK_PEOPLE_WAIT_S
+
+    people = PeopleSeen(1, 6.0, 1.0)
+    rec, _watched, approaches = _fallback_on_fakes(monkeypatch, [people] * 1000, clock_step_s=5.0)
+    asyncio.run(rec.lander._final_approach(None))
+    assert approaches == ["started", "stopped", "started"]  # the second approach unwatched
+    holds = [f for k, f in rec.ctx.record.events if k == "people_watch" and f["action"] == "hold"]
+    assert holds
+    assert FALLBACK_PEOPLE_WAIT_S <= holds[-1]["waited_s"] < FALLBACK_PEOPLE_WAIT_S + 5.0
+    assert any("landing all the same" in t for t in rec.ctx.announce.texts)
+
+
+def test_without_a_people_margin_the_fallback_lands_unwatched(monkeypatch: pytest.MonkeyPatch) -> None:
+    rec, watched, _approaches = _fallback_on_fakes(monkeypatch, [PeopleSeen(1, 6.0, 1.0)])
+    monkeypatch.setattr(rec.ctx, "p", dataclasses.replace(rec.ctx.p, people_margin_m=0.0))
+    rec.lander.land = lambda: asyncio.sleep(0, True)  # type: ignore[method-assign]
+    asyncio.run(rec.lander._final_approach(None))
+    assert watched == []

@@ -37,6 +37,7 @@ QUIET_LOOKS = 2  # looks in a row without anyone before a site where people were
 ASIDE_CLEAR_M = 3.0  # a site stepped aside to lies this much beyond the people margin from everyone seen
 ASIDE_EDGE_KEEP_M = 5.0  # and at least this far inside its surface's edge (from Surface ID's edge distance)
 ASIDE_MAX = 3  # steps aside from people on one site before holding for them to go
+FALLBACK_PEOPLE_WAIT_S = 60.0  # autopilot seconds a fallback landing holds for people in all, then lands
 SEVERITY_CRITICAL = 2  # MAV_SEVERITY_CRITICAL: a defect of the companion's own
 MAX_REJECTED_RADIUS_M = 15.0  # water or traffic rules out at most this far around a rejected site
 # a site at street level with roofs measured this close is among buildings (people and traffic come back)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+from collections.abc import Awaitable, Callable
 
 from companion.control import TargetTimeout
 from companion.guidance.frames import PinholeCamera
@@ -36,6 +37,9 @@ class Lander:
         self.ctx = ctx
         self.looker = looker
         self.follower = follower
+        # the fallback's final approach watched for people (PeopleWatch.fallback_landing, given the site
+        # as NED with its surface's height); None: the autopilot's land mode unwatched
+        self.watched_landing: Callable[[tuple[float, float, float]], Awaitable[None]] | None = None
 
     async def land(self) -> bool:
         """The final approach where the vehicle is (over the site); True once down."""
@@ -81,8 +85,27 @@ class Lander:
                 site = await self._look_over(reason, site)
             else:
                 await self.fly_over(site, "the chosen site")
-        await self.land()
+        await self._final_approach(site)
         return Outcome(State.LANDED, ctx.round, site.ned_m if site is not None else None, reason)
+
+    async def _final_approach(self, site: LedgerSite | None) -> None:
+        """The fallback's landing where the vehicle is, over ``site``: watched for people
+        (``watched_landing``) when there is a watch and the site's surface height is known (the site's,
+        or the ground under the vehicle by the rangefinder), else the autopilot's land mode alone. The
+        site was never confirmed free of people, and a person may walk onto it as the vehicle comes down
+        (farmland in fog: a lawn landed on after the search ended, a person 3 m away at touchdown)."""
+        ctx = self.ctx
+        target: tuple[float, float, float] | None = None
+        if site is not None:
+            target = site.ned_m
+        else:
+            n, e, d = ctx.tm.state.pos_ned_m
+            if math.isfinite(ctx.tm.state.rangefinder_m):
+                target = (n, e, d + ctx.tm.state.rangefinder_m)
+        if self.watched_landing is None or target is None or ctx.p.people_margin_m <= 0:
+            await self.land()
+            return
+        await self.watched_landing(target)
 
     def _record_choice(self, reason: str, site: LedgerSite, looked_at: LedgerSite | None = None) -> None:
         ctx = self.ctx

@@ -118,6 +118,7 @@ class Recovery:
         self.lander = Lander(ctx, looker=self.looker, follower=self.follower)
         self.searcher = Searcher(ctx, plan=plan, lander=self.lander, onboard=onboard)
         self.watch = PeopleWatch(ctx, looker=self.looker, follower=self.follower, lander=self.lander)
+        self.lander.watched_landing = self.watch.fallback_landing
         self.handover = Handover(ctx)
         # the site a descent is on, confirmed again first when a lost link comes back
         self._descending: tuple[tuple[float, float, float], Candidate] | None = None

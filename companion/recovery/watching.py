@@ -24,6 +24,7 @@ from companion.reasoning.people_watch import PeopleSeen
 from companion.recovery.core import (
     ASIDE_CLEAR_M,
     ASIDE_EDGE_KEEP_M,
+    FALLBACK_PEOPLE_WAIT_S,
     GO_AROUND_M,
     GO_AROUND_MIN_M,
     PEOPLE_LOOK_AGAIN_S,
@@ -122,6 +123,55 @@ class PeopleWatch:
             )
         return seen
 
+    async def fallback_landing(self, target: tuple[float, float, float]) -> None:
+        """Policy: the fallback's landing (:meth:`Lander.land_at_best`, a site never confirmed free of
+        people) watched as a site's off the roofs is (:meth:`landing`): someone within the margin stops
+        it and the vehicle climbs back ``GO_AROUND_M`` above the site, holds there and looks again every
+        ``PEOPLE_LOOK_AGAIN_S`` until a look sees no one, then comes down again. Once it has held
+        ``FALLBACK_PEOPLE_WAIT_S`` in all it lands on the next approach whatever is seen: the search has
+        ended and the battery is the limit. Said, and recorded as ``people_watch`` events (``site``
+        "fallback")."""
+        ctx = self.ctx
+        margin = ctx.p.people_margin_m
+        held_s = 0.0
+        while True:
+            if held_s >= FALLBACK_PEOPLE_WAIT_S:
+                ctx.say(4, f"held {held_s:.0f} s for people near the landing site: landing all the same")
+                await self.lander.land()
+                return
+            seen = await self.landing(target)
+            if seen is None:
+                return
+            self._fallback_watch(seen, target, held_s, "go-around")
+            ctx.say(4, f"{seen.phrase(margin)}: landing stopped, back up to {GO_AROUND_M:.0f} m")
+            since = ctx.clock_s() - held_s
+            while held_s < FALLBACK_PEOPLE_WAIT_S:
+                await asyncio.sleep(PEOPLE_LOOK_AGAIN_S)
+                held_s = ctx.clock_s() - since
+                looked, now = await self._look(target, "while holding")
+                if not looked:
+                    continue
+                if now is None or not now.cells:
+                    break  # no one within the margin: down again, watched
+                self._fallback_watch(now, target, held_s, "hold")
+
+    def _fallback_watch(
+        self, seen: PeopleSeen, target: tuple[float, float, float], waited_s: float, action: str
+    ) -> None:
+        self.ctx.record.record_event(
+            "people_watch",
+            {
+                "round": self.ctx.round,
+                "site": "fallback",
+                "site_ned_m": [round(v, 2) for v in target],
+                "person_cells": seen.cells,
+                "nearest_m": None if seen.nearest_m is None else round(seen.nearest_m, 1),
+                "seen_share": round(seen.seen_share, 2),
+                "waited_s": round(waited_s, 1),
+                "action": action,
+            },
+        )
+
     async def _watch_through(self, target: tuple[float, float, float], floor_m: float) -> PeopleSeen:
         """Looks for people near the site until someone is seen (frames missing are skipped); the site
         where the position target has it (the follower may move it), at ``target``'s height. Below
@@ -133,14 +183,20 @@ class PeopleWatch:
                 continue  # too low to turn back: the landing goes on
             held = ctx.ctl.target
             site = (held[0], held[1], target[2]) if held is not None else target
-            try:
-                frame = await ctx.frames()
-            except FrameUnavailable as exc:
-                ctx.log.debug("no look for people on the way down: %s", exc)
-                continue
-            seen = await self.looker.watch_people(frame, site)
+            _looked, seen = await self._look(site, "on the way down")
             if seen is not None and seen.cells:
                 return seen
+
+    async def _look(self, site: tuple[float, float, float], when: str) -> tuple[bool, PeopleSeen | None]:
+        """A frame of its own and the people within the margin of ``site`` in it
+        (:meth:`Looker.watch_people`: None when the watch cannot run); (False, None) when no frame
+        came, said in the debug log ``when``."""
+        try:
+            frame = await self.ctx.frames()
+        except FrameUnavailable as exc:
+            self.ctx.log.debug("no look for people %s: %s", when, exc)
+            return False, None
+        return True, await self.looker.watch_people(frame, site)
 
     def paused_for_people(
         self,
