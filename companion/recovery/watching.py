@@ -11,7 +11,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import math
-from collections.abc import Coroutine
+from collections.abc import Coroutine, Mapping
 from typing import Any, TypeVar
 
 import numpy as np
@@ -158,19 +158,8 @@ class PeopleWatch:
     def _fallback_watch(
         self, seen: PeopleSeen, target: tuple[float, float, float], waited_s: float, action: str
     ) -> None:
-        self.ctx.record.record_event(
-            "people_watch",
-            {
-                "round": self.ctx.round,
-                "site": "fallback",
-                "site_ned_m": [round(v, 2) for v in target],
-                "person_cells": seen.cells,
-                "nearest_m": None if seen.nearest_m is None else round(seen.nearest_m, 1),
-                "seen_share": round(seen.seen_share, 2),
-                "waited_s": round(waited_s, 1),
-                "action": action,
-            },
-        )
+        site = [round(v, 2) for v in target]
+        _watch_event(self.ctx, seen, site, waited_s, action, {"site": "fallback"})
 
     async def _watch_through(self, target: tuple[float, float, float], floor_m: float) -> PeopleSeen:
         """Looks for people near the site until someone is seen (frames missing are skipped); the site
@@ -304,16 +293,29 @@ def _record_watch(
     ctx.ledger.add(site)
     if ctx.best is not None and math.dist(ctx.best.ned_m[:2], target[:2]) < ctx.p.rejected_radius_m:
         ctx.best = None  # no longer the site confirmed for descent: not a fallback's first choice either
+    extra = {"aside_ned_m": [round(v, 2) for v in aside]} if aside is not None else {}
+    _watch_event(ctx, seen, list(target), waited_s, action, extra)
+
+
+def _watch_event(
+    ctx: RecoveryContext,
+    seen: PeopleSeen,
+    site_ned_m: list[float],
+    waited_s: float,
+    action: str,
+    extra: Mapping[str, object],
+) -> None:
+    """The ``people_watch`` event of one look, with ``extra`` keys."""
     ctx.record.record_event(
         "people_watch",
         {
             "round": ctx.round,
-            "site_ned_m": list(target),
+            "site_ned_m": site_ned_m,
             "person_cells": seen.cells,
             "nearest_m": None if seen.nearest_m is None else round(seen.nearest_m, 1),
             "seen_share": round(seen.seen_share, 2),
             "waited_s": round(waited_s, 1),
             "action": action,
-            **({"aside_ned_m": [round(v, 2) for v in aside]} if aside is not None else {}),
+            **extra,
         },
     )
