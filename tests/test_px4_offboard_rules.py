@@ -53,10 +53,21 @@ def test_offboard_takes_a_fresh_setpoint_and_refuses_without_one(
         pass
     assert c.set_mode_px4("OFFBOARD") == TEMPORARILY_REJECTED
     c.send_position(0.0, 0.0, -100.0)  # one fresh setpoint
+    sent = time.monotonic()
     assert c.set_mode_px4("OFFBOARD") == MAV_RESULT_ACCEPTED
+    gap_s = (time.monotonic() - sent) * float(speed)  # of the vehicle's clock, at most
     # then the stream a client keeps up in OFFBOARD: with none, PX4 leaves it COM_OF_LOSS_T after that
     # one setpoint, which may come before its next heartbeat (a CI run read AUTO.LOITER there)
-    assert c.heartbeat_streaming(0.0, 0.0, -100.0).custom_mode == PX4_OFFBOARD
+    mode = c.heartbeat_streaming(0.0, 0.0, -100.0).custom_mode
+    if mode != PX4_OFFBOARD:
+        # right only where the ACK came so late that the one setpoint had aged past COM_OF_LOSS_T
+        # before the stream began (a loaded CI machine took that long once, at 2x)
+        assert mode == PX4_LOITER, mode
+        assert gap_s > 0.8, gap_s
+        _enter_offboard(c, 0.0, 0.0, -100.0)
+        mode = c.heartbeat_streaming(0.0, 0.0, -100.0).custom_mode
+    assert mode == PX4_OFFBOARD
+    assert c.heartbeat_streaming(0.0, 0.0, -100.0).custom_mode == PX4_OFFBOARD  # and it stays
 
 
 def _wait_ready(sim: SimProcess) -> None:
