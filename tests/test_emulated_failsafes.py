@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import pytest
+
 from simbridge.autopilot.core import Autopilot
 from simbridge.autopilot.flavours import (
     MAV_RESULT_ACCEPTED,
@@ -107,10 +109,11 @@ def test_arducopter_returns_at_a_critical_battery_but_never_turns_a_landing_into
     assert log.failsafes() == []
 
 
-def test_arducopter_without_gps_loses_its_position_and_its_ekf_failsafe_lands() -> None:
+@pytest.mark.parametrize("switch", ["SIM_GPS1_ENABLE", "GPS1_TYPE"])
+def test_arducopter_without_gps_loses_its_position_and_its_ekf_failsafe_lands(switch: str) -> None:
     ap, v, log = _rig("ardupilot")
     assert ap.set_mode(ap.flavour.mode("GUIDED")).result == MAV_RESULT_ACCEPTED
-    ap.set_param("SIM_GPS1_ENABLE", 0)
+    ap.set_param(switch, 0)
     _fly(ap, v, 1.0)
     assert ap.position_valid  # dead reckoning, for a while
     _fly(ap, v, 1.5)

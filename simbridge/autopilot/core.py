@@ -123,7 +123,8 @@ class Autopilot:
         self._battery_level = BATTERY_OK  # the worst battery warning of this flight so far
         self._battery_level_at_arming = BATTERY_OK
         self._battery_action: tuple[str, float, int] | None = None  # (mode, when, level) pending
-        # the GPS and the estimator: SITL's SIM_GPS1_ENABLE (ArduPilot), MAV_CMD_INJECT_FAILURE (PX4)
+        # the GPS and the estimator: SITL's SIM_GPS1_ENABLE or GPS1_TYPE 0 (ArduPilot),
+        # MAV_CMD_INJECT_FAILURE (PX4)
         self.gps_enabled = True
         self.position_valid = True  # False: no position estimate, none sent (LOCAL_POSITION_NED, ...)
         self._gps_off_at: float | None = None
@@ -164,8 +165,8 @@ class Autopilot:
             return False
         self.tun = tun
         self._apply_limits()
-        if name == "SIM_GPS1_ENABLE":
-            self.gps_enabled = value != 0
+        if name in ("SIM_GPS1_ENABLE", "GPS1_TYPE"):  # SITL's switch, or the GPS driver's type 0 (none)
+            self.gps_enabled = all(self.params.get(n, 1) != 0 for n in ("SIM_GPS1_ENABLE", "GPS1_TYPE"))
         return True
 
     def inject_failure(self, unit: int, failure: int) -> CommandOutcome:

@@ -360,7 +360,7 @@ class ArduPilotFlavour(Flavour):
         Param("BATT_FS_LOW_ACT", 0, MAV_PARAM_TYPE_INT32),
         Param("BATT_FS_CRT_ACT", 0, MAV_PARAM_TYPE_INT32),
         # the EKF failsafe (FS_EKF_ACTION: 1 land, 2 AltHold, 3 land even in STABILIZE) and SITL's own
-        # GPS switch, SIM_GPS1_ENABLE, as real ArduCopter SITL has it (0: the GPS stops)
+        # GPS switch, SIM_GPS1_ENABLE, as real ArduCopter SITL has it (0: the GPS stops; GPS1_TYPE 0 too)
         Param("FS_EKF_ACTION", 1, MAV_PARAM_TYPE_INT32),
         # the fence's breach (ArduCopter's defaults: disabled; when enabled, RTL or land)
         Param("FENCE_ENABLE", 0, MAV_PARAM_TYPE_INT32),
@@ -370,6 +370,8 @@ class ArduPilotFlavour(Flavour):
         Param("FENCE_TYPE", 7, MAV_PARAM_TYPE_INT8),
         Param("FENCE_MARGIN", 2.0, MAV_PARAM_TYPE_REAL32),
         Param("SIM_GPS1_ENABLE", 1, MAV_PARAM_TYPE_INT32),
+        # the first GPS's driver (1: auto-detect; 0: none, which ArduCopter reads at every update)
+        Param("GPS1_TYPE", 1, MAV_PARAM_TYPE_INT8),
         # precision landing on a companion's LANDING_TARGET: ArduCopter ships with it off
         # (PLND_ENABLED 0, PLND_TYPE 0); simbridge's vehicle is set up for Landfall's (as the SITL
         # runs with simbridge.sitl.PARAMS); PLND_ALT_MIN / MAX and PLND_XY_DIST_MAX as the firmware's
