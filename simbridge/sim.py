@@ -438,7 +438,11 @@ class SimBridge:
         are compiled on first use (numba; about 10 s on one core with no cache, seconds more on a busy
         computer), and that compilation holds the interpreter: done mid-flight, it would stall the
         physics, the telemetry and the first frame a companion asks for. Afterwards they load from
-        numba's cache. Its own random generator: the sensor noise stream stays as seeded."""
+        numba's cache. A vehicle that starts on the ground (real firmware always does) is rendered at
+        the launch pose too: the shadows of what a frame sees are computed tile by tile on first sight,
+        and the first frame 110 m up over scenario1 took 213 ms after a warm-up on the ground against
+        57 ms after one at the launch pose, time a lock step spends paused. Its own random generator:
+        the sensor noise stream stays as seeded."""
         from simbridge.world.live import LiveWorld
 
         world = self.scenario.terrain
@@ -447,9 +451,16 @@ class SimBridge:
         t0 = time.perf_counter()
         s = self.vehicle.state
         rng = np.random.default_rng(0)
-        world.camera_frame(s.pos_ned_m, s.quat, s.t_s, self.config.weather, rng)
-        world.lidar_sweep(s.pos_ned_m, s.quat, s.t_s, rng)
-        world.rangefinder_m(s.pos_ned_m, s.quat)
+        sc = self.scenario
+        n, e = sc.launch_ne_m
+        launch = (n, e, -(world.height_m(n, e) + sc.launch_height_m))
+        poses = [s.pos_ned_m]
+        if math.dist(s.pos_ned_m, launch) > 1.0:
+            poses.append(launch)
+        for pos in poses:
+            world.camera_frame(pos, s.quat, s.t_s, self.config.weather, rng)
+            world.lidar_sweep(pos, s.quat, s.t_s, rng)
+            world.rangefinder_m(pos, s.quat)
         self.log.info("sensors ready (%.1f s to warm up the renderer)", time.perf_counter() - t0)
 
     def _sensor_server(self, host: str, port: int) -> contextlib.AbstractAsyncContextManager[object]:
