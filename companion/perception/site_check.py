@@ -35,6 +35,16 @@ MIN_PLANE_RETURNS = 10  # surface returns in the disc needed to fit its plane (f
 MIN_PLANE_SPREAD_M = 1.0  # and their spread north and east, so that the tilt is measured, not guessed
 NEAR_M = 6.0  # around the site as far as the confirmation's close-up shows (recovery closeup_half_m) ...
 MIN_NEAR_RETURNS = 50  # ... the tallest return there is measured from this many returns
+# Water returns little of a near-infrared LiDAR's pulse (absorbed, or mirrored away off the beam):
+# about 2 % reflectivity at 905 nm against 5-10 % for black tar or EPDM, 10-20 % for asphalt and more
+# for everything else. Intensity on the sensor stream is 0..1, calibrated reflectivity as far as the
+# sensor gives it. A disc whose surface returns have a median under this is water, whatever a camera
+# sees through fog ...
+WATER_MAX_INTENSITY = 0.04
+# ... when the sweep reports intensity at all: a LiDAR (or a bridge) that measures none sends zeros;
+# read from beams within 30 deg of straight down (their cosine from this): at a grazing angle black tar
+# returns as little as water does
+WATER_BEAM_COS = math.cos(math.radians(30.0))
 
 
 @dataclass(frozen=True, slots=True)
@@ -52,6 +62,8 @@ class SiteCheck:
     # tallest return above the surface's plane within NEAR_M of the site: a tree's crown, a wall, a
     # vehicle near it (NaN: fewer than MIN_NEAR_RETURNS there)
     tallest_near_m: float = math.nan
+    # median intensity (0..1) of the disc's surface returns (NaN: the sweep reports no intensity)
+    surface_intensity: float = math.nan
 
     @property
     def clear(self) -> bool:
@@ -106,12 +118,15 @@ def check_site(
     max_roughness_m: float = 0.08,
     min_edge_m: float = 1.5,
     max_slope_deg: float = 8.0,
+    max_water_intensity: float = WATER_MAX_INTENSITY,
 ) -> SiteCheck:
     """Slope/roughness, obstacles in the rotor disc and distance to an edge around ``site_ne_m``.
 
     Heights are measured from the plane fitted to the surface's returns in the disc
     (:func:`_surface_plane`), so a gentle slope is neither rough nor an obstacle; it is refused over
-    ``max_slope_deg`` (Surface ID's limit: ``perception.max_slope_deg``).
+    ``max_slope_deg`` (Surface ID's limit: ``perception.max_slope_deg``). A surface whose returns in
+    the disc are as dark as water (median intensity under ``max_water_intensity``; 0: not judged) is
+    refused as water: in fog a camera may not see a harbour's water, a LiDAR still does.
 
     Never raises for a sweep: no sweep, an empty one or one that is not an (N, 3+) array of body FRD
     metres is a check that measured nothing (``measured`` False), rows with a NaN are dropped.
@@ -148,7 +163,12 @@ def check_site(
     edge = _edge_distance(world, d, rel, site_ne_m, 0.0, clearance_m + 4.0)
     near = d <= NEAR_M
     tallest = float(rel[near].max()) if near.sum() >= MIN_NEAR_RETURNS else math.nan
+    beam = world - np.asarray(pos_ned_m)  # steep beams only: a grazing one returns little from anything
+    steep = beam[:, 2] >= WATER_BEAM_COS * np.linalg.norm(beam, axis=1)
+    dark = _surface_intensity(lidar_frd, disc & (np.abs(rel) < max_obstacle_m) & steep)
     reasons = []
+    if dark < max_water_intensity:
+        reasons.append(f"returns as dark as water (median intensity {dark:.2f})")
     if obstacle > max_obstacle_m:
         reasons.append(f"object {obstacle:.1f} m tall within {clearance_m:.0f} m")
     if rough > max_roughness_m:
@@ -163,7 +183,24 @@ def check_site(
         reasons.append(f"{edge:.1f} m from an edge")
     if slope > max_slope_deg:
         reasons.append(f"sloped {slope:.0f} deg")
-    return SiteCheck(int(disc.sum()), surface, rough, obstacle, edge, tuple(reasons), sunken, slope, tallest)
+    return SiteCheck(
+        int(disc.sum()), surface, rough, obstacle, edge, tuple(reasons), sunken, slope, tallest, dark
+    )
+
+
+def _surface_intensity(lidar_frd: np.ndarray, on_surface: np.ndarray) -> float:
+    """Median intensity of the returns ``on_surface`` (a mask over the sweep's finite rows); NaN when
+    the sweep has no intensity column, reports none (every return's is zero) or has fewer than
+    ``MIN_SITE_RETURNS`` such returns."""
+    rows = np.asarray(lidar_frd, dtype=np.float64)
+    if rows.shape[1] < 4:
+        return math.nan
+    rows = rows[np.isfinite(rows[:, :3]).all(axis=1)]
+    intensity = rows[:, 3]
+    if not np.nanmax(intensity, initial=0.0) > 0.0:
+        return math.nan
+    seen = intensity[on_surface & np.isfinite(intensity)]
+    return float(np.median(seen)) if len(seen) >= MIN_SITE_RETURNS else math.nan
 
 
 def _surface_plane(

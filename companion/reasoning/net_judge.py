@@ -147,7 +147,7 @@ def confirm_reading(
     window = centre(image, site_window(image.shape[0], image.shape[1], p.site_window))
     r = net.confirmation(net.read(window, short_side=net.confirm_short_side_px), image)
     vetoes = list(lidar_vetoes)
-    categorical = False
+    categorical = any(kind == "water" for kind, _ in vetoes)  # the LiDAR's water binds as the image's
     canopy = 0.0 if street_level else canopy_share(window)
     if canopy > MAX_CANOPY_SHARE:  # at street level the vegetation limits below judge lawns and parks
         vetoes.append(("canopy", f"tree canopy ({canopy:.0%} of the site green and textured)"))

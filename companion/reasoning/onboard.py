@@ -256,7 +256,8 @@ class OnboardReasoner:
         relax = request.critical
         max_raised = p.max_raised_critical if relax and lidar_clear else p.max_raised
         vetoes = _lidar_vetoes(check)  # (kind, what was seen)
-        categorical = False  # water or a road's markings: no other tier's yes overrules them
+        # water or a road's markings: no other tier's yes overrules them
+        categorical = any(kind == "water" for kind, _ in vetoes)
         if cues.water_share > p.max_water:
             vetoes.append(("water", f"water ({100 * cues.water_share:.0f} % of the site)"))
             categorical = True
@@ -393,9 +394,12 @@ def _lidar_vetoes(check: SiteCheck | None) -> list[tuple[str, str]]:
 
 
 def lidar_kind(check: SiteCheck) -> str:
-    """The ``Decision.hazards`` kind of a LiDAR veto: an object in the rotor disc before roughness
-    before a slope before an edge (the worst of what the check found)."""
+    """The ``Decision.hazards`` kind of a LiDAR veto: water (returns as dark as water) before an
+    object in the rotor disc before roughness before a slope before an edge (the worst of what the
+    check found)."""
     text = " ".join(check.reasons)
+    if "dark as water" in text:
+        return "water"
     if "object" in text:
         return "lidar_obstacle"
     if "rough" in text:
