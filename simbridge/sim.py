@@ -433,6 +433,13 @@ class SimBridge:
         finally:
             await loop.run_in_executor(None, streamer.close)
 
+    def _launch_pose_ned(self) -> tuple[float, float, float]:
+        """Where the vehicle holds when an episode's alarm comes: the scenario's launch point, its launch
+        height above the ground there."""
+        sc = self.scenario
+        n, e = sc.launch_ne_m
+        return (n, e, -(sc.terrain.height_m(n, e) + sc.launch_height_m))
+
     def _warm_up_sensors(self) -> None:
         """Render one camera frame and one sweep before the link opens. The ray caster and the shader
         are compiled on first use (numba; about 10 s on one core with no cache, seconds more on a busy
@@ -451,9 +458,7 @@ class SimBridge:
         t0 = time.perf_counter()
         s = self.vehicle.state
         rng = np.random.default_rng(0)
-        sc = self.scenario
-        n, e = sc.launch_ne_m
-        launch = (n, e, -(world.height_m(n, e) + sc.launch_height_m))
+        launch = self._launch_pose_ned()
         poses = [s.pos_ned_m]
         if math.dist(s.pos_ned_m, launch) > 1.0:
             poses.append(launch)

@@ -202,6 +202,10 @@ class FirmwareBridge(SimBridge):
         with contextlib.suppress(RuntimeError):  # the loop is closing
             self._loop_ref.call_soon_threadsafe(fn, *args)
 
+    def _launch_pose_ned(self) -> tuple[float, float, float]:
+        """Above home (moved onto land when the launch point is not), where the firmware climbs to."""
+        return self.launch_ned_m
+
     def _at_launch(self) -> bool:
         s = self.vehicle.state
         ln, le, ld = self.launch_ned_m

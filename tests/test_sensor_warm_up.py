@@ -23,9 +23,8 @@ def test_the_launch_pose_is_rendered_before_the_first_frame_is_asked(start: str)
     assert isinstance(world, LiveWorld)
     sim._warm_up_sensors()
     done = int(world.shadow._done.sum())
-    sc = sim.scenario
-    n, e = sc.launch_ne_m
-    launch = (n, e, -(world.height_m(n, e) + sc.launch_height_m))
+    launch = sim._launch_pose_ned()
+    assert launch[:2] == sim.scenario.launch_ne_m
     world.camera_frame(launch, sim.vehicle.state.quat, 0.0, "clear", np.random.default_rng(0))
     assert int(world.shadow._done.sum()) == done  # no shadow tile left to compute there
     if start == "ground":
