@@ -138,7 +138,9 @@ def check_site(
         return SiteCheck(
             0, math.nan, math.nan, math.nan, math.nan, (f"LiDAR sweep of shape {shape}, not (N, 3+)",)
         )
-    world = world_points(lidar_frd, pos_ned_m, quat)
+    rows = np.asarray(lidar_frd, dtype=np.float64)
+    rows = rows[np.isfinite(rows[:, :3]).all(axis=1)]
+    world = world_points(rows, pos_ned_m, quat)
     dn, de = world[:, 0] - site_ne_m[0], world[:, 1] - site_ne_m[1]
     d = np.hypot(dn, de)
     disc = d <= clearance_m
@@ -165,7 +167,8 @@ def check_site(
     tallest = float(rel[near].max()) if near.sum() >= MIN_NEAR_RETURNS else math.nan
     beam = world - np.asarray(pos_ned_m)  # steep beams only: a grazing one returns little from anything
     steep = beam[:, 2] >= WATER_BEAM_COS * np.linalg.norm(beam, axis=1)
-    dark = _surface_intensity(lidar_frd, disc & (np.abs(rel) < max_obstacle_m) & steep)
+    intensity = rows[:, 3] if rows.shape[1] >= 4 else None
+    dark = _surface_intensity(intensity, disc & (np.abs(rel) < max_obstacle_m) & steep)
     reasons = []
     if dark < max_water_intensity:
         reasons.append(f"returns as dark as water (median intensity {dark:.2f})")
@@ -188,15 +191,12 @@ def check_site(
     )
 
 
-def _surface_intensity(lidar_frd: np.ndarray, on_surface: np.ndarray) -> float:
-    """Median intensity of the returns ``on_surface`` (a mask over the sweep's finite rows); NaN when
-    the sweep has no intensity column, reports none (every return's is zero) or has fewer than
+def _surface_intensity(intensity: np.ndarray | None, on_surface: np.ndarray) -> float:
+    """Median of the sweep's ``intensity`` (one per finite return; None: no column) over the returns
+    ``on_surface``; NaN when the sweep reports none (every return's is zero) or has fewer than
     ``MIN_SITE_RETURNS`` such returns."""
-    rows = np.asarray(lidar_frd, dtype=np.float64)
-    if rows.shape[1] < 4:
+    if intensity is None:
         return math.nan
-    rows = rows[np.isfinite(rows[:, :3]).all(axis=1)]
-    intensity = rows[:, 3]
     if not np.nanmax(intensity, initial=0.0) > 0.0:
         return math.nan
     seen = intensity[on_surface & np.isfinite(intensity)]
