@@ -559,6 +559,57 @@ def test_a_fallback_landing_interrupted_again_and_again_ends_in_the_autopilots_l
     assert any(f"interrupted {MAX_REENGAGE + 1} times: landing here" in t for t in _said(ctx))
 
 
+def test_an_autopilot_failsafe_during_the_defect_landing_is_ridden_out_not_given_up(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A defect of the companion's own starts the fail-safe landing; on the way PX4's offboard-loss
+    failsafe (POSCTL) holds the vehicle. The landing meets it as a round would: the handover's policy
+    runs (here the failsafe clears) and the landing starts again, so the vehicle comes down; a
+    failsafe that lands the vehicle itself ends the recovery with its outcome, the defect named."""
+    from companion.control import AutopilotFailsafe
+
+    ctx = context()
+    rec = _recovery(ctx)
+    ctl = _ctl(ctx)
+    held = [True]
+    land_mode = ctl.land
+
+    async def land(timeout_s: float, mode: Mode = Mode.LAND) -> None:
+        if held[0]:
+            raise AutopilotFailsafe(196608)  # PX4 POSCTL
+        await land_mode(timeout_s, mode)
+
+    met: list[int] = []
+
+    async def cleared(exc: AutopilotFailsafe) -> Outcome | None:
+        met.append(exc.custom_mode)
+        held[0] = False
+        return None
+
+    monkeypatch.setattr(ctl, "land", land)
+    monkeypatch.setattr(rec.handover, "on_failsafe", cleared)
+    outcome = asyncio.run(rec._fail_safe(RuntimeError("boom")))
+    assert outcome == Outcome(State.LANDED, 0, None, "defect (RuntimeError: boom): landed")
+    assert (met, ctl.lands) == ([196608], [Mode.LAND])
+    assert not any("the autopilot has the vehicle" in t for t in _said(ctx))
+
+    handed = Outcome(State.LANDED, 0, None, "the autopilot's failsafe landed it (AUTO.LAND)")
+
+    async def lands(exc: AutopilotFailsafe) -> Outcome | None:
+        return handed
+
+    held[0] = True
+    rec = _recovery(ctx)
+    monkeypatch.setattr(rec.handover, "on_failsafe", lands)
+    outcome = asyncio.run(rec._fail_safe(RuntimeError("boom")))
+    assert outcome == Outcome(
+        State.LANDED,
+        0,
+        None,
+        "defect (RuntimeError: boom), then the autopilot's failsafe landed it (AUTO.LAND)",
+    )
+
+
 def test_recovery_search_flies_the_height_and_lidar_range_of_its_params() -> None:
     """The search plan is built from the recovery's parameters (``recovery.search_agl_m``,
     ``perception.lidar_range_m``), not from defaults of its own."""

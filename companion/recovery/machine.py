@@ -25,7 +25,7 @@ import logging
 import math
 import time
 import traceback
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from typing import Any, TypeVar
 
 from companion.alarms import Alarm, Criticality
@@ -221,8 +221,10 @@ class Recovery:
         """Policy for a defect of the companion's own (an exception no stage expects): announce it
         (STATUSTEXT, critical), record it with its traceback, and land: at the best site already
         measured (accepted, else the ledger's least bad; nothing is measured anew), else with the
-        autopilot's land mode where the vehicle is. Should that landing fail too, land mode once more,
-        then the vehicle is left to the autopilot."""
+        autopilot's land mode where the vehicle is. The autopilot's own failsafe or a lost link on the
+        way is met as in a round (:meth:`_through_handovers`): ridden out or re-engaged, the landing
+        starts again from where the vehicle is. Should that landing fail otherwise, land mode once
+        more, then the vehicle is left to the autopilot."""
         ctx = self.ctx
         where = ctx.state.value
         text = f"{type(exc).__name__}: {exc}"
@@ -241,11 +243,21 @@ class Recovery:
         await self.searcher.observed_or_said()  # the round's candidates noted from afar: sites to land at
         site = self.lander.fallback_site()
         self.follower.forget()  # nothing measured anew, the camera's view of a site included
+        landed = Outcome(
+            State.LANDED, ctx.round, site.ned_m if site is not None else None, f"defect ({text}): landed"
+        )
+
+        async def land() -> Outcome:
+            if site is not None:
+                await self.lander.fly_over(site, "best site measured")
+            await self.lander.final_land()
+            return landed
+
+        ended = landed
         try:
             try:
-                if site is not None:
-                    await self.lander.fly_over(site, "best site measured")
-                await self.lander.final_land()
+                # the autopilot's own failsafe or a lost link on the way: met as in a round
+                ended = await self._through_handovers(land, "fail-safe landing")
             except (TouchedDown, OperatorTakeover):
                 raise
             except Exception as again:  # the landing itself failed: the autopilot's land mode, once more
@@ -264,9 +276,9 @@ class Recovery:
             with contextlib.suppress(Exception):
                 await ctx.ctl.release()
             return Outcome(State.ABORTED, ctx.round, None, f"defect ({text}); landing failed ({last!r})")
-        return Outcome(
-            State.LANDED, ctx.round, site.ned_m if site is not None else None, f"defect ({text}): landed"
-        )
+        if ended is landed:
+            return landed
+        return Outcome(ended.state, ended.rounds, ended.site_ned_m, f"defect ({text}), then {ended.reason}")
 
     async def _land_at_best(self, reason: str, *, measure_here: bool = True) -> Outcome:
         """:meth:`Lander.land_at_best` once the round's deferred work is done (the candidates noted
@@ -275,9 +287,18 @@ class Recovery:
         number of times), and the landing at the least bad site starts again from where the vehicle
         is; a failsafe that lands or flies home keeps the vehicle."""
         await self.searcher.observed_or_said()
+        return await self._through_handovers(
+            lambda: self.lander.land_at_best(reason, measure_here=measure_here), reason
+        )
+
+    async def _through_handovers(self, land: Callable[[], Awaitable[Outcome]], reason: str) -> Outcome:
+        """Run ``land`` through the autopilot's failsafes and lost links (:class:`Handover`): one that
+        is ridden out or re-engaged starts ``land`` again from where the vehicle is; one that lands or
+        flies home ends the recovery with its outcome. Interrupted ``MAX_REENGAGE + 1`` times, the
+        autopilot's land mode where the vehicle is."""
         for _ in range(MAX_REENGAGE + 1):
             try:
-                return await self.lander.land_at_best(reason, measure_here=measure_here)
+                return await land()
             except AutopilotFailsafe as exc:
                 ended = await self.handover.on_failsafe(exc)
             except TelemetryLost as exc:
