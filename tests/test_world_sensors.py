@@ -288,6 +288,31 @@ def test_a_sensor_sees_the_same_actors_as_if_every_actor_were_stamped() -> None:
             assert (every.pyramid.maps[k] >= base).all()
 
 
+def test_each_max_map_is_the_brute_force_maximum_over_its_window() -> None:
+    """The pyramid's maps against their definition computed cell by cell: map ``k`` at coarse cell
+    (bi, bj) is the tallest fine cell of every coarse cell within ``2**k`` (Chebyshev), an offset
+    past the grid's edge clamped to it; on a grid with partial coarse cells at its far edges."""
+    from simbridge.world.raycast import COARSE, LEVELS
+
+    rng = np.random.default_rng(7)
+    height = rng.gamma(1.0, 5.0, size=(4 * 37 + 3, 4 * 29 + 1)).astype(np.float32)
+    p = Pyramid(height)
+    rows, cols = -(-height.shape[0] // COARSE), -(-height.shape[1] // COARSE)
+    base = np.array(
+        [
+            [height[i * COARSE : (i + 1) * COARSE, j * COARSE : (j + 1) * COARSE].max() for j in range(cols)]
+            for i in range(rows)
+        ]
+    )
+    assert p.maps.shape == (LEVELS, rows, cols)
+    for k in range(LEVELS):
+        r = 1 << k
+        for bi, bj in [(0, 0), (rows - 1, cols - 1), (5, 17), (rows // 2, 0), (rows - 2, cols // 3)]:
+            window = base[max(bi - r, 0) : bi + r + 1, max(bj - r, 0) : bj + r + 1]
+            assert p.maps[k, bi, bj] == window.max(), (k, bi, bj)
+    assert p.h_max == float(height.max())
+
+
 def _graded_block() -> WorldGrid:
     g = WorldGrid.empty((-60.0, 60.0), (-60.0, 60.0), ground_cls=C.ROAD, ground_mat=M.ASPHALT)
     g.fill_rect((0.0, 0.0), 30.0, 30.0, 0.0, height_m=20.0, cls=C.ROOF_FLAT, mat=M.GRAVEL, region=1)

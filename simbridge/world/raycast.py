@@ -52,21 +52,32 @@ def max_pool(height: np.ndarray, block: int) -> np.ndarray:
     rows, cols = height.shape
     out = np.full(((rows + block - 1) // block, (cols + block - 1) // block), -1e9, dtype=np.float32)
     for i in range(rows):
-        bi = i // block
-        for j in range(cols):
-            v = height[i, j]
-            bj = j // block
-            if v > out[bi, bj]:
-                out[bi, bj] = v
+        row = height[i]
+        pooled = out[i // block]
+        for bj in range(pooled.shape[0]):
+            m = pooled[bj]
+            for j in range(bj * block, min(bj * block + block, cols)):
+                if row[j] > m:
+                    m = row[j]
+            pooled[bj] = m
     return out
 
 
+@njit(cache=True)
 def _dilate(a: np.ndarray, s: int) -> np.ndarray:
-    """Max over offsets in {-s, 0, +s} along both axes (edges padded with the edge value)."""
-    p = np.pad(a, ((s, s), (0, 0)), mode="edge")
-    a = np.maximum(np.maximum(p[: -2 * s], p[s:-s]), p[2 * s :])
-    p = np.pad(a, ((0, 0), (s, s)), mode="edge")
-    return np.asarray(np.maximum(np.maximum(p[:, : -2 * s], p[:, s:-s]), p[:, 2 * s :]))
+    """Max over offsets in {-s, 0, +s} along both axes, an offset past an edge taking the edge's
+    value."""
+    rows, cols = a.shape
+    tmp = np.empty_like(a)
+    for i in range(rows):
+        up, down = max(i - s, 0), min(i + s, rows - 1)
+        for j in range(cols):
+            tmp[i, j] = max(a[up, j], a[i, j], a[down, j])
+    out = np.empty_like(a)
+    for i in range(rows):
+        for j in range(cols):
+            out[i, j] = max(tmp[i, max(j - s, 0)], tmp[i, j], tmp[i, min(j + s, cols - 1)])
+    return out
 
 
 def _max_levels(base: np.ndarray) -> Iterator[np.ndarray]:
@@ -85,7 +96,9 @@ class Pyramid:
 
     def __init__(self, height: np.ndarray) -> None:
         base = max_pool(height, COARSE)
-        self.maps = np.ascontiguousarray(np.stack(list(_max_levels(base))).astype(np.float32))
+        self.maps = np.empty((LEVELS, *base.shape), np.float32)
+        for k, level in enumerate(_max_levels(base)):
+            self.maps[k] = level
         self.h_max = float(base.max())
 
     def raise_envelope(self, coarse_top: np.ndarray, from_level: int) -> None:
