@@ -17,14 +17,16 @@ directories there (the entries themselves come back to this process, which write
 
 from __future__ import annotations
 
+import queue
+import threading
 import time
-from collections.abc import Iterator, Sequence
-from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
+from collections import deque
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
-from landfall_eval.episode import EpisodeSpec, EpisodeTimes, run_episode
+from landfall_eval.episode import EpisodeSpec, EpisodeTimes, Launch, launch_episode, run_episode
 from landfall_eval.processes import STOPPING, stop_running_episodes
 
 __all__ = [
@@ -37,6 +39,7 @@ __all__ = [
     "error_entry",
     "fly",
     "is_infrastructure_failure",
+    "launch_ahead",
     "make_executor",
 ]
 
@@ -90,18 +93,25 @@ def error_entry(
     }  # fmt: skip
 
 
-def fly(job: EpisodeJob) -> dict[str, Any]:
+def fly(
+    job: EpisodeJob, *, launched: Launch | None = None, in_flight: Callable[[], None] | None = None
+) -> dict[str, Any]:
     """Fly ``job``, again while it fails for infrastructure (``job.tries`` in all); the entry records
-    ``attempts``. An exception out of the harness itself is an infrastructure failure."""
+    ``attempts``. An exception out of the harness itself is an infrastructure failure. ``launched``:
+    the job's processes started ahead (:func:`launch_episode`), flown by the first try;
+    ``in_flight``: :func:`run_episode`'s, for every try."""
     entry: dict[str, Any] = {}
     for attempt in range(1, job.tries + 1):
         t0 = time.monotonic()
         try:
             entry = run_episode(
                 job.spec, job.workdir, times=job.times, config_path=job.config_path, sitl=job.sitl,
-                world_cache=job.world_cache,
+                world_cache=job.world_cache, launched=launched if attempt == 1 else None,
+                in_flight=in_flight,
             )  # fmt: skip
         except Exception as exc:  # the harness failed (e.g. no port to bind), not the episode
+            if launched is not None and attempt == 1:
+                launched.discard()
             entry = error_entry(
                 job.spec, f"harness: {type(exc).__name__}: {exc}", infrastructure=True,
                 wall_s=time.monotonic() - t0,
@@ -110,6 +120,18 @@ def fly(job: EpisodeJob) -> dict[str, Any]:
         if not is_infrastructure_failure(entry):
             break
     return entry
+
+
+def launch_ahead(job: EpisodeJob) -> Launch | None:
+    """``job``'s processes started and held (:func:`launch_episode`); None when they could not be
+    (its flight then starts them itself, and meets the same error there, tried again as usual)."""
+    try:
+        return launch_episode(
+            job.spec, job.workdir, times=job.times, config_path=job.config_path, sitl=job.sitl,
+            world_cache=job.world_cache, held=True,
+        )  # fmt: skip
+    except Exception:
+        return None
 
 
 class Executor(Protocol):
@@ -121,32 +143,80 @@ class Executor(Protocol):
 
 
 class LocalExecutor:
-    """``workers`` episodes at once on this machine, one thread each (the work is in the processes)."""
+    """``workers`` episodes in flight at once on this machine, one thread each (the work is in the
+    processes). With ``ahead`` (the default) each worker launches its next episode once the alarm of
+    the one it flies has gone in: the next simbridge builds its world and warms its sensors, and its
+    companion starts, while this flight runs; both then wait, using no CPU, and the simulation's
+    clock starts when the worker turns to it (:func:`launch_episode`). So the starting costs no
+    wall time between flights, and the flights themselves are as they were."""
 
-    def __init__(self, workers: int) -> None:
+    def __init__(self, workers: int, *, ahead: bool = True) -> None:
         self.workers = workers
-        self._pool: ThreadPoolExecutor | None = None
-        self._pending: set[Future[dict[str, Any]]] = set()
+        self.ahead = ahead
+        self._jobs: deque[EpisodeJob] = deque()
+        self._lock = threading.Lock()
+        self._threads: list[threading.Thread] = []
+        self._ended: queue.Queue[dict[str, Any] | BaseException] = queue.Queue()
+
+    def _take(self) -> EpisodeJob | None:
+        with self._lock:
+            return self._jobs.popleft() if self._jobs and not STOPPING.is_set() else None
+
+    def _work(self) -> None:
+        """One worker: fly a job, launching the next while it flies (``ahead``), until none is left."""
+        nxt: list[tuple[EpisodeJob, Launch | None]] = []  # the next job, launched ahead (or not)
+        taken = [False]  # the next job was asked for during this flight (none may be left)
+        try:
+            while not STOPPING.is_set():
+                if nxt:
+                    job, launched = nxt.pop()
+                else:
+                    first = self._take()
+                    if first is None:
+                        return
+                    job, launched = first, None
+                taken[0] = False
+
+                def in_flight() -> None:
+                    if self.ahead and not taken[0]:
+                        taken[0] = True
+                        following = self._take()
+                        if following is not None:
+                            nxt.append((following, launch_ahead(following)))
+
+                self._ended.put(fly(job, launched=launched, in_flight=in_flight))
+        except BaseException as exc:  # the harness itself: the caller raises it
+            self._ended.put(exc)
+        finally:
+            for _job, launched in nxt:  # stopped before its turn: nothing of it is left running
+                if launched is not None:
+                    launched.discard()
 
     def run(self, jobs: Sequence[EpisodeJob]) -> Iterator[dict[str, Any]]:
         STOPPING.clear()
-        self._pool = ThreadPoolExecutor(max_workers=self.workers, thread_name_prefix="episode")
-        self._pending = {self._pool.submit(fly, j) for j in jobs}
-        while self._pending:
-            done, self._pending = wait(self._pending, return_when=FIRST_COMPLETED)
-            for fut in done:
-                yield fut.result()
+        self._jobs = deque(jobs)
+        self._threads = [
+            threading.Thread(target=self._work, name=f"episode-{k}", daemon=True)
+            for k in range(min(self.workers, len(jobs)))
+        ]
+        for t in self._threads:
+            t.start()
+        for _ in range(len(jobs)):
+            ended = self._ended.get()
+            if isinstance(ended, BaseException):
+                raise ended
+            yield ended
 
     def close(self) -> None:
         """After the last entry: nothing to do. Before it (an interrupted campaign): the episodes not
-        started are dropped and those in flight stopped, their processes terminated."""
-        if self._pool is not None:
-            if any(not f.done() for f in self._pending):
-                for fut in self._pending:
-                    fut.cancel()
-                stop_running_episodes()
-            self._pool.shutdown(wait=True, cancel_futures=True)
-            self._pool = None
+        started are dropped and those in flight or launched ahead stopped, their processes terminated."""
+        if any(t.is_alive() for t in self._threads):
+            with self._lock:
+                self._jobs.clear()
+            stop_running_episodes()
+        for t in self._threads:
+            t.join()
+        self._threads = []
 
 
 class RayUnavailable(RuntimeError):
@@ -219,11 +289,15 @@ class RayExecutor:
             self._ray.shutdown()
 
 
-def make_executor(kind: str, *, workers: int, address: str | None, cpus_per_episode: float) -> Executor:
+def make_executor(
+    kind: str, *, workers: int, address: str | None, cpus_per_episode: float, ahead: bool = True
+) -> Executor:
+    """The executor ``kind`` names; ``ahead``: the local one launches each worker's next episode
+    while it flies one (:class:`LocalExecutor`)."""
     if kind == "local":
         if address is not None:
             raise ValueError("--ray-address goes with --executor ray")
-        return LocalExecutor(workers)
+        return LocalExecutor(workers, ahead=ahead)
     if kind == "ray":
         return RayExecutor(address=address, workers=workers, cpus_per_episode=cpus_per_episode)
     raise ValueError(f"unknown executor {kind!r}; known: {', '.join(EXECUTORS)}")

@@ -217,6 +217,11 @@ def build_parser() -> argparse.ArgumentParser:
         "(landfall[campaign])",
     )  # fmt: skip
     flying.add_argument(
+        "--launch-ahead", action=argparse.BooleanOptionalAction, default=True,
+        help="local executor: each worker starts its next episode's processes, held at the start, "
+        "while it flies one (default: on; the flights are the same, the starting costs no wall time)",
+    )  # fmt: skip
+    flying.add_argument(
         "--ray-address", metavar="ADDR",
         help="a running Ray cluster (auto, HOST:6379, ray://HOST:10001); default: a local Ray "
         "instance with --workers CPUs",
@@ -395,8 +400,9 @@ def run_episodes(
         for s in todo
     ]
     executor = make_executor(
-        args.executor, workers=args.workers, address=args.ray_address, cpus_per_episode=args.cpus_per_episode
-    )
+        args.executor, workers=args.workers, address=args.ray_address,
+        cpus_per_episode=args.cpus_per_episode, ahead=args.launch_ahead,
+    )  # fmt: skip
     errors = 0
     bar = tqdm(
         total=len(todo), unit="episode", disable=args.quiet or not todo, file=sys.stderr, dynamic_ncols=True

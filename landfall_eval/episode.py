@@ -26,6 +26,7 @@ alarm tool) in :mod:`landfall_eval.processes`, reading what they wrote into the 
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import socket
@@ -62,7 +63,7 @@ from landfall_eval.processes import (
     untrack,
 )
 
-__all__ = ["EpisodeSpec", "EpisodeTimes", "run_episode", "simbridge_command"]
+__all__ = ["EpisodeSpec", "EpisodeTimes", "Launch", "launch_episode", "run_episode", "simbridge_command"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -199,28 +200,67 @@ def simbridge_command(
     return cmd
 
 
-def run_episode(
+@dataclass(eq=False)
+class Launch:
+    """An episode's processes, started: simbridge (with ``held`` true, built and waiting for its go:
+    :func:`launch_episode`) and the companion, their files and ports."""
+
+    spec: EpisodeSpec
+    workdir: Path
+    times: EpisodeTimes
+    udp: int
+    sim: subprocess.Popen[bytes]
+    comp: subprocess.Popen[bytes]
+    sim_err: Any  # simbridge's stderr file, open while it runs
+    t_launch: float  # monotonic seconds when the processes started
+    held: bool
+
+    @property
+    def episode_log(self) -> Path:
+        return self.workdir / "episode.jsonl"
+
+    @property
+    def comp_log(self) -> Path:
+        return self.workdir / "companion.log"
+
+    @property
+    def record_dir(self) -> Path:
+        return self.workdir / "record"
+
+    def go(self) -> None:
+        """Start a held simbridge's clock (its ``--wait-for-go``); nothing when not held or started."""
+        if self.held and self.sim.stdin is not None:
+            with contextlib.suppress(OSError):  # exited meanwhile: the flight finds it gone
+                self.sim.stdin.write(b"go\n")
+                self.sim.stdin.close()
+            self.held = False
+
+    def discard(self) -> None:
+        """Stop both processes and close simbridge's file: an episode launched and never flown."""
+        for proc in (self.comp, self.sim):
+            stop_process(proc)
+        untrack(self.sim, self.comp)
+        if self.sim.stdin is not None:
+            with contextlib.suppress(OSError):
+                self.sim.stdin.close()
+        self.sim_err.close()
+
+
+def launch_episode(
     spec: EpisodeSpec,
     workdir: Path,
     *,
-    times: EpisodeTimes | None = None,
+    times: EpisodeTimes,
     config_path: Path | None = None,
-    on_line: Callable[[str, str], None] | None = None,
     sitl: Path | None = None,
     world_cache: Path | None = None,
-) -> dict[str, Any]:
-    """Fly one episode; returns its results.json entry (``episodes[]`` in docs/bench.md).
-
-    ``on_line(source, text)`` sees the alarm tool's answer (source ``alarm``) and every line of the
-    companion's log (``companion``) as they come. Never raises for what happens in the episode: a
-    process that dies, an alarm that is refused or a landing that never comes is an ``outcome`` of
-    ``error`` or ``timeout`` with the ``error`` text, and ``last_state`` says where the companion and
-    the vehicle stood at the end. ``city_seed`` and ``world_digest`` come from simbridge's episode log:
-    the world it flew. ``sitl``: the firmware binary when ``spec.autopilot`` is ``ardupilot-sitl`` or
-    ``px4-sitl``. ``world_cache``: where built places are kept, for simbridge and the grading
-    (:mod:`simbridge.world.cache`; None: each builds its own).
-    """
-    times = times or EpisodeTimes()
+    held: bool = False,
+) -> Launch:
+    """Start ``spec``'s simbridge and companion in ``workdir`` (what a try before this one left there
+    removed). ``held``: simbridge builds its world and warms its sensors, then waits for
+    :meth:`Launch.go` before its clock starts, and the companion, started beside it, waits for it:
+    a worker launches its next episode while it flies this one (:class:`landfall_eval.campaign.
+    LocalExecutor`), so the starting costs no flight's wall time, and the flight is the same."""
     workdir.mkdir(parents=True, exist_ok=True)
     episode_log, comp_log, record_dir = (
         workdir / "episode.jsonl",
@@ -240,6 +280,8 @@ def run_episode(
         spec, udp_port=udp, sensors_port=tcp, episode_log=episode_log, speed=times.speed, sitl=sitl,
         video_port=video, camera_info=camera_info, world_cache=world_cache,
     )  # fmt: skip
+    if held:
+        sim_cmd.append("--wait-for-go")
     comp_cmd = [
         sys.executable, "-m", "companion", "--mavlink", f"udp:{udp}", "--sensors", f"127.0.0.1:{tcp}",
         "--record", str(record_dir), "--reasoner", spec.reasoner,
@@ -249,6 +291,77 @@ def run_episode(
     if config_path is not None:
         comp_cmd += ["--config", str(config_path)]
     env = {**os.environ, "LANDFALL_REASONER_CONTEXT": spec.context, **sped_up_env(times.speed)}
+    t_launch = time.monotonic()
+    sim_err = (workdir / "simbridge.log").open("wb")
+    try:
+        sim = subprocess.Popen(
+            sim_cmd,
+            stdin=subprocess.PIPE if held else subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=sim_err,
+            preexec_fn=die_with_parent,
+        )
+    except BaseException:
+        sim_err.close()
+        raise
+    try:
+        if video is not None:
+            # the companion reads the camera's calibration at start: simbridge writes it as it starts
+            while (
+                not camera_info.exists()
+                and sim.poll() is None
+                and time.monotonic() - t_launch < times.start_wall_s
+            ):
+                time.sleep(0.1)
+        with comp_log.open("wb") as fh:
+            comp = subprocess.Popen(
+                comp_cmd, env=env, stdout=fh, stderr=subprocess.STDOUT, preexec_fn=die_with_parent
+            )
+    except BaseException:  # the companion never started: nothing of simbridge's is left behind
+        stop_process(sim)
+        sim_err.close()
+        raise
+    track(sim, comp)
+    return Launch(spec, workdir, times, udp, sim, comp, sim_err, t_launch, held)
+
+
+def run_episode(
+    spec: EpisodeSpec,
+    workdir: Path,
+    *,
+    times: EpisodeTimes | None = None,
+    config_path: Path | None = None,
+    on_line: Callable[[str, str], None] | None = None,
+    sitl: Path | None = None,
+    world_cache: Path | None = None,
+    launched: Launch | None = None,
+    in_flight: Callable[[], None] | None = None,
+) -> dict[str, Any]:
+    """Fly one episode; returns its results.json entry (``episodes[]`` in docs/bench.md).
+
+    ``on_line(source, text)`` sees the alarm tool's answer (source ``alarm``) and every line of the
+    companion's log (``companion``) as they come. Never raises for what happens in the episode: a
+    process that dies, an alarm that is refused or a landing that never comes is an ``outcome`` of
+    ``error`` or ``timeout`` with the ``error`` text, and ``last_state`` says where the companion and
+    the vehicle stood at the end. ``city_seed`` and ``world_digest`` come from simbridge's episode log:
+    the world it flew. ``sitl``: the firmware binary when ``spec.autopilot`` is ``ardupilot-sitl`` or
+    ``px4-sitl``. ``world_cache``: where built places are kept, for simbridge and the grading
+    (:mod:`simbridge.world.cache`; None: each builds its own). ``launched``: this episode's processes
+    started ahead (:func:`launch_episode`), told to go now; None: started here. ``in_flight()`` is
+    called at every look while the vehicle flies (after the alarm, until the touchdown).
+    """
+    times = times or EpisodeTimes()
+    t_wall = time.monotonic()
+    ahead_s = 0.0
+    if launched is None:
+        launched = launch_episode(
+            spec, workdir, times=times, config_path=config_path, sitl=sitl, world_cache=world_cache
+        )
+    else:
+        ahead_s = t_wall - launched.t_launch
+        launched.go()
+    sim, comp, udp, sim_err = launched.sim, launched.comp, launched.udp, launched.sim_err
+    episode_log, comp_log, record_dir = launched.episode_log, launched.comp_log, launched.record_dir
     entry: dict[str, Any] = {
         "id": spec.id,
         "kind": spec.kind,
@@ -269,30 +382,6 @@ def run_episode(
         "criticality": spec.criticality,
         "launch_height_m": spec.launch[2] if spec.launch is not None else None,
     }
-    t_wall = time.monotonic()
-    sim_err = (workdir / "simbridge.log").open("wb")
-    try:
-        sim = subprocess.Popen(sim_cmd, stdout=subprocess.DEVNULL, stderr=sim_err, preexec_fn=die_with_parent)
-    except BaseException:
-        sim_err.close()
-        raise
-    try:
-        if video is not None:
-            # the companion reads the camera's calibration at start: simbridge writes it as it starts
-            while (
-                not camera_info.exists()
-                and sim.poll() is None
-                and time.monotonic() - t_wall < times.start_wall_s
-            ):
-                time.sleep(0.1)
-        with comp_log.open("wb") as fh:
-            comp = subprocess.Popen(
-                comp_cmd, env=env, stdout=fh, stderr=subprocess.STDOUT, preexec_fn=die_with_parent
-            )
-    except BaseException:  # the companion never started: nothing of simbridge's is left behind
-        stop_process(sim)
-        sim_err.close()
-        raise
     comp_lines = LineTail(comp_log)
     track(sim, comp)
     usage, sim_usage = ProcessSample(comp.pid), ProcessSample(sim.pid)
@@ -309,7 +398,7 @@ def run_episode(
                 raise _EpisodeError(
                     f"{who} exited before the vehicle was ready and the sensor stream up", infrastructure=True
                 )
-            waited = time.monotonic() - t_wall
+            waited = time.monotonic() - launched.t_launch  # a held launch: its build went on meanwhile
             if log.ready is None and waited > times.ready_wall_s:
                 raise _EpisodeError(
                     f"simbridge's autopilot not ready after {times.ready_wall_s:.0f} s", infrastructure=True
@@ -332,6 +421,8 @@ def run_episode(
             usage.sample()
             sim_usage.sample()
             log.take(tail.lines())
+            if in_flight is not None and log.touchdown is None:
+                in_flight()
             if on_line is not None:
                 for line in comp_lines.text_lines():
                     on_line("companion", line)
@@ -365,6 +456,9 @@ def run_episode(
         for proc in (comp, sim):
             stop_process(proc)
         untrack(sim, comp)
+        if sim.stdin is not None:
+            with contextlib.suppress(OSError):
+                sim.stdin.close()
         if on_line is not None:
             for line in comp_lines.text_lines():
                 on_line("companion", line)
@@ -398,6 +492,7 @@ def run_episode(
     marks["graded"] = time.monotonic()
     entry["wall_phases_s"] = wall_phases(marks)
     entry["wall_s"] = round(marks["graded"] - t_wall, 2)
+    entry["launched_ahead_s"] = round(ahead_s, 2)
     return entry
 
 

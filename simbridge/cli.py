@@ -147,6 +147,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--speed", type=float, default=1.0, help="simulated seconds per wall second")
     p.add_argument(
+        "--wait-for-go",
+        action="store_true",
+        help="build the world and warm the sensors, then wait for a line (or the end) on standard input "
+        "before the simulation starts: a harness starts the next episode while it flies this one",
+    )
+    p.add_argument(
         "--start",
         choices=("air", "ground"),
         default="air",
@@ -295,6 +301,7 @@ def config_from_args(args: argparse.Namespace) -> SimConfig:
         fence=args.fence,
         camera_fps=args.camera_fps,
         camera_info_out=args.camera_info_out,
+        wait_for_go=args.wait_for_go,
     )
 
 

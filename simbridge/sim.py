@@ -8,6 +8,7 @@ import contextlib
 import logging
 import math
 import signal
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -70,6 +71,7 @@ class SimConfig:
     camera_stream: tuple[str, int, str] | None = None
     camera_fps: float = 5.0  # the stream's frames per simulated second
     camera_info_out: Path | None = None  # write the camera's calibration (ROS camera_info YAML) here
+    wait_for_go: bool = False  # the clock starts once standard input has a line or ends (--wait-for-go)
     fence: str = "off"  # "map": the emulated autopilot's circular fence reaches the map's nearest edge
 
     def __post_init__(self) -> None:
@@ -346,6 +348,8 @@ class SimBridge:
             self.write_camera_info(cfg.camera_info_out)
         if cfg.sensors is not None or cfg.camera_stream is not None:
             self._warm_up_sensors()
+        if not await self._go():
+            return
         async with contextlib.AsyncExitStack() as stack:
             await stack.enter_async_context(self.link)
             if cfg.sensors is not None:
@@ -355,6 +359,26 @@ class SimBridge:
                 task.add_done_callback(self._camera_stream_ended)
                 stack.push_async_callback(_cancelled, task)
             await self._loop(loop)
+
+    async def _go(self) -> bool:
+        """With ``wait_for_go``, all that is heavy done (the world built, the sensors warmed): wait for
+        a line on standard input, or its end, before the clock starts, nothing sent or listened to
+        meanwhile. False when stopped (SIGINT, SIGTERM) while waiting."""
+        if not self.config.wait_for_go:
+            return True
+        loop = asyncio.get_running_loop()
+        go = asyncio.Event()
+        fd = sys.stdin.fileno()
+        loop.add_reader(fd, go.set)  # readable: a line, or the end of the input
+        self.log.info("built and warmed: waiting for the go on standard input")
+        try:
+            waits = [asyncio.ensure_future(go.wait()), asyncio.ensure_future(self._stop.wait())]
+            await asyncio.wait(waits, return_when=asyncio.FIRST_COMPLETED)
+            for w in waits:
+                w.cancel()
+        finally:
+            loop.remove_reader(fd)
+        return go.is_set()
 
     def _camera_stream_ended(self, task: asyncio.Task[None]) -> None:
         """A camera stream that fails is said at once (the flight goes on without it), not at exit."""

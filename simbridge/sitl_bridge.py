@@ -225,6 +225,8 @@ class FirmwareBridge(SimBridge):
             self.write_camera_info(cfg.camera_info_out)
         if cfg.sensors is not None:
             self._warm_up_sensors()
+        if not await self._go():
+            return
         self.vehicle_t0_s = self.vehicle.state.t_s
         wall0 = time.monotonic()
         try:
