@@ -94,12 +94,16 @@ def error_entry(
 
 
 def fly(
-    job: EpisodeJob, *, launched: Launch | None = None, in_flight: Callable[[], None] | None = None
+    job: EpisodeJob,
+    *,
+    launched: Launch | None = None,
+    in_flight: Callable[[], None] | None = None,
+    on_stopped: Callable[[], None] | None = None,
 ) -> dict[str, Any]:
     """Fly ``job``, again while it fails for infrastructure (``job.tries`` in all); the entry records
     ``attempts``. An exception out of the harness itself is an infrastructure failure. ``launched``:
     the job's processes started ahead (:func:`launch_episode`), flown by the first try;
-    ``in_flight``: :func:`run_episode`'s, for every try."""
+    ``in_flight`` and ``on_stopped``: :func:`run_episode`'s, for every try."""
     entry: dict[str, Any] = {}
     for attempt in range(1, job.tries + 1):
         t0 = time.monotonic()
@@ -107,7 +111,7 @@ def fly(
             entry = run_episode(
                 job.spec, job.workdir, times=job.times, config_path=job.config_path, sitl=job.sitl,
                 world_cache=job.world_cache, launched=launched if attempt == 1 else None,
-                in_flight=in_flight,
+                in_flight=in_flight, on_stopped=on_stopped,
             )  # fmt: skip
         except Exception as exc:  # the harness failed (e.g. no port to bind), not the episode
             if launched is not None and attempt == 1:
@@ -147,8 +151,9 @@ class LocalExecutor:
     processes). With ``ahead`` (the default) each worker launches its next episode once the alarm of
     the one it flies has gone in: the next simbridge builds its world and warms its sensors, and its
     companion starts, while this flight runs; both then wait, using no CPU, and the simulation's
-    clock starts when the worker turns to it (:func:`launch_episode`). So the starting costs no
-    wall time between flights, and the flights themselves are as they were."""
+    clock starts once this flight's processes have stopped, while it is graded
+    (:func:`launch_episode`). So neither the starting nor the grading costs wall time between
+    flights, and the flights themselves are as they were."""
 
     def __init__(self, workers: int, *, ahead: bool = True) -> None:
         self.workers = workers
@@ -184,7 +189,12 @@ class LocalExecutor:
                         if following is not None:
                             nxt.append((following, launch_ahead(following)))
 
-                self._ended.put(fly(job, launched=launched, in_flight=in_flight))
+                def on_stopped() -> None:  # the next one's clock runs while this one is graded
+                    for _following, ready in nxt:
+                        if ready is not None:
+                            ready.go()
+
+                self._ended.put(fly(job, launched=launched, in_flight=in_flight, on_stopped=on_stopped))
         except BaseException as exc:  # the harness itself: the caller raises it
             self._ended.put(exc)
         finally:

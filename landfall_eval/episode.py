@@ -336,6 +336,7 @@ def run_episode(
     world_cache: Path | None = None,
     launched: Launch | None = None,
     in_flight: Callable[[], None] | None = None,
+    on_stopped: Callable[[], None] | None = None,
 ) -> dict[str, Any]:
     """Fly one episode; returns its results.json entry (``episodes[]`` in docs/bench.md).
 
@@ -348,7 +349,8 @@ def run_episode(
     ``px4-sitl``. ``world_cache``: where built places are kept, for simbridge and the grading
     (:mod:`simbridge.world.cache`; None: each builds its own). ``launched``: this episode's processes
     started ahead (:func:`launch_episode`), told to go now; None: started here. ``in_flight()`` is
-    called at every look while the vehicle flies (after the alarm, until the touchdown).
+    called at every look while the vehicle flies (after the alarm, until the touchdown), and
+    ``on_stopped()`` once its processes are stopped, before the grading.
     """
     times = times or EpisodeTimes()
     t_wall = time.monotonic()
@@ -383,7 +385,6 @@ def run_episode(
         "launch_height_m": spec.launch[2] if spec.launch is not None else None,
     }
     comp_lines = LineTail(comp_log)
-    track(sim, comp)
     usage, sim_usage = ProcessSample(comp.pid), ProcessSample(sim.pid)
     marks: dict[str, float] = {"start": t_wall}  # wall clock at each phase's end (wall_phases_s)
     tail = JsonlTail(episode_log)
@@ -467,6 +468,8 @@ def run_episode(
         log.take(tail.lines(), final=True)  # what simbridge wrote since the last look
         tail.close()
         marks["stopped"] = time.monotonic()
+    if on_stopped is not None:
+        on_stopped()
     if log.header is not None:
         entry["city_seed"] = log.header.get("city_seed", entry["city_seed"])
         entry["world_digest"] = log.header.get("world_digest")

@@ -83,6 +83,10 @@ class _Launched:
     def __init__(self, spec: EpisodeSpec) -> None:
         self.spec = spec
         self.discarded = False
+        self.went = False
+
+    def go(self) -> None:
+        self.went = True
 
     def discard(self) -> None:
         self.discarded = True
@@ -99,8 +103,8 @@ def test_each_worker_launches_its_next_job_while_it_flies_and_flies_each_job_onc
     monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
     """Two workers, seven jobs: every job is flown once; a worker's first job is started by its
-    flight, every other one was launched during the flight before it (and handed to its flight);
-    without ``ahead`` nothing is launched ahead."""
+    flight, every other one was launched during the flight before it, told to go once that flight's
+    processes stopped, and handed to its flight; without ``ahead`` nothing is launched ahead."""
     launched: list[str] = []
     flown: list[tuple[str, str | None]] = []
 
@@ -115,9 +119,12 @@ def test_each_worker_launches_its_next_job_while_it_flies_and_flies_each_job_onc
         got = kw["launched"]
         if got is None:
             both.wait(10.0)  # each worker's first flight: both workers are at work
+        else:
+            assert got.went  # its clock started when the flight before it stopped
         flown.append((spec.id, got.spec.id if got is not None else None))
         for _ in range(3):  # the flight's looks: the next job is launched once
             kw["in_flight"]()
+        kw["on_stopped"]()
         return {"id": spec.id, "outcome": "landed", "safe": True}
 
     monkeypatch.setattr(campaign, "launch_episode", launch_episode)
