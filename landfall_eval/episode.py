@@ -18,6 +18,10 @@ after the alarm; where the vehicle already holds in GUIDED, as real ArduCopter d
 the alarm's acceptance, placed on the log's clock through the autopilot's boot clock) to the touchdown.
 The companion's peak RSS and CPU time are sampled from ``/proc`` every poll (Linux).
 
+A campaign's worker may start an episode's processes ahead of its turn (:func:`launch_episode` with
+``held``): simbridge builds its world and warms its sensors, then waits with its clock stopped until
+the flight before it has ended (:meth:`Launch.go`), so the flight itself is the one it would have been.
+
 This module is one episode's life, from starting the processes to the graded entry, in the order it
 happens; its parts live beside it: the processes (starting, stopping, sampling, reading their files, the
 alarm tool) in :mod:`landfall_eval.processes`, reading what they wrote into the entry in
