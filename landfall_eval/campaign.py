@@ -169,38 +169,37 @@ class LocalExecutor:
 
     def _work(self) -> None:
         """One worker: fly a job, launching the next while it flies (``ahead``), until none is left."""
-        nxt: list[tuple[EpisodeJob, Launch | None]] = []  # the next job, launched ahead (or not)
-        taken = [False]  # the next job was asked for during this flight (none may be left)
+        nxt: tuple[EpisodeJob, Launch | None] | None = None  # the next job, launched ahead (or not)
+        asked = False  # the next job was asked for during this flight (none may be left)
+
+        def in_flight() -> None:
+            nonlocal nxt, asked
+            if self.ahead and not asked:
+                asked = True
+                following = self._take()
+                if following is not None:
+                    nxt = (following, launch_ahead(following))
+
+        def on_stopped() -> None:  # the next one's clock runs while this one is graded
+            if nxt is not None and nxt[1] is not None:
+                nxt[1].go()
+
         try:
             while not STOPPING.is_set():
-                if nxt:
-                    job, launched = nxt.pop()
+                if nxt is not None:
+                    (job, launched), nxt = nxt, None
                 else:
                     first = self._take()
                     if first is None:
                         return
                     job, launched = first, None
-                taken[0] = False
-
-                def in_flight() -> None:
-                    if self.ahead and not taken[0]:
-                        taken[0] = True
-                        following = self._take()
-                        if following is not None:
-                            nxt.append((following, launch_ahead(following)))
-
-                def on_stopped() -> None:  # the next one's clock runs while this one is graded
-                    for _following, ready in nxt:
-                        if ready is not None:
-                            ready.go()
-
+                asked = False
                 self._ended.put(fly(job, launched=launched, in_flight=in_flight, on_stopped=on_stopped))
         except BaseException as exc:  # the harness itself: the caller raises it
             self._ended.put(exc)
         finally:
-            for _job, launched in nxt:  # stopped before its turn: nothing of it is left running
-                if launched is not None:
-                    launched.discard()
+            if nxt is not None and nxt[1] is not None:  # stopped before its turn: nothing left running
+                nxt[1].discard()
 
     def run(self, jobs: Sequence[EpisodeJob]) -> Iterator[dict[str, Any]]:
         STOPPING.clear()

@@ -239,14 +239,18 @@ class Launch:
                 self.sim.stdin.close()
             self.held = False
 
-    def discard(self) -> None:
-        """Stop both processes and close simbridge's file: an episode launched and never flown."""
+    def stop(self) -> None:
+        """Stop both processes (the companion first) and close simbridge's standard input."""
         for proc in (self.comp, self.sim):
             stop_process(proc)
         untrack(self.sim, self.comp)
         if self.sim.stdin is not None:
             with contextlib.suppress(OSError):
                 self.sim.stdin.close()
+
+    def discard(self) -> None:
+        """Stop both processes and close simbridge's file: an episode launched and never flown."""
+        self.stop()
         self.sim_err.close()
 
 
@@ -458,12 +462,7 @@ def run_episode(
     finally:
         usage.sample()
         sim_usage.sample()
-        for proc in (comp, sim):
-            stop_process(proc)
-        untrack(sim, comp)
-        if sim.stdin is not None:
-            with contextlib.suppress(OSError):
-                sim.stdin.close()
+        launched.stop()
         if on_line is not None:
             for line in comp_lines.text_lines():
                 on_line("companion", line)
