@@ -232,13 +232,14 @@ def test_lander_looks_at_a_site_seen_from_afar_and_leaves_crops_for_the_next_lea
         frame(),  # the spot below: nothing measured
         _ground_sweep((30.0, 0.0), 40.0, crop=True, seed=1),
         _ground_sweep((0.0, 60.0), 40.0, crop=False, seed=2),
+        _ground_sweep((0.0, 60.0), 20.0, crop=False, seed=4),  # the low look: level still
         pos_ned_m=(0.0, 0.0, -40.0),
     )
     far = "nothing seen against it from afar"
     ctx.ledger.add(LedgerSite((30.0, 0.0, 0.0), Hazard.OFF_ROOF, far, 1, False, label="site 0"))
     ctx.ledger.add(LedgerSite((0.0, 60.0, 0.0), Hazard.OFF_ROOF, far, 2, False, label="site 3"))
     outcome = asyncio.run(_parts(ctx)[2].land_at_best("search ended (window)"))
-    assert [g[:2] for g in _ctl(ctx).gotos] == [(30.0, 0.0), (0.0, 60.0)]
+    assert _ctl(ctx).gotos == [(30.0, 0.0, -40.0), (0.0, 60.0, -40.0), (0.0, 60.0, -20.0)]
     assert outcome.site_ned_m is not None
     assert outcome.site_ned_m[:2] == (0.0, 60.0)
     first, second = _record(ctx).of("fallback_site")
@@ -301,13 +302,49 @@ def test_lander_judges_a_site_from_overhead_as_a_confirmation_would_among_buildi
     assert (kept.hazard, kept.closeup) == (Hazard.OFF_ROOF, True)
 
 
+def test_lander_looks_at_a_ground_site_again_from_20_m_and_steps_aside_from_rails() -> None:
+    """The least bad site is level ground measured close up from 40 m; from 20 m over it the LiDAR
+    finds it rough (a double rail track read as plain ground from 35 m: town city 21, launch 10). The
+    lander says so, records the change and steps aside to level ground measured 15 m away, judged
+    from 20 m in turn, and lands there; not on the track."""
+    ctx = context(
+        frame(),  # the look around: nothing noted
+        frame(),  # the spot below: nothing measured
+        _ground_sweep((30.0, 0.0), 20.0, crop=True, seed=7),  # the low look: rough
+        frame(),  # the look around from 20 m: nothing new
+        _ground_sweep((45.0, 0.0), 20.0, crop=False, seed=8),  # the low look aside: level
+        pos_ned_m=(0.0, 0.0, -40.0),
+    )
+    seen = "nothing seen against it"
+    ctx.ledger.add(LedgerSite((30.0, 0.0, 0.0), Hazard.OFF_ROOF, seen, 1, True, label="site 0"))
+    ctx.ledger.add(LedgerSite((45.0, 0.0, 0.0), Hazard.OFF_ROOF, seen, 2, True, label="site 1"))
+    outcome = asyncio.run(_parts(ctx)[2].land_at_best("search ended (window)"))
+    assert _ctl(ctx).gotos == [(30.0, 0.0, -40.0), (30.0, 0.0, -20.0), (45.0, 0.0, -20.0)]
+    assert outcome.site_ned_m == (45.0, 0.0, 0.0)
+    first, second = _record(ctx).of("fallback_site")
+    assert first["chosen"]["label"] == "site 0"
+    assert (second["chosen"]["label"], second["instead_of"]["label"]) == ("site 1", "site 0")
+    assert second["instead_of"]["hazard"] == "obstructed"
+    said = " ".join(_said(ctx))
+    assert "site 0 from 20 m: obstructed (lidar_rough" in said, said
+    assert "landing at site 1 instead, 15 m away" in said, said
+    kept = ctx.ledger.near((30.0, 0.0))
+    assert kept is not None
+    assert kept.hazard is Hazard.OBSTRUCTED
+    assert ctx.state is State.LANDED
+
+
 FIELDS = [(30.0 * (k + 1), 0.0) for k in range(landing_module.FALLBACK_LOOKS + 1)]  # one more than looked at
 
 
-def _fields_all_crops(measured: LedgerSite | None = None) -> Any:
+def _fields_all_crops(measured: LedgerSite | None = None, low: Any = None) -> Any:
     """A context 40 m up at the origin whose ledger holds ``FIELDS``, each seen only from afar and a
-    crop from overhead (their LiDAR sweeps queued in that order), and ``measured`` when given."""
+    crop from overhead (their LiDAR sweeps queued in that order, the last one's being the low look's
+    too), and ``measured`` when given; ``low``: the frame of the low look after those looked at, in
+    place of the last field's."""
     sweeps = [_ground_sweep(ne, 40.0, crop=True, seed=10 + k) for k, ne in enumerate(FIELDS)]
+    if low is not None:
+        sweeps[-1] = low
     ctx = context(frame(), frame(), *sweeps, pos_ned_m=(0.0, 0.0, -40.0))
     for k, (n, e) in enumerate(FIELDS):
         ctx.ledger.add(LedgerSite((n, e, 0.0), Hazard.OFF_ROOF, "from afar", 1, False, label=f"site {k}"))
@@ -320,18 +357,25 @@ def test_lander_lands_on_a_site_that_stays_the_least_bad_from_overhead_and_bound
     """A field seen from afar and level from overhead is landed on after one look; with every field a
     crop the lander stops after FALLBACK_LOOKS sites and lands on the last one chosen, not looking on."""
     ctx = context(
-        frame(), frame(), _ground_sweep((30.0, 0.0), 40.0, crop=False, seed=3), pos_ned_m=(0.0, 0.0, -40.0)
+        frame(),
+        frame(),
+        _ground_sweep((30.0, 0.0), 40.0, crop=False, seed=3),
+        _ground_sweep((30.0, 0.0), 20.0, crop=False, seed=4),
+        pos_ned_m=(0.0, 0.0, -40.0),
     )
     ctx.ledger.add(LedgerSite((30.0, 0.0, 0.0), Hazard.OFF_ROOF, "from afar", 1, False, label="site 0"))
     asyncio.run(_parts(ctx)[2].land_at_best("round budget spent"))
-    assert _ctl(ctx).gotos == [(30.0, 0.0, -40.0)]
+    assert _ctl(ctx).gotos == [(30.0, 0.0, -40.0), (30.0, 0.0, -20.0)]  # down to the low look: level
     assert len(_record(ctx).of("fallback_site")) == 1
 
     ctx = _fields_all_crops()
     asyncio.run(_parts(ctx)[2].land_at_best("round budget spent"))
     looked = landing_module.FALLBACK_LOOKS
-    assert [g[:2] for g in _ctl(ctx).gotos] == FIELDS[: looked + 1]
+    # the last one, seen only from afar, is looked at from 20 m: a crop too, nothing better near
+    assert [g[:2] for g in _ctl(ctx).gotos] == [*FIELDS[: looked + 1], FIELDS[looked]]
+    assert _ctl(ctx).gotos[-1][2] == -20.0
     assert len(_record(ctx).of("fallback_site")) == looked + 1
+    assert any("from 20 m: obstructed" in t and "nothing better near" in t for t in _said(ctx)), _said(ctx)
 
 
 def test_lander_after_its_looks_lands_on_level_ground_measured_close_up_not_on_another_unseen_field() -> None:
@@ -340,10 +384,10 @@ def test_lander_after_its_looks_lands_on_level_ground_measured_close_up_not_on_a
     the fourth field, seen only from afar, is no surer: the lander says so and lands on the measured
     ground. (Farmland city 21, launch 8: the fourth field was a crop too, 36 m from safe ground.)"""
     street = LedgerSite((60.0, 40.0, 0.0), Hazard.STREET, "street_level", 2, True, 20.0, label="site 7")
-    ctx = _fields_all_crops(street)
+    ctx = _fields_all_crops(street, low=_ground_sweep((60.0, 40.0), 20.0, crop=False, seed=20))
     outcome = asyncio.run(_parts(ctx)[2].land_at_best("search ended (window)"))
     looked = landing_module.FALLBACK_LOOKS
-    assert [g[:2] for g in _ctl(ctx).gotos] == [*FIELDS[:looked], (60.0, 40.0)]
+    assert [g[:2] for g in _ctl(ctx).gotos] == [*FIELDS[:looked], (60.0, 40.0), (60.0, 40.0)]
     assert outcome.site_ned_m == street.ned_m
     last = _record(ctx).of("fallback_site")[-1]
     assert (last["chosen"]["label"], last["instead_of"]["label"]) == ("site 7", f"site {looked}")
@@ -358,7 +402,7 @@ def test_lander_after_its_looks_lands_on_level_ground_measured_close_up_not_on_a
     ):
         ctx = _fields_all_crops(measured)
         asyncio.run(_parts(ctx)[2].land_at_best("search ended (window)"))
-        assert [g[:2] for g in _ctl(ctx).gotos] == FIELDS[: looked + 1]
+        assert [g[:2] for g in _ctl(ctx).gotos] == [*FIELDS[: looked + 1], FIELDS[looked]]  # + the low look
 
 
 def test_lander_never_falls_back_to_a_site_beyond_the_autopilots_fence() -> None:

@@ -22,6 +22,11 @@ FALLBACK_LOOKS = 3  # sites seen only from afar looked at from overhead before a
 # afar, when it is no worse than this (level ground at street level, refused where people come back)
 MEASURED_AFTER_LOOKS = Hazard.STREET
 MEASURED_EXTRA_M = 50.0  # ... and no farther from the vehicle than the site it replaces plus this
+# a street-level site is judged once more from this high above it before the final approach: from
+# 35 m a double rail track read as plain ground (LiDAR 8 cm rough, its rails too thin for the image
+# judgement), from 20 m as rough ground and road markings (town city 21, launch 10)
+LOW_LOOK_M = 20.0
+LOW_LOOK_KINDS = (Hazard.OFF_ROOF, Hazard.STREET)  # ground sites, where rails and roads hide from afar
 
 
 class Lander:
@@ -82,7 +87,7 @@ class Lander:
             )
             self._record_choice(reason, site)
             if measure_here:
-                site = await self._look_over(reason, site)
+                site = await self._look_low(reason, await self._look_over(reason, site))
             else:
                 await self.fly_over(site, "the chosen site")
         await self._final_approach(site)
@@ -142,8 +147,8 @@ class Lander:
                 return site
             ctx.say(
                 4,
-                f"{name} from overhead: {seen.hazard.name.lower().replace('_', ' ')} "
-                f"({seen.why}); landing at {ctx.ledger.name(now)} instead",
+                f"{name} from overhead: {_kind(seen)} ({seen.why}); "
+                f"landing at {ctx.ledger.name(now)} instead",
             )
             self._record_choice(reason, now, seen)
             site = now
@@ -159,6 +164,69 @@ class Lander:
             site = measured
         await self.fly_over(site, "the chosen site")
         return site
+
+    async def _look_low(self, reason: str, site: LedgerSite) -> LedgerSite:
+        """Over a ground site (``LOW_LOOK_KINDS``) more than ``LOW_LOOK_M`` below the vehicle: come
+        down to that height above it and judge it once more, as :meth:`_look_over` does from overhead.
+        When it proves worse there (a rail track that read as plain ground from 35 m), step aside: what
+        is in view from that height goes into the ledger (:meth:`_look_around`), and the least bad site
+        within ``MEASURED_EXTRA_M`` that is better than what was found is flown to and judged from that
+        height in turn, up to ``FALLBACK_LOOKS`` sites. Said and recorded as the looks from overhead
+        are; the final approach starts from there. The site landed on."""
+        ctx = self.ctx
+        for k in range(FALLBACK_LOOKS):
+            if site.hazard not in LOW_LOOK_KINDS or site.label == "home":
+                return site
+            n, e, site_d = site.ned_m
+            high = site_d - ctx.tm.state.pos_ned_m[2] > LOW_LOOK_M + 5.0
+            if k == 0 and not high:
+                return site  # the vehicle is low already: the look it had from here was close
+            if high:
+                try:
+                    await ctx.ctl.goto(
+                        n,
+                        e,
+                        site_d - LOW_LOOK_M,
+                        tolerance_m=ctx.p.arrival_tolerance_m,
+                        speed_m_s=ctx.p.arrival_speed_m_s,
+                        timeout_s=ctx.p.move_timeout_s,
+                    )
+                except TargetTimeout as exc:
+                    ctx.say(4, f"the low look's height not reached ({exc.error_m:.1f} m off): landing here")
+                    return site
+            name = ctx.ledger.name(site)
+            seen = await self._measure_at((n, e), site.label, site.candidate)
+            if seen is None or seen.hazard in LOW_LOOK_KINDS:
+                return site  # no frame (land on what was chosen), or still ground to land on
+            await self._look_around()
+            here = (n, e)
+            aside = self._aside(here, seen.hazard)
+            if aside is None or math.dist(aside.ned_m[:2], here) < ctx.ledger.same_site_m:
+                ctx.say(4, f"{name} from {LOW_LOOK_M:.0f} m: {_kind(seen)} ({seen.why}); nothing better near")
+                return seen
+            ctx.say(
+                4,
+                f"{name} from {LOW_LOOK_M:.0f} m: {_kind(seen)} ({seen.why}); "
+                f"landing at {ctx.ledger.name(aside)} instead, {math.dist(aside.ned_m[:2], here):.0f} m away",
+            )
+            self._record_choice(reason, aside, seen)
+            site = aside
+            if not await self.fly_over(site, "the chosen site"):
+                return site
+        return site
+
+    def _aside(self, here: tuple[float, float], worse: Hazard) -> LedgerSite | None:
+        """The least bad site better than ``worse`` within ``MEASURED_EXTRA_M`` of ``here`` and the
+        fence, or None."""
+        ctx = self.ctx
+        return ctx.ledger.least_bad(
+            here,
+            allowed=lambda s: (
+                s.hazard < worse
+                and math.dist(s.ned_m[:2], here) <= MEASURED_EXTRA_M
+                and not ctx.beyond_fence(s.ned_m)
+            ),
+        )
 
     def _measured_instead(self, site: LedgerSite) -> LedgerSite | None:
         """Once the looks are spent: the least bad site measured close up, within the fence, no worse
@@ -296,3 +364,7 @@ class Lander:
                 label=label,
             )
         )
+
+
+def _kind(site: LedgerSite) -> str:
+    return site.hazard.name.lower().replace("_", " ")
