@@ -16,7 +16,9 @@ from simbridge.cli import build_parser as simbridge_parser
 from simbridge.cli import config_from_args as make_config
 from simbridge.scenarios import load_scenario
 from simbridge.world.cache import cached_place, entry_dir
+from simbridge.world.live import LiveWorld
 from simbridge.world.model import Material, SurfaceClass, WorldGrid
+from simbridge.world.raycast import Pyramid
 from simbridge.world.world import World
 
 
@@ -64,12 +66,41 @@ def test_cached_place_builds_once_and_maps_the_same_world_after(
 def test_writing_into_a_cached_world_never_reaches_the_cache(
     tmp_path: Path, builds: list[tuple[str, int]]
 ) -> None:
-    pristine = cached_place("town", 1, tmp_path).digest()
+    pristine = cached_place("town", 1, tmp_path)
+    grid_digest, maps = pristine.grid.digest(), np.array(pristine.pyramid_maps)
     mapped = cached_place("town", 1, tmp_path)
     mapped.grid.height[:] = 99.0  # as actors are stamped into the grid while an episode runs
     mapped.grid.cls[0, 0] = int(SurfaceClass.WATER)
-    assert cached_place("town", 1, tmp_path).digest() == pristine
+    mapped.pyramid_maps[:] = 99.0  # ... and raise the ray caster's max maps
+    again = cached_place("town", 1, tmp_path)
+    assert again.grid.digest() == grid_digest  # hashed from the arrays read again
+    np.testing.assert_array_equal(again.pyramid_maps, maps)
     assert len(builds) == 1
+
+
+def test_a_cached_world_brings_its_digest_and_max_maps_as_computed_from_its_rasters(
+    tmp_path: Path, builds: list[tuple[str, int]]
+) -> None:
+    """What a process would compute again from the rasters comes from the entry: the same digest
+    and the same max maps, mapped copy-on-write (a plain ndarray for numba's kernels); an entry whose
+    maps are missing or of another shape is built again."""
+    built = cached_place("industrial", 6, tmp_path)
+    mapped = cached_place("industrial", 6, tmp_path)
+    fresh = _small_world(6)
+    assert built.known_digest == mapped.known_digest == mapped.digest() == fresh.digest()
+    assert type(mapped.pyramid_maps) is np.ndarray
+    np.testing.assert_array_equal(mapped.pyramid_maps, Pyramid(fresh.grid.height).maps)
+    live = LiveWorld(mapped)
+    assert live.world_digest == fresh.digest()
+    assert live.pyramid.h_max == Pyramid(fresh.grid.height).h_max
+    assert len(builds) == 1
+    entry = entry_dir(tmp_path, "industrial", 6)
+    np.save(entry / "pyramid.npy", np.zeros((8, 2, 2), np.float32))
+    assert cached_place("industrial", 6, tmp_path).digest() == fresh.digest()
+    assert len(builds) == 2
+    (entry_dir(tmp_path, "industrial", 6) / "pyramid.npy").unlink()
+    assert cached_place("industrial", 6, tmp_path).digest() == fresh.digest()
+    assert len(builds) == 3
 
 
 def test_a_broken_entry_is_built_again_with_a_warning(

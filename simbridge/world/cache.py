@@ -4,10 +4,11 @@ A procedural place is a pure function of its kind, its seed and this package's c
 takes seconds of CPU (2.3 s for a downtown city on this project's machine) that every episode of a
 campaign, and its grading, would otherwise pay again. :func:`cached_place` stores the built
 :class:`~simbridge.world.world.World` under ``DIR/KIND-SEED-CODE/``: its four rasters as ``.npy``
-files and the rest pickled. A later call maps the rasters copy-on-write (``numpy.load(mmap_mode="c")``):
-the actors stamped into the grid as the episode runs stay in the process's own pages and never reach
-the files, so one entry serves every process at once. ``CODE`` fingerprints the source of
-``simbridge.world``, so an entry built by other code is never read.
+files and the rest pickled, with what every process would otherwise compute again from the rasters:
+the world's digest and the ray caster's max maps (``pyramid.npy``). A later call maps the rasters and
+the maps copy-on-write (``numpy.load(mmap_mode="c")``): the actors stamped into them as the episode runs
+stay in the process's own pages and never reach the files, so one entry serves every process at once.
+``CODE`` fingerprints the source of ``simbridge.world``, so an entry built by other code is never read.
 
 Writers race safely: each builds into a private directory and renames it into place; the loser's copy
 is removed. An entry that cannot be read (a disk filled half-way, files removed by hand) is built again
@@ -29,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from simbridge.world.model import WorldGrid
+from simbridge.world.raycast import Pyramid
 from simbridge.world.world import World
 
 __all__ = ["cached_place", "code_fingerprint", "entry_dir"]
@@ -36,6 +38,7 @@ __all__ = ["cached_place", "code_fingerprint", "entry_dir"]
 _log = logging.getLogger(__name__)
 _RASTERS = ("height", "cls", "mat", "region")
 _META = "world.pickle"
+_PYRAMID = "pyramid.npy"
 
 
 @functools.cache
@@ -76,6 +79,9 @@ def cached_place(place: str, seed: int, cache_dir: Path | None) -> World:
             _log.warning("world cache %s unreadable (%s): building it again", entry, exc)
             shutil.rmtree(entry, ignore_errors=True)
     world = generate_place(place, seed)
+    world = dataclasses.replace(
+        world, known_digest=world.digest(), pyramid_maps=Pyramid(world.grid.height).maps
+    )
     try:
         _write(entry, world)
     except OSError as exc:
@@ -94,7 +100,13 @@ def _read(entry: Path) -> World:
     shapes = {r.shape for r in rasters.values()}
     if len(shapes) != 1:
         raise ValueError(f"rasters of different shapes {sorted(shapes)}")
-    world: World = dataclasses.replace(meta["world"], grid=grid)
+    if not isinstance(meta.get("digest"), str):
+        raise ValueError("no digest kept")
+    maps = np.load(entry / _PYRAMID, mmap_mode="c").view(np.ndarray)
+    Pyramid(grid.height, maps)  # ValueError: maps of another shape
+    world: World = dataclasses.replace(
+        meta["world"], grid=grid, known_digest=meta["digest"], pyramid_maps=maps
+    )
     return world
 
 
@@ -105,8 +117,10 @@ def _write(entry: Path, world: World) -> None:
         g = world.grid
         for name in _RASTERS:
             np.save(tmp / f"{name}.npy", getattr(g, name))
+        np.save(tmp / _PYRAMID, world.pyramid_maps)
         empty = WorldGrid(n0=g.n0, e0=g.e0, res=g.res, **{n: np.zeros((0, 0), np.uint8) for n in _RASTERS})
-        meta = {"world": dataclasses.replace(world, grid=empty), "n0": g.n0, "e0": g.e0, "res": g.res}
+        bare = dataclasses.replace(world, grid=empty, known_digest=None, pyramid_maps=None)
+        meta = {"world": bare, "n0": g.n0, "e0": g.e0, "res": g.res, "digest": world.known_digest}
         with (tmp / _META).open("wb") as f:
             pickle.dump(meta, f, protocol=pickle.HIGHEST_PROTOCOL)
         try:

@@ -56,7 +56,7 @@ class LiveWorld:
         # nothing here writes to the grid until the first sync stamps the actors
         with ThreadPoolExecutor(max_workers=1, thread_name_prefix="world-digest") as pool:
             digest = pool.submit(world.digest)
-            self.pyramid = Pyramid(self.grid.height)
+            self.pyramid = Pyramid(self.grid.height, world.pyramid_maps)
             self.shadow = ShadowMap(self.grid, self.pyramid, self.sun_neu)
             self.actors = Actors(world.lanes, world.walkways, self.actor_seed)
             self.pyramid.raise_envelope(self.actors.envelope(self.grid), DYNAMIC_LEVELS)

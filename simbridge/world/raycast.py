@@ -94,7 +94,17 @@ class Pyramid:
     """The max maps the march jumps with: ``maps[k, bi, bj]`` is the tallest cell within
     ``2**k`` coarse cells (Chebyshev) of coarse cell ``(bi, bj)``."""
 
-    def __init__(self, height: np.ndarray) -> None:
+    def __init__(self, height: np.ndarray, maps: np.ndarray | None = None) -> None:
+        """The max maps over ``height``; or ``maps``, those maps computed before (a world kept on disk
+        brings them, :mod:`simbridge.world.cache`), taken as they are (a view, written in place)."""
+        if maps is not None:
+            rows, cols = height.shape
+            shape = (LEVELS, -(-rows // COARSE), -(-cols // COARSE))
+            if maps.shape != shape or maps.dtype != np.float32:
+                raise ValueError(f"max maps of shape {maps.shape} ({maps.dtype}) for a grid needing {shape}")
+            self.maps = maps
+            self.h_max = float(maps[-1].max())  # the widest level holds the tallest cell
+            return
         base = max_pool(height, COARSE)
         self.maps = np.empty((LEVELS, *base.shape), np.float32)
         for k, level in enumerate(_max_levels(base)):
