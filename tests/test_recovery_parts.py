@@ -654,6 +654,64 @@ def test_an_autopilot_failsafe_during_the_defect_landing_is_ridden_out_not_given
     )
 
 
+def test_an_autopilot_failsafe_ridden_out_mid_descent_goes_on_at_the_same_site(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """PX4's offboard-loss failsafe (POSCTL) in a descent onto a confirmed lawn, ridden out: the
+    recovery goes on at that site, confirmed again first, as after a lost link; not a new round that
+    may choose another site (town city 21, launch 29 in rain: the lawn 14 m below was lost and a
+    sidewalk landed on). A failsafe before any descent starts the next round."""
+    from companion.control import AutopilotFailsafe
+
+    ctx = context()
+    rec = _recovery(ctx)
+    lawn = ((5.0, 6.0, 0.0), candidate(0, (5.0, 6.0, 0.0)))
+    rounds: list[int] = []
+    resumed: list[tuple[float, float, float]] = []
+
+    async def engage_and_look() -> None:
+        return None
+
+    async def a_round() -> bool:
+        rounds.append(rec.ctx.round)
+        if len(rounds) == 1:
+            rec._descending = lawn  # confirmed, descending
+            raise AutopilotFailsafe(196608)
+        return True
+
+    async def confirm_and_descend(target: tuple[float, float, float], choice: Any) -> bool:
+        resumed.append(target)
+        return True
+
+    async def cleared(exc: AutopilotFailsafe) -> Outcome | None:
+        return None
+
+    monkeypatch.setattr(rec, "_engage_and_look", engage_and_look)
+    monkeypatch.setattr(rec, "_round", a_round)
+    monkeypatch.setattr(rec, "_confirm_and_descend", confirm_and_descend)
+    monkeypatch.setattr(rec.handover, "on_failsafe", cleared)
+    outcome = asyncio.run(rec.run())
+    assert (rounds, resumed) == ([1], [(5.0, 6.0, 0.0)])
+    assert outcome.state is State.LANDED
+
+    rec = _recovery(context())
+    rounds.clear()
+    resumed.clear()
+
+    async def before_descent() -> bool:
+        rounds.append(rec.ctx.round)
+        if len(rounds) == 1:
+            raise AutopilotFailsafe(196608)  # nothing confirmed yet
+        return True
+
+    monkeypatch.setattr(rec, "_engage_and_look", engage_and_look)
+    monkeypatch.setattr(rec, "_round", before_descent)
+    monkeypatch.setattr(rec, "_confirm_and_descend", confirm_and_descend)
+    monkeypatch.setattr(rec.handover, "on_failsafe", cleared)
+    asyncio.run(rec.run())
+    assert (rounds, resumed) == ([1, 2], [])
+
+
 def test_recovery_search_flies_the_height_and_lidar_range_of_its_params() -> None:
     """The search plan is built from the recovery's parameters (``recovery.search_agl_m``,
     ``perception.lidar_range_m``), not from defaults of its own."""

@@ -151,7 +151,7 @@ class Recovery:
             resume: tuple[tuple[float, float, float], Candidate] | None = None
             while resume is not None or self.searcher.go_on():
                 try:
-                    if resume is not None:  # the link came back mid-descent: same site, confirm first
+                    if resume is not None:  # the vehicle is back mid-descent: same site, confirm first
                         landed = await self._confirm_and_descend(*resume)
                     elif self.ctx.round >= self.ctx.budget:
                         landed = await self._extra_round()
@@ -161,7 +161,10 @@ class Recovery:
                         landed = await self._round()
                     resume = None
                 except AutopilotFailsafe as exc:
-                    resume = None
+                    # ridden out or re-engaged, the vehicle is held where it was: a descent goes on at
+                    # its site, confirmed again first, as after a lost link (town, launch 29 in rain:
+                    # a new round after PX4's offboard-loss POSCTL lost a lawn confirmed 14 m below)
+                    resume = self._descending
                     ended = await self.handover.on_failsafe(exc)
                     if ended is not None:
                         return ended
