@@ -334,6 +334,69 @@ def test_lander_looks_at_a_ground_site_again_from_20_m_and_steps_aside_from_rail
     assert ctx.state is State.LANDED
 
 
+def _low_looks(
+    monkeypatch: pytest.MonkeyPatch, ctx: RecoveryContext, verdicts: dict[tuple[float, float], Hazard | None]
+) -> Lander:
+    """A lander whose look at a spot gives ``verdicts[spot]`` (None: no frame), kept in the ledger
+    as a close look, and whose look around adds nothing."""
+    lander = _parts(ctx)[2]
+
+    async def measure_at(ne_m: Any, label: str, candidate: Any = None) -> LedgerSite | None:
+        hazard = verdicts[ne_m]
+        if hazard is None:
+            return None
+        return ctx.ledger.add(
+            LedgerSite((*ne_m, 0.0), hazard, hazard.name.lower(), ctx.round, True, label=label)
+        )
+
+    async def look_around() -> None:
+        return None
+
+    monkeypatch.setattr(lander, "_measure_at", measure_at)
+    monkeypatch.setattr(lander, "_look_around", look_around)
+    return lander
+
+
+def test_the_low_look_steps_aside_only_to_sites_judged_and_farther_only_from_traffic(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The low look's choices, its judgements set: a roof seen only from afar 10 m away is no step
+    aside (landed on unjudged), level ground measured close up 30 m away is; from traffic (a railway
+    read as markings) level ground 120 m away is flown to, from rough ground it is not (farther than
+    the search counted the battery for); nothing measured from 20 m leaves the site as it was; a
+    vehicle not over the site (its fly-over fell short) does not come down on a slant."""
+    ground = "nothing seen against it"
+    for found, far_ok in ((Hazard.TRAFFIC, True), (Hazard.OBSTRUCTED, False)):
+        ctx = context(pos_ned_m=(0.0, 0.0, -40.0))
+        site = ctx.ledger.add(LedgerSite((0.0, 0.0, 0.0), Hazard.OFF_ROOF, ground, 1, True, label="site 0"))
+        ctx.ledger.add(LedgerSite((10.0, 0.0, 0.0), Hazard.DOUBTED, "from afar", 1, False, label="site 1"))
+        ctx.ledger.add(LedgerSite((0.0, 120.0, 0.0), Hazard.STREET, "street_level", 1, True, label="site 2"))
+        verdicts = {(0.0, 0.0): found, (0.0, 120.0): Hazard.STREET}
+        landed = asyncio.run(_low_looks(monkeypatch, ctx, verdicts)._look_low("window", site))
+        assert _ctl(ctx).gotos[0] == (0.0, 0.0, -20.0)
+        assert landed.ned_m[:2] == ((0.0, 120.0) if far_ok else (0.0, 0.0)), (found, _said(ctx))
+        if not far_ok:
+            assert "nothing better measured: landing here" in _said(ctx)[-1]
+        ctx = context(pos_ned_m=(0.0, 0.0, -40.0))
+        site = ctx.ledger.add(LedgerSite((0.0, 0.0, 0.0), Hazard.OFF_ROOF, ground, 1, True, label="site 0"))
+        ctx.ledger.add(LedgerSite((30.0, 0.0, 0.0), Hazard.OFF_ROOF, ground, 1, True, label="site 3"))
+        verdicts = {(0.0, 0.0): found, (30.0, 0.0): Hazard.OFF_ROOF}
+        landed = asyncio.run(_low_looks(monkeypatch, ctx, verdicts)._look_low("window", site))
+        assert landed.ned_m[:2] == (30.0, 0.0)
+        assert _ctl(ctx).gotos == [(0.0, 0.0, -20.0), (30.0, 0.0, -20.0)]
+
+    for verdict in (None, Hazard.UNKNOWN):
+        ctx = context(pos_ned_m=(0.0, 0.0, -40.0))
+        site = ctx.ledger.add(LedgerSite((0.0, 0.0, 0.0), Hazard.OFF_ROOF, ground, 1, True, label="site 0"))
+        landed = asyncio.run(_low_looks(monkeypatch, ctx, {(0.0, 0.0): verdict})._look_low("window", site))
+        assert landed is site
+
+    ctx = context(pos_ned_m=(0.0, -30.0, -40.0))  # the fly-over stopped 30 m short
+    site = ctx.ledger.add(LedgerSite((0.0, 0.0, 0.0), Hazard.OFF_ROOF, ground, 1, True, label="site 0"))
+    landed = asyncio.run(_low_looks(monkeypatch, ctx, {})._look_low("window", site))
+    assert (landed, _ctl(ctx).gotos) == (site, [])
+
+
 FIELDS = [(30.0 * (k + 1), 0.0) for k in range(landing_module.FALLBACK_LOOKS + 1)]  # one more than looked at
 
 
@@ -375,7 +438,9 @@ def test_lander_lands_on_a_site_that_stays_the_least_bad_from_overhead_and_bound
     assert [g[:2] for g in _ctl(ctx).gotos] == [*FIELDS[: looked + 1], FIELDS[looked]]
     assert _ctl(ctx).gotos[-1][2] == -20.0
     assert len(_record(ctx).of("fallback_site")) == looked + 1
-    assert any("from 20 m: obstructed" in t and "nothing better near" in t for t in _said(ctx)), _said(ctx)
+    assert any("from 20 m: obstructed" in t and "nothing better measured" in t for t in _said(ctx)), _said(
+        ctx
+    )
 
 
 def test_lander_after_its_looks_lands_on_level_ground_measured_close_up_not_on_another_unseen_field() -> None:
@@ -710,6 +775,25 @@ def test_an_autopilot_failsafe_ridden_out_mid_descent_goes_on_at_the_same_site(
     monkeypatch.setattr(rec.handover, "on_failsafe", cleared)
     asyncio.run(rec.run())
     assert (rounds, resumed) == ([1, 2], [])
+
+    # a failsafe that clears and comes back in every resumed descent: MAX_RESUMES of them, then a
+    # new round (whose search verdict checks the battery and the alarm's window first)
+    from companion.recovery.core import MAX_RESUMES
+
+    rec = _recovery(context())
+    rounds.clear()
+    resumed.clear()
+
+    async def again(target: tuple[float, float, float], choice: Any) -> bool:
+        resumed.append(target)
+        raise AutopilotFailsafe(196608)
+
+    monkeypatch.setattr(rec, "_engage_and_look", engage_and_look)
+    monkeypatch.setattr(rec, "_round", a_round)
+    monkeypatch.setattr(rec, "_confirm_and_descend", again)
+    monkeypatch.setattr(rec.handover, "on_failsafe", cleared)
+    asyncio.run(rec.run())
+    assert (rounds, len(resumed)) == ([1, 2], MAX_RESUMES)
 
 
 def test_recovery_search_flies_the_height_and_lidar_range_of_its_params() -> None:

@@ -25,6 +25,7 @@ from companion.site_ledger import Hazard, SiteLedger
 from companion.telemetry import TelemetryCache
 
 MAX_REENGAGE = 2
+MAX_RESUMES = 3  # descents gone on with at the same site after a failsafe or a lost link, in a recovery
 SENSOR_RETRY_S = 1.0  # between two asks for a frame after one failed
 SITE_RETRIES = 2  # more frames asked for when a LiDAR sweep misses the site before judging it unmeasured
 PEOPLE_LOOK_AGAIN_S = 2.0  # wall seconds between two looks at people near a site, held where it is

@@ -166,19 +166,28 @@ class Lander:
         return site
 
     async def _look_low(self, reason: str, site: LedgerSite) -> LedgerSite:
-        """Over a ground site (``LOW_LOOK_KINDS``) more than ``LOW_LOOK_M`` below the vehicle: come
-        down to that height above it and judge it once more, as :meth:`_look_over` does from overhead.
-        When it proves worse there (a rail track that read as plain ground from 35 m), step aside: what
-        is in view from that height goes into the ledger (:meth:`_look_around`), and the least bad site
-        within ``MEASURED_EXTRA_M`` that is better than what was found is flown to and judged from that
-        height in turn, up to ``FALLBACK_LOOKS`` sites. Said and recorded as the looks from overhead
-        are; the final approach starts from there. The site landed on."""
+        """Over a ground site (``LOW_LOOK_KINDS``) more than ``LOW_LOOK_M`` + 5 m below the vehicle:
+        come down to ``LOW_LOOK_M`` above it and judge it once more, as :meth:`_look_over` does from
+        overhead. When it proves worse there (a rail track that read as plain ground from 35 m), step
+        aside (:meth:`_aside`): what is in view from that height goes into the ledger
+        (:meth:`_look_around`), and the least bad site better than what was found, judged close up or
+        at ground level, is flown to and judged from that height in turn: within ``MEASURED_EXTRA_M``
+        (the search's end counted the battery for the site chosen, and a margin), farther only away
+        from traffic or water; up to ``FALLBACK_LOOKS`` steps aside, then the last site is landed on.
+        Water found with nothing better measured: home, as :meth:`fallback_site` would.
+        Nothing measured from that height (no frame, no LiDAR return, no image): the site stays.
+        Not over the site (its fly-over fell short): no descent on a slant, the site stays. Said and
+        recorded as the looks from overhead are; the final approach starts from there. The site
+        landed on."""
         ctx = self.ctx
-        for k in range(FALLBACK_LOOKS):
+        for k in range(FALLBACK_LOOKS + 1):
             if site.hazard not in LOW_LOOK_KINDS or site.label == "home":
                 return site
             n, e, site_d = site.ned_m
-            high = site_d - ctx.tm.state.pos_ned_m[2] > LOW_LOOK_M + 5.0
+            pn, pe, pd = ctx.tm.state.pos_ned_m
+            if math.dist((pn, pe), (n, e)) > ctx.ledger.same_site_m:
+                return site
+            high = site_d - pd > LOW_LOOK_M + 5.0
             if k == 0 and not high:
                 return site  # the vehicle is low already: the look it had from here was close
             if high:
@@ -189,41 +198,50 @@ class Lander:
                         site_d - LOW_LOOK_M,
                         tolerance_m=ctx.p.arrival_tolerance_m,
                         speed_m_s=ctx.p.arrival_speed_m_s,
-                        timeout_s=ctx.p.move_timeout_s,
+                        timeout_s=ctx.p.move_timeout(site_d - LOW_LOOK_M - pd),
                     )
                 except TargetTimeout as exc:
                     ctx.say(4, f"the low look's height not reached ({exc.error_m:.1f} m off): landing here")
                     return site
             name = ctx.ledger.name(site)
             seen = await self._measure_at((n, e), site.label, site.candidate)
-            if seen is None or seen.hazard in LOW_LOOK_KINDS:
-                return site  # no frame (land on what was chosen), or still ground to land on
+            if seen is None or seen.hazard is Hazard.UNKNOWN or seen.hazard <= Hazard.STREET:
+                return site  # nothing measured (land on what was chosen), or still ground to land on
+            found = f"{name} from {LOW_LOOK_M:.0f} m: {_kind(seen)} ({seen.why})"
+            if k == FALLBACK_LOOKS:
+                ctx.say(4, f"{found}; {FALLBACK_LOOKS} steps aside spent: landing here")
+                return seen
             await self._look_around()
             here = (n, e)
-            aside = self._aside(here, seen.hazard)
+            aside = self._aside(here, seen.hazard, MEASURED_EXTRA_M)
+            if aside is None and seen.hazard >= Hazard.TRAFFIC:  # a road, a railway, water: farther
+                aside = self._aside(here, seen.hazard)
+            if aside is None and seen.hazard >= Hazard.WATER:
+                aside = self.home_site(here)
             if aside is None or math.dist(aside.ned_m[:2], here) < ctx.ledger.same_site_m:
-                ctx.say(4, f"{name} from {LOW_LOOK_M:.0f} m: {_kind(seen)} ({seen.why}); nothing better near")
+                ctx.say(4, f"{found}; nothing better measured: landing here")
                 return seen
-            ctx.say(
-                4,
-                f"{name} from {LOW_LOOK_M:.0f} m: {_kind(seen)} ({seen.why}); "
-                f"landing at {ctx.ledger.name(aside)} instead, {math.dist(aside.ned_m[:2], here):.0f} m away",
-            )
+            away = math.dist(aside.ned_m[:2], here)
+            ctx.say(4, f"{found}; landing at {ctx.ledger.name(aside)} instead, {away:.0f} m away")
             self._record_choice(reason, aside, seen)
             site = aside
             if not await self.fly_over(site, "the chosen site"):
                 return site
         return site
 
-    def _aside(self, here: tuple[float, float], worse: Hazard) -> LedgerSite | None:
-        """The least bad site better than ``worse`` within ``MEASURED_EXTRA_M`` of ``here`` and the
-        fence, or None."""
+    def _aside(
+        self, here: tuple[float, float], worse: Hazard, reach_m: float | None = None
+    ) -> LedgerSite | None:
+        """The least bad site better than ``worse`` that was judged close up or lies at ground level
+        (where the low look judges it next), within the fence and ``reach_m`` of ``here`` (None: any
+        distance), or None."""
         ctx = self.ctx
         return ctx.ledger.least_bad(
             here,
             allowed=lambda s: (
                 s.hazard < worse
-                and math.dist(s.ned_m[:2], here) <= MEASURED_EXTRA_M
+                and (s.closeup or s.hazard in LOW_LOOK_KINDS)
+                and (reach_m is None or math.dist(s.ned_m[:2], here) <= reach_m)
                 and not ctx.beyond_fence(s.ned_m)
             ),
         )

@@ -50,6 +50,7 @@ from companion.recovery.core import (
     ASIDE_MAX,
     GO_AROUND_M,
     MAX_REENGAGE,
+    MAX_RESUMES,
     PEOPLE_LOOK_AGAIN_S,
     QUIET_LOOKS,
     SEVERITY_CRITICAL,
@@ -122,6 +123,7 @@ class Recovery:
         self.handover = Handover(ctx)
         # the site a descent is on, confirmed again first when a lost link comes back
         self._descending: tuple[tuple[float, float, float], Candidate] | None = None
+        self._resumes = 0  # descents gone on with after a failsafe or a lost link (MAX_RESUMES)
         self.extra = 0  # rounds flown past the budget (nothing acceptable seen)
         # the last round ended on an exploring climb or descent: a view from here not yet looked at
         self._new_vantage = False
@@ -164,13 +166,13 @@ class Recovery:
                     # ridden out or re-engaged, the vehicle is held where it was: a descent goes on at
                     # its site, confirmed again first, as after a lost link (town, launch 29 in rain:
                     # a new round after PX4's offboard-loss POSCTL lost a lawn confirmed 14 m below)
-                    resume = self._descending
+                    resume = self._resume()
                     ended = await self.handover.on_failsafe(exc)
                     if ended is not None:
                         return ended
                     continue
                 except TelemetryLost as exc:
-                    resume = self._descending
+                    resume = self._resume()
                     ended = await self.handover.ride_out_link_loss(exc)
                     if ended is not None:
                         return ended
@@ -282,6 +284,16 @@ class Recovery:
         if ended is landed:
             return landed
         return Outcome(ended.state, ended.rounds, ended.site_ned_m, f"defect ({text}), then {ended.reason}")
+
+    def _resume(self) -> tuple[tuple[float, float, float], Candidate] | None:
+        """The descent to go on with once the vehicle is back from a failsafe or a lost link (its
+        site, confirmed again first), at most ``MAX_RESUMES`` times in a recovery: a failsafe that
+        clears and comes back at every try (setpoint stalls on a loaded computer) then meets a new
+        round, whose search verdict checks the battery and the alarm's window first."""
+        if self._descending is None or self._resumes >= MAX_RESUMES:
+            return None
+        self._resumes += 1
+        return self._descending
 
     async def _land_at_best(self, reason: str, *, measure_here: bool = True) -> Outcome:
         """:meth:`Lander.land_at_best` once the round's deferred work is done (the candidates noted
