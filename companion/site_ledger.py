@@ -60,6 +60,11 @@ class Hazard(enum.IntEnum):
         """Good enough to land on without looking further: a roof with nothing against it."""
         return self <= Hazard.DOUBTED
 
+    @property
+    def phrase(self) -> str:
+        """How the kind is said to people: "off roof", "obstructed"."""
+        return self.name.lower().replace("_", " ")
+
 
 _TRAFFIC = {"markings", "street_asphalt"}
 _OBSTRUCTED = {

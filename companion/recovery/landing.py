@@ -82,9 +82,7 @@ class Lander:
             ctx.say(4, f"{reason}, only water or traffic measured elsewhere: landing here")
         else:
             where = "here" if site.label == "here" else f"at {ctx.ledger.name(site)}"
-            ctx.say(
-                4, f"{reason}: landing {where} ({site.hazard.name.lower().replace('_', ' ')}: {site.why})"
-            )
+            ctx.say(4, f"{reason}: landing {where} ({site.hazard.phrase}: {site.why})")
             self._record_choice(reason, site)
             if measure_here:
                 site = await self._look_low(reason, await self._look_over(reason, site))
@@ -147,7 +145,7 @@ class Lander:
                 return site
             ctx.say(
                 4,
-                f"{name} from overhead: {_kind(seen)} ({seen.why}); "
+                f"{name} from overhead: {seen.hazard.phrase} ({seen.why}); "
                 f"landing at {ctx.ledger.name(now)} instead",
             )
             self._record_choice(reason, now, seen)
@@ -207,7 +205,7 @@ class Lander:
             seen = await self._measure_at((n, e), site.label, site.candidate)
             if seen is None or seen.hazard is Hazard.UNKNOWN or seen.hazard <= Hazard.STREET:
                 return site  # nothing measured (land on what was chosen), or still ground to land on
-            found = f"{name} from {LOW_LOOK_M:.0f} m: {_kind(seen)} ({seen.why})"
+            found = f"{name} from {LOW_LOOK_M:.0f} m: {seen.hazard.phrase} ({seen.why})"
             if k == FALLBACK_LOOKS:
                 ctx.say(4, f"{found}; {FALLBACK_LOOKS} steps aside spent: landing here")
                 return seen
@@ -382,7 +380,3 @@ class Lander:
                 label=label,
             )
         )
-
-
-def _kind(site: LedgerSite) -> str:
-    return site.hazard.name.lower().replace("_", " ")

@@ -377,11 +377,7 @@ class Recovery:
             if not await self.lander.fly_over(site, site.label, then="next round"):
                 return False  # not over it: no confirmation, no descent from elsewhere
             return await self._confirm_and_descend(site.ned_m, site.candidate)
-        seen = (
-            "nothing measured"
-            if site is None
-            else f"the best seen is {site.hazard.name.lower().replace('_', ' ')}"
-        )
+        seen = "nothing measured" if site is None else f"the best seen is {site.hazard.phrase}"
         if self._new_vantage:
             # the last round ended by climbing or descending to see (out of the LiDAR's reach, or too
             # low for a wide view): look from there before flying on, or the step was for nothing

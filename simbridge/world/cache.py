@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from simbridge.world.model import WorldGrid
-from simbridge.world.raycast import Pyramid
+from simbridge.world.raycast import Pyramid, check_maps
 from simbridge.world.world import World
 
 __all__ = ["cached_place", "code_fingerprint", "entry_dir"]
@@ -103,7 +103,7 @@ def _read(entry: Path) -> World:
     if not isinstance(meta.get("digest"), str):
         raise ValueError("no digest kept")
     maps = np.load(entry / _PYRAMID, mmap_mode="c").view(np.ndarray)
-    Pyramid(grid.height, maps)  # ValueError: maps of another shape
+    check_maps(maps, grid.height.shape)
     world: World = dataclasses.replace(
         meta["world"], grid=grid, known_digest=meta["digest"], pyramid_maps=maps
     )

@@ -90,6 +90,15 @@ def _max_levels(base: np.ndarray) -> Iterator[np.ndarray]:
         yield level
 
 
+def check_maps(maps: np.ndarray, grid_shape: tuple[int, ...]) -> None:
+    """Raises ValueError unless ``maps`` has the shape and type of :class:`Pyramid`'s max maps over
+    a grid of ``grid_shape``."""
+    rows, cols = grid_shape
+    shape = (LEVELS, -(-rows // COARSE), -(-cols // COARSE))
+    if maps.shape != shape or maps.dtype != np.float32:
+        raise ValueError(f"max maps of shape {maps.shape} ({maps.dtype}) for a grid needing {shape}")
+
+
 class Pyramid:
     """The max maps the march jumps with: ``maps[k, bi, bj]`` is the tallest cell within
     ``2**k`` coarse cells (Chebyshev) of coarse cell ``(bi, bj)``."""
@@ -98,10 +107,7 @@ class Pyramid:
         """The max maps over ``height``; or ``maps``, those maps computed before (a world kept on disk
         brings them, :mod:`simbridge.world.cache`), taken as they are (a view, written in place)."""
         if maps is not None:
-            rows, cols = height.shape
-            shape = (LEVELS, -(-rows // COARSE), -(-cols // COARSE))
-            if maps.shape != shape or maps.dtype != np.float32:
-                raise ValueError(f"max maps of shape {maps.shape} ({maps.dtype}) for a grid needing {shape}")
+            check_maps(maps, height.shape)
             self.maps = maps
             self.h_max = float(maps[-1].max())  # the widest level holds the tallest cell
             return
