@@ -1,5 +1,5 @@
 """Peak memory of the onboard judge reading ranks and confirmations with glibc's malloc as it comes, as
-the daemon sets it (``companion.memory.limit_malloc_arenas``: two arenas; this process's reads run on one
+the daemon sets it (``companion.memory.limit_malloc_arenas``: one arena; this process's reads run on one
 thread, so it should change nothing here) and with a fixed 1 MiB mmap threshold (large freed blocks go
 back to the system at once: less memory, more page faults).
 

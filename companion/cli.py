@@ -18,7 +18,7 @@ from companion.config import ConfigError, load_config
 from companion.config_schema import DEFAULTS, CompanionConfig
 from companion.daemon import Companion
 from companion.ground import GroundFeed, GroundParams
-from companion.memory import limit_malloc_arenas
+from companion.memory import limit_malloc_arenas, trim_malloc
 from companion.operator import InhibitSwitch
 from companion.perception.depth import DepthError
 from companion.reasoning.tiers import BUILTIN_PROFILES, ONBOARD, build_cascade, secrets
@@ -124,6 +124,9 @@ def build_companion(cfg: CompanionConfig) -> Companion:
 
         record = FlightRecord(cfg.record.dir, cfg.record.max_mb)
     reasoner = build_cascade(cfg.reasoner, record=record.record_event if record is not None else None)
+    # what loading the onboard net freed (ONNX Runtime's graph optimisation: some 30 MB) goes back now:
+    # the warm-up's reads that follow at once no longer stack on it (the daemon's peak began there)
+    trim_malloc()
     a = cfg.alarms
     return Companion(
         mavlink_url=cfg.mavlink.url,

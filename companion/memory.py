@@ -16,7 +16,7 @@ import os
 from typing import Any
 
 M_ARENA_MAX = -8  # glibc's malloc.h: mallopt's parameter for the most malloc arenas
-MALLOC_ARENAS = 2  # the daemon's: the event loop's thread and one for its worker threads
+MALLOC_ARENAS = 1  # the daemon's: one heap for the event loop's thread and its worker threads
 
 
 def _libc(name: str) -> Any:
@@ -32,7 +32,10 @@ def limit_malloc_arenas(arenas: int = MALLOC_ARENAS) -> bool:
     tunable ``glibc.malloc.arena_max``) is set: the operator's choice wins; True when set. glibc gives
     each thread that allocates while another holds the lock an arena of its own, up to eight per core,
     and each keeps what it freed: the reasoner's and the record's worker threads add theirs to the
-    daemon's peak. Call it before the first thread starts. (A fixed 1 MiB mmap threshold as well, so
+    daemon's peak. One arena, the default: what the net's load freed on the event loop's thread, the
+    warm-up's and the flight's worker threads use again (town city 21, launches 36-45 at 8x, two flights
+    at once: peak RSS at most 245.5 MB with two arenas, 227.7 MB with one, the same CPU time;
+    docs/performance.md). Call it before the first thread starts. (A fixed 1 MiB mmap threshold as well, so
     that large freed blocks go back to the system, took 17 MB off the peak of a process reading
     LandNet-E's ranks and confirmations, 214 to 197 MB, but made its reads 1.56 times slower:
     benchmarks/bench_judge_memory.py, docs/performance.md; not taken.)"""

@@ -127,6 +127,34 @@ def test_a_look_runs_on_a_copy_and_only_the_event_loop_writes_what_it_found(
 
 
 # ---------------------------------------------------------------- 3: the setpoint stream
+def test_each_look_hands_back_what_it_freed_in_its_own_worker_thread(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Twice a second in a descent a look resamples the frames around the site; glibc kept what each
+    freed and the daemon's memory climbed with every look. The look's worker thread hands it back
+    (``trim_malloc``) once the look is done, found or failed, before the event loop goes on."""
+    events: list[tuple[str, threading.Thread]] = []
+    found = TrackResult(True, (5.0, 6.0, 0.0), (1.0, 3.0), 0.9, 0.3, 0.1)
+    outcome: list[Any] = [found]
+
+    def match(*_a: Any) -> TrackResult:
+        events.append(("look", threading.current_thread()))
+        if isinstance(outcome[0], Exception):
+            raise outcome[0]
+        return found
+
+    monkeypatch.setattr(following, "track_site", match)
+    monkeypatch.setattr(following, "trim_malloc", lambda: events.append(("trim", threading.current_thread())))
+    frame = _frame(12_000)
+    me = _follower(frame)
+    assert asyncio.run(me._track_once(frame, True)) is found
+    outcome[0] = ValueError("a malformed frame")
+    with pytest.raises(ValueError, match="malformed"):
+        asyncio.run(me._track_once(frame, True))
+    assert [what for what, _t in events] == ["look", "trim", "look", "trim"]
+    assert all(t is not threading.main_thread() for _w, t in events)  # in the look's worker thread
+    assert events[0][1] is events[1][1]
+    assert events[2][1] is events[3][1]
+
+
 def test_a_setpoint_stream_survives_a_failing_send_and_release_never_raises(
     caplog: pytest.LogCaptureFixture,
 ) -> None:

@@ -29,6 +29,7 @@ import numpy as np
 
 from companion.flavour import Mode
 from companion.guidance.frames import PinholeCamera, quat_to_matrix
+from companion.memory import trim_malloc
 from companion.perception.site_track import SiteView, TrackParams, TrackResult, centre_down, track_site
 from companion.precision import PrecisionLanding
 from companion.recovery.core import FrameUnavailable, RecoveryContext
@@ -155,6 +156,20 @@ def look_for_site(
     return Look(result, track, seen)
 
 
+def _look_then_trim(
+    frame: Any, state: FollowState, params: TrackParams, adopt: bool, reanchor: bool
+) -> Look | None:
+    """:func:`look_for_site`, then what it freed handed back to the system (:func:`trim_malloc`, a
+    tenth of a millisecond when there is little). Twice a second in a descent, each look resamples the
+    frames around the site on grids that grow as the ground comes closer; glibc kept the larger blocks
+    freed, and the daemon's memory climbed a step with each look (town city 21, launch 44 at 8x, two
+    flights at once: 215 to 263 MB in the 7 s of one descent; 240 MB with the trim)."""
+    try:
+        return look_for_site(frame, state, params, adopt, reanchor)
+    finally:
+        trim_malloc()
+
+
 class SiteFollower:
     """The site kept in view from its choice to the touchdown (module docstring): its last view and
     where it was then (``track``), the frame it was chosen in, the estimate's resets taken and its
@@ -235,7 +250,7 @@ class SiteFollower:
             tuple(self.ctx.tm.position_resets.resets[: self._resets_seen]),
         )  # fmt: skip
         resets_before = self._resets_seen
-        look = await asyncio.to_thread(look_for_site, frame, state, self.track_params, adopt, reanchor)
+        look = await asyncio.to_thread(_look_then_trim, frame, state, self.track_params, adopt, reanchor)
         if look is None:
             return None
         # resets taken while it ran: the find moves with those the frame predates (a frame taken after
