@@ -1,5 +1,9 @@
 """The simulator process: vehicle, autopilot, MAVLink link and episode log, paced in real time
-times ``speed`` (lockstep with the 120 Hz JSBSim step)."""
+times ``speed`` (lockstep with the 120 Hz JSBSim step).
+
+One module over 600 lines: the process's start, its lock-step loop and its stop share the vehicle,
+the autopilot, the link and the sensors, and are read together; what each of those is lives in its
+own module (:mod:`simbridge.physics`, :mod:`simbridge.autopilot`, :mod:`simbridge.world`)."""
 
 from __future__ import annotations
 

@@ -14,7 +14,9 @@ commander: it is announced, recorded with its traceback, and the vehicle lands
 
 The machine decides; its parts (:mod:`companion.recovery` lists them) look, follow the site, land,
 search, watch for people on the way down and take the autopilot's failsafes and a lost link, each on
-the context they share.
+the context they share. One module over 600 lines: the states and every way out of each (a round's
+end, a resume after a failsafe or a lost link, the fail-safe landing) read together, as one machine;
+what each state does is in the parts.
 """
 
 from __future__ import annotations

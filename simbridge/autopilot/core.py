@@ -4,12 +4,12 @@ the land detector, auto-disarm, the offboard-stream rules and failsafes, and the
 It speaks in setpoints, modes and MAV_RESULT codes; MAVLink framing lives in
 :mod:`simbridge.autopilot.server`.
 
-Kept whole (about 800 lines): it is one sans-IO state machine, as a flight controller's commander is; the
-modes, the land detector, the failsafes and the fence all read and change the same armed state, mode,
-setpoint and estimate each tick, and which one wins depends on their order in :meth:`Autopilot.tick`.
-Apart, each would hold a reference to the others' state (the mixins this project avoids); the flavours'
-tables (:mod:`simbridge.autopilot.flavours`) and the precision landing (:mod:`simbridge.autopilot.precland`)
-are already parts of their own.
+Kept whole (one module over 600 lines, about 800): it is one sans-IO state machine, as a flight
+controller's commander is; the modes, the land detector, the failsafes and the fence all read and change
+the same armed state, mode, setpoint and estimate each tick, and which one wins depends on their order
+in :meth:`Autopilot.tick`. Apart, each would hold a reference to the others' state (the mixins this
+project avoids); the flavours' tables (:mod:`simbridge.autopilot.flavours`) and the precision landing
+(:mod:`simbridge.autopilot.precland`) are already parts of their own.
 """
 
 from __future__ import annotations
