@@ -29,6 +29,7 @@ from simbridge.episode_log import EpisodeLog
 from simbridge.estimate import TRUTH, EstimateError, GpsFault, GpsFaultConfig, estimate_preset
 from simbridge.geo import GeoOrigin
 from simbridge.home import home_on_land
+from simbridge.pacing import Pacer
 from simbridge.physics import GEAR_HEIGHT_M
 from simbridge.scenarios import Scenario, load_scenario
 from simbridge.telemetry import Telemetry
@@ -576,10 +577,11 @@ class SimBridge:
             cfg.start,
         )
         wall0 = loop.time()
-        sim0 = self.vehicle.state.t_s
+        pacer = Pacer(cfg.speed)
+        pacer.start(wall0, self.vehicle.state.t_s)
         try:
             while not self._stop.is_set():
-                target = sim0 + (loop.time() - wall0) * cfg.speed
+                target = pacer.target(loop.time(), self.vehicle.state.t_s)
                 steps = 0
                 while self.vehicle.state.t_s + dt <= target + 1e-9 and steps < _MAX_BATCH_STEPS:
                     self.step()
@@ -604,6 +606,7 @@ class SimBridge:
                     "rejected_unsigned": st.rejected_unsigned,
                     "rejected_bad_signature": st.rejected_bad_signature,
                     "ignored_foreign": self.server.ignored_foreign,
+                    "clock_slipped_s": round(pacer.slipped_s, 3),
                 },
             )
             self.episode.close()
