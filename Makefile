@@ -7,10 +7,18 @@ DEPTH_STAMP := $(VENV)/.installed-depth
 
 .PHONY: demo test test-fast lint bench clean mosquitto chromium model model-s model-e model-e-package
 
+# MAVProxy (dev extra) pulls in opencv-python, the build with Qt, which shares the cv2 package with the
+# headless build the companion depends on: whichever pip writes last is the one imported. The headless
+# build is written again last, so that tests and benchmarks load what a vehicle's install loads (the Qt
+# build maps about 13 MB more into every process that imports cv2; docs/performance.md).
+HEADLESS_CV2 = $(VENV)/bin/pip install --quiet --force-reinstall --no-deps \
+  "opencv-python-headless==$$($(VENV)/bin/python -c 'import importlib.metadata as m; print(m.version("opencv-python-headless"))')"
+
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(VENV)/bin/pip install --quiet --upgrade pip
 	$(VENV)/bin/pip install --quiet -e '.[dev,sim]'
+	$(HEADLESS_CV2)
 	touch $(STAMP)
 
 # Tests also exercise the optional monocular-depth, bench (report figures, rationale clusters), campaign
@@ -20,6 +28,7 @@ $(STAMP): pyproject.toml
 $(DEPTH_STAMP): $(STAMP)
 	$(VENV)/bin/pip install --quiet 'torch==2.13.0'
 	$(VENV)/bin/pip install --quiet -e '.[dev,sim,depth,bench,train,campaign,ground]'
+	$(HEADLESS_CV2)
 	touch $(DEPTH_STAMP)
 
 demo: $(STAMP)
