@@ -56,7 +56,9 @@ chromium:
 # fixtures (rendered frames, simulator start-ups) are built once; TEST_WORKERS=0 runs it in this process.
 # (Work stealing measured no faster: 24:01 against 23:21, and builds those fixtures on both workers. One
 # worker more than the cores measured 17:31 and 20:21 from fresh clones, but the second run timed out a
-# campaign episode and misdated camera frames by 2 s: the flights starve; docs/development.md.)
+# campaign episode and misdated camera frames by 2 s: the flights starve; with simbridge's clock slipping
+# instead of racing, 2026-12-05, three workers took 29:14 with four flights' landing errors over their bounds,
+# against 27:53 and none with two in the same sitting; docs/development.md.)
 TEST_WORKERS ?= auto
 # simbridge's numba kernels compile (a minute and a half on a fresh clone) beside the linters.
 test: $(DEPTH_STAMP) mosquitto chromium
