@@ -1,4 +1,4 @@
-"""Figures of the search (issue 30) over a companion-bench campaign: what the launch point was, where it
+"""Figures of the search over a companion-bench campaign: what the launch point was, where it
 landed, how long it searched and what it cost.
 
     python benchmarks/search_campaign.py runs/campaign [--min-legs 1]

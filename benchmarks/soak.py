@@ -9,7 +9,7 @@ and threads from /proc, and stops that simbridge. The companion meets each new a
 vehicle that rebooted: its sensor client reconnects, its routes follow the new peer.
 
 Growth is measured from the end of the first episode (which pays for the first imports, the
-onboard reasoner's tables and the allocator's arenas) to the end of the last. Goals (issue 9): RSS
+onboard reasoner's tables and the allocator's arenas) to the end of the last. Goals: RSS
 growth < 10 %, no file-descriptor growth, every landing safe. Exit status 0 when all are met.
 
 Usage: python benchmarks/soak.py [--episodes 50] [--speed 4] [--out runs/soak]

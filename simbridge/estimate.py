@@ -1,4 +1,4 @@
-"""The emulated autopilot's state estimate: the truth with an EKF's errors (``--ekf-error``, issue 19).
+"""The emulated autopilot's state estimate: the truth with an EKF's errors (``--ekf-error``).
 
 A real autopilot knows where it is only through its estimator: GPS error that wanders over tens of
 seconds, a little noise, a lag of some tens of milliseconds behind the airframe, a fraction of a degree of
@@ -19,7 +19,7 @@ rocked the airframe at up to 77 degrees a second hovering (3 with the lags; test
 ``nominal`` is a healthy GPS + EKF multicopter (figures of the order ArduPilot
 and PX4 logs show with a u-blox M8/M9 receiver); ``off`` is the truth.
 
-A GPS fault (``--gps-fault``, issue 35) is a lie on top: the first time the vehicle descends below a
+A GPS fault (``--gps-fault``) is a lie on top: the first time the vehicle descends below a
 height above the ground, the position the GPS reports moves by a fixed offset, at once (a glitch, a
 spoofer taking over) or growing evenly over some seconds (a slow drift). :class:`GpsFault` decides when
 and how much; the emulation's estimate follows the GPS at once (a real EKF takes a few seconds: with

@@ -1,5 +1,5 @@
 """``simbridge --autopilot px4-sitl``: the same world, sensors, episode log and grading, flown by real PX4
-firmware (SITL) instead of the emulation (issue 33).
+firmware (SITL) instead of the emulation.
 
 simbridge starts PX4 as its child (:class:`simbridge.px4_sitl.Px4Process`: airframe 10016 ``none_iris``,
 instance ``-i N``, a working directory of its own) and is the simulator it connects to

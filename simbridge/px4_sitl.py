@@ -1,4 +1,4 @@
-"""Real PX4 firmware (SITL) as simbridge's autopilot, with simbridge as its simulator (issue 33).
+"""Real PX4 firmware (SITL) as simbridge's autopilot, with simbridge as its simulator.
 
 PX4's ``px4_sitl_default`` build with airframe 10016 (``none_iris``) starts ``simulator_mavlink``, which
 connects as a TCP client to port ``4560 + instance`` and takes its whole world from there: the way Gazebo

@@ -1,4 +1,4 @@
-"""Real ArduCopter firmware (SITL) as simbridge's autopilot, with simbridge as its physics (issue 19).
+"""Real ArduCopter firmware (SITL) as simbridge's autopilot, with simbridge as its physics.
 
 ArduPilot's software-in-the-loop build (``arducopter``) started with ``--model JSON:127.0.0.1`` takes its
 physics from outside: at every step it sends its servo outputs as one binary UDP datagram to port

@@ -1,5 +1,5 @@
 """``simbridge --autopilot ardupilot-sitl``: the same world, sensors, episode log and grading, flown by
-real ArduCopter firmware (SITL) instead of the emulation (issue 19).
+real ArduCopter firmware (SITL) instead of the emulation.
 
 The vehicle starts on the ground at the launch point, where SITL's home is (its reply positions are
 relative to the resting vehicle there, so the firmware's home and EKF origin are the launch point: a

@@ -1,4 +1,4 @@
-"""The autopilot's own failsafes in the middle of a recovery (issue 35), on simbridge's emulation of
+"""The autopilot's own failsafes in the middle of a recovery, on simbridge's emulation of
 PX4 and ArduPilot: the companion sees the autopilot take over, stops commanding, says so, records it
 and never fights the autopilot's choice; a failsafe that clears by itself (PX4's offboard-loss
 fallback) hands the vehicle back; a warning that leaves room lets the recovery go on."""

@@ -1,4 +1,4 @@
-"""The real camera path end to end (issue 34): simbridge sends its camera as H.264 over RTP, as a Gazebo
+"""The real camera path end to end: simbridge sends its camera as H.264 over RTP, as a Gazebo
 camera does; the companion reads it from the video stream with the calibration file simbridge wrote,
 dates each frame on the autopilot's clock, and takes only the LiDAR from the sensor socket."""
 

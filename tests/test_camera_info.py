@@ -1,4 +1,4 @@
-"""Camera calibration files (issue 34): ROS camera_info and OpenCV YAML read alike, bad files refused
+"""Camera calibration files: ROS camera_info and OpenCV YAML read alike, bad files refused
 naming the field, undistortion that puts each pixel where the calibrated lens model says."""
 
 from __future__ import annotations

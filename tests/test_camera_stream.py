@@ -1,4 +1,4 @@
-"""The companion's video camera input (issue 34): URLs, the mount rotation, a video file replayed through
+"""The companion's video camera input: URLs, the mount rotation, a video file replayed through
 the decoder thread, the autopilot's clock fitted from telemetry."""
 
 from __future__ import annotations

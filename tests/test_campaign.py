@@ -1,4 +1,4 @@
-"""Campaigns (issue 20): several cities and weathers in one run, the local and Ray executors, retries
+"""Campaigns: several cities and weathers in one run, the local and Ray executors, retries
 for infrastructure failures only, failure classes, and resumption after a campaign killed outright."""
 
 from __future__ import annotations

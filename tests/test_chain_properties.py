@@ -347,7 +347,7 @@ def single_cell_margin_depth(cam: PinholeCamera, col: int, row: int, half_cells:
 
 
 def test_surface_id_single_landable_cell_at_the_margin_gets_a_one_pixel_box() -> None:
-    """Issue 17: a component whose landable part is one cell exactly at the edge margin had a box of
+    """A component whose landable part is one cell exactly at the edge margin had a box of
     no width, (526, 382, 526, 382) in a 960 x 540 frame, and cropping it for the reasoner raised."""
     cam = PinholeCamera.from_hfov(960, 540, 90.0)
     # cell (131, 95) holds pixel (526, 382) at its centre: (131.5 * 4, 95.5 * 4)

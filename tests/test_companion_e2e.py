@@ -360,7 +360,7 @@ def test_high_above_the_ground_with_nothing_flat_in_reach_it_descends_before_it_
     """125 m above a bare field, a tower with a pitched roof 40 m east: the LiDAR (100 m) reaches only the
     tower's roof, nothing flat. Moving on level (as the exploring spiral did) would keep the field out
     of reach; the rangefinder measured the column below clear, so the companion descends to 90 m above
-    the field, finds it flat and lands on it. (Issue 20's campaign: city 2 launch 18 spent four extra
+    the field, finds it flat and lands on it. (A campaign's city 2 launch 18 spent four extra
     rounds 130 m up, seeing nothing flat.)"""
     scenario = tmp_path / "tower_field.toml"
     scenario.write_text(open_field_toml(250.0, 125.0) + TOWER)

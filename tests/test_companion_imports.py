@@ -38,7 +38,7 @@ def test_the_companion_imports_no_simulator_module() -> None:
 
 def test_no_companion_module_imports_the_simulator_even_lazily() -> None:
     """Imports inside functions too (the daemon connects its sensor stream lazily). The demo's
-    orchestrator, which starts simbridge beside the daemon, lives in landfall_eval (issue 32)."""
+    orchestrator, which starts simbridge beside the daemon, lives in landfall_eval."""
     pattern = re.compile(r"^\s*(from|import)\s+(simbridge|landfall_eval)\b", re.MULTILINE)
     offenders = [
         str(p.relative_to(ROOT))

@@ -95,7 +95,7 @@ def test_rank_crops_one_pixel_box_at_every_edge_and_corner(context: str, w: int,
     [
         ((0, 0, 961, 10), 0.2),  # past the right edge
         ((-1, 0, 10, 10), 0.2),  # left of the image
-        ((5, 5, 5, 6), 0.0),  # no width: the issue 17 box
+        ((5, 5, 5, 6), 0.0),  # no width: a box with no width
         ((5, 6, 6, 6), 0.0),  # no height
         ((10, 0, 5, 10), 0.0),  # inverted
         ((0, 0, 10, 10), -0.1),  # negative padding

@@ -1,4 +1,4 @@
-"""The emulated autopilots' own failsafes (issue 35), stepped without processes: the battery failsafe
+"""The emulated autopilots' own failsafes, stepped without processes: the battery failsafe
 of each flavour and the estimator without GPS. The same behaviour flown end to end, on the emulation
 and on real ArduCopter and PX4: tests/test_autopilot_failsafes.py."""
 

@@ -1,4 +1,4 @@
-"""The emulated autopilots' precision landing on a companion's LANDING_TARGET (issue 35), stepped
+"""The emulated autopilots' precision landing on a companion's LANDING_TARGET, stepped
 without processes: ArduCopter's in LAND, PX4's AUTO.PRECLAND (simbridge.autopilot.precland, its phases
 one by one); and the message as the emulation's MAVLink server reads it for each. The companion's side,
 flown end to end: tests/test_precision_landing.py."""

@@ -1,4 +1,4 @@
-"""The emulated autopilot's estimator errors (``simbridge --ekf-error``, issue 19)."""
+"""The emulated autopilot's estimator errors (``simbridge --ekf-error``)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The fail-safe for the companion's own defects, end to end (issue 17): every stage of a recovery made
+"""The fail-safe for the companion's own defects, end to end: every stage of a recovery made
 to raise (the test-only fault hook, companion/faults.py, turned on through ``LANDFALL_TEST_FAULT``).
 Every time, the defect is announced to the ground station as a critical STATUSTEXT, recorded with its
 traceback, and the vehicle still comes down: a touchdown that simbridge grades, never a hover in the

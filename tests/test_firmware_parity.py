@@ -1,4 +1,4 @@
-"""The emulated ArduPilot flavour against real ArduCopter (issue 19, part 4): the same checks, flown
+"""The emulated ArduPilot flavour against real ArduCopter: the same checks, flown
 against both, must pass on both. What a companion meets: what arrives unasked, stream requests and
 their ACKs, the local frame's origin (the EKF origin at the launch point, not the scenario's origin),
 HOME_POSITION and GPS_GLOBAL_ORIGIN, GUIDED / arm / takeoff ACKs, the landed states through a takeoff

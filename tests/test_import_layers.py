@@ -1,4 +1,4 @@
-"""The packages' imports form layers with no circles (issue 32; STYLE.md habit 11).
+"""The packages' imports form layers with no circles (STYLE.md habit 11).
 
 Every import of every module counts, the ones inside functions and under ``TYPE_CHECKING`` too: a lazy
 import is still a dependency, and a circle hidden behind one comes back the day someone hoists it.

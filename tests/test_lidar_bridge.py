@@ -1,4 +1,4 @@
-"""The reference LiDAR producer (issue 34, landfall_link.lidar_bridge): a driver's sweeps served on the
+"""The reference LiDAR producer (landfall_link.lidar_bridge): a driver's sweeps served on the
 sensor stream, turned into the body frame by the mounting and dated on the autopilot's boot clock, which
 the bridge fits from the autopilot's own MAVLink. The autopilot here is the test, at the UDP boundary: it
 stamps LOCAL_POSITION_NED on a boot clock that runs twice as fast as this computer's (a sped-up

@@ -495,7 +495,7 @@ def _painted_line_site(length_frac: float) -> np.ndarray:
 @pytest.mark.parametrize("length_frac", [0.06, 0.1])
 def test_onboard_confirm_a_painted_line_off_a_roof_vetoes_whatever_the_texture(length_frac: float) -> None:
     """One short painted line, too little paint for the lane-marking limit: on a roof it is no reason to
-    refuse (a seam, a stain), but at street level or on an elevated strip it is a road's (issue 17: a
+    refuse (a seam, a stain), but at street level or on an elevated strip it is a road's (a
     sidewalk accepted as "uniform gravel or tile texture" though the close-up saw a painted line)."""
     image = _painted_line_site(length_frac)
     cues = analyse(image, site=True)

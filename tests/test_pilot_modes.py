@@ -1,4 +1,4 @@
-"""The emulated ArduPilot flavour's pilot modes with no transmitter (issue 19, part 4): the sticks rest
+"""The emulated ArduPilot flavour's pilot modes with no transmitter: the sticks rest
 centred and the throttle at its minimum, as in real ArduCopter SITL (RC3 = 1000). The same checks
 against the firmware: tests/test_firmware_parity.py."""
 

@@ -1,4 +1,4 @@
-"""The companion places frames with the autopilot's estimate at capture time (issue 19, part 3)."""
+"""The companion places frames with the autopilot's estimate at capture time."""
 
 from __future__ import annotations
 

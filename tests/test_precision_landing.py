@@ -1,4 +1,4 @@
-"""Precision landing on the chosen site (issue 35): the parameter check the companion makes when it
+"""Precision landing on the chosen site: the parameter check the companion makes when it
 hears the autopilot, and a landing on simbridge's emulated ArduCopter with an estimator's errors,
 where the companion follows the site down in the camera and feeds LANDING_TARGET to land mode.
 The same on real ArduCopter: tests/test_bench.py (test_curated_episode_flies_real_arducopter)."""

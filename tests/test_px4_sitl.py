@@ -1,4 +1,4 @@
-"""simbridge as real PX4's simulator (issue 33): the HIL lock step, and real PX4 v1.15 firmware flying
+"""simbridge as real PX4's simulator: the HIL lock step, and real PX4 v1.15 firmware flying
 simbridge's JSBSim F450 with the companion unchanged.
 
 The tests marked ``sitl`` need PX4's SITL build (``../shared/sitl/px4/bin/px4`` beside the repository, its

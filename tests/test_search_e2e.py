@@ -1,4 +1,4 @@
-"""Search until safe (issue 30), end to end: simbridge and the companion as separate processes over
+"""Search until safe, end to end: simbridge and the companion as separate processes over
 UDP MAVLink and the sensor socket, launched over the river of ``river_crossing`` (every site in view is
 water or traffic, the roofs are out of view), graded by simbridge's ground truth."""
 

@@ -1,4 +1,4 @@
-"""The recovery's runtime parameters have one source, the configuration schema (issue 48): the defaults
+"""The recovery's runtime parameters have one source, the configuration schema: the defaults
 of :class:`RecoveryParams`, :class:`SearchLimits`, :class:`SurfaceParams` and the depth sources are the
 schema's, never a copy; and every key that sets a parameter reaches it through the function the daemon
 uses (``companion.cli.params_from``)."""

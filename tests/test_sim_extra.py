@@ -1,5 +1,5 @@
 """The companion installs without the simulator: JSBSim, numba and tqdm are the ``sim`` extra, and
-``simbridge`` / ``companion-bench`` without it say in one line how to install it (issue 19)."""
+``simbridge`` / ``companion-bench`` without it say in one line how to install it."""
 
 from __future__ import annotations
 

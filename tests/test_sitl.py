@@ -1,4 +1,4 @@
-"""simbridge as ArduCopter SITL's physics (issue 19): the wire format, the lock step against a stand-in
+"""simbridge as ArduCopter SITL's physics: the wire format, the lock step against a stand-in
 SITL on a real UDP socket, and real ArduCopter firmware flying simbridge's JSBSim F450.
 
 The tests marked ``sitl`` need ArduPilot's SITL build (``../shared/sitl/ardupilot/arducopter`` beside the

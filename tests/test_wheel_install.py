@@ -1,4 +1,4 @@
-"""Installed like a product (issue 34): the project built as a wheel and installed (not editable) in a
+"""Installed like a product: the project built as a wheel and installed (not editable) in a
 fresh virtual environment, then run from a folder outside the checkout as the README shows it.
 
 The wheel is installed with ``--no-deps``; the fresh environment borrows the third-party packages from

@@ -1,4 +1,4 @@
-"""LandNet-S, the onboard tier's learned eyes: what one RGB image shows, and where (issue 18).
+"""LandNet-S, the onboard tier's learned eyes: what one RGB image shows, and where.
 
 A small fully convolutional net (``landfall_train/net.py`` defines and trains it) says, per cell of 8 x 8
 pixels of its input, which classes are present (``roof``, ``object``, ``edge``, ``person``, ``vehicle``,

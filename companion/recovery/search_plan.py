@@ -1,4 +1,4 @@
-"""The search for a landing site once the rounds in view have found nothing acceptable (issue 30).
+"""The search for a landing site once the rounds in view have found nothing acceptable.
 
 A launch over a river, a highway or a wide street sees only water and traffic. Accepting them while the
 battery still holds most of its charge is what a pilot would never do: a pilot flies to the nearest block

@@ -84,7 +84,7 @@ class Material(enum.IntEnum):
 
 ROOF_MATERIALS = (Material.GRAVEL, Material.CONCRETE, Material.TAR, Material.MEMBRANE, Material.TILES)
 
-# What the landing grader calls each class (DESIGN.md section 9 / issue 7 surface classes).
+# What the landing grader calls each class (DESIGN.md section 9's surface classes).
 GRADE_SURFACE: dict[SurfaceClass, str] = {
     SurfaceClass.UNKNOWN: "no_landing",
     SurfaceClass.GROUND: "ground",
