@@ -126,7 +126,6 @@ def test_a_look_runs_on_a_copy_and_only_the_event_loop_writes_what_it_found(
     assert state.seen == ((11.0, 6.0, 5.0),)
 
 
-# ---------------------------------------------------------------- 3: the setpoint stream
 def test_each_look_hands_back_what_it_freed_in_its_own_worker_thread(monkeypatch: pytest.MonkeyPatch) -> None:
     """Twice a second in a descent a look resamples the frames around the site; glibc kept what each
     freed and the daemon's memory climbed with every look. The look's worker thread hands it back
@@ -155,6 +154,7 @@ def test_each_look_hands_back_what_it_freed_in_its_own_worker_thread(monkeypatch
     assert events[2][1] is events[3][1]
 
 
+# ---------------------------------------------------------------- 3: the setpoint stream
 def test_a_setpoint_stream_survives_a_failing_send_and_release_never_raises(
     caplog: pytest.LogCaptureFixture,
 ) -> None:
