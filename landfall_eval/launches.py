@@ -11,8 +11,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from scipy.stats import qmc
-
 __all__ = ["CITY_SIZE_M", "Launch", "halton_launches"]
 
 CITY_SIZE_M = 1200.0  # simbridge's procedural city: north and east in [-600, 600] m
@@ -39,6 +37,8 @@ def halton_launches(
     half = size_m / 2 - margin_m
     if half <= 0:
         raise ValueError(f"margin {margin_m} m leaves nothing of a {size_m} m city")
+    from scipy.stats import qmc  # here: scipy.stats takes about a second to import, and few runs need it
+
     seq = qmc.Halton(d=3, scramble=False)
     seq.fast_forward(start_index + 1)
     pts = seq.random(count) if count else []

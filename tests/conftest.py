@@ -79,14 +79,26 @@ class SimProcess:
         self.port = port
         self.episode_log = episode_log
         self.stderr_path = stderr_path
+        self._read_to = 0  # bytes of the episode log parsed into _rows
+        self._rows: list[dict[str, object]] = []
 
     def events(self, name: str | None = None) -> list[dict[str, object]]:
-        if not self.episode_log.exists():
+        """The episode log's events so far (``name``: of that kind only). Tests poll this while a
+        flight runs, so only what was appended since the last call is read and parsed: a real-firmware
+        flight writes thousands of state lines, and parsing them all again at every poll cost a test
+        seconds of CPU beside the flight it waits on."""
+        try:
+            with self.episode_log.open("rb") as fh:
+                if fh.seek(0, 2) < self._read_to:  # written anew (a test reused the path): start over
+                    self._read_to, self._rows = 0, []
+                fh.seek(self._read_to)
+                data = fh.read()
+        except FileNotFoundError:
             return []
-        text = self.episode_log.read_text()
-        complete = text[: text.rfind("\n") + 1]  # simbridge may be writing the last line right now
-        rows = [json.loads(line) for line in complete.splitlines() if line.strip()]
-        return [r for r in rows if name is None or r.get("event") == name]
+        complete = data[: data.rfind(b"\n") + 1]  # simbridge may be writing the last line right now
+        self._read_to += len(complete)
+        self._rows.extend(json.loads(line) for line in complete.splitlines() if line.strip())
+        return [r for r in self._rows if name is None or r.get("event") == name]
 
     def stop(self) -> int:
         if self.proc.poll() is None:

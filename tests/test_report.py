@@ -101,8 +101,8 @@ def _results(episodes: list[dict[str, Any]] | None) -> dict[str, Any]:
 
 
 EPISODES = [
-    _episode(1, (0.0, -27.0), "rooftop_clear", True, ROOF_TEXTS[:2]),
-    _episode(2, (1.0, 3.0), "road", False, [*ROAD_TEXTS[:2], SCRIPT], reasoner="cascade", context="pad20"),
+    _episode(1, (0.0, -27.0), "rooftop_clear", True, ROOF_TEXTS),
+    _episode(2, (1.0, 3.0), "road", False, [*ROAD_TEXTS, SCRIPT], reasoner="cascade", context="pad20"),
     _episode(3, (20.0, 85.0), "water", False, ["harbour water next to a pier"]),
     _episode(4, None, "no_landing", False, []),
 ]
@@ -181,13 +181,30 @@ def test_write_report_without_embeddings_shows_a_note(
     monkeypatch.setattr(report_page, "cluster_rationales", unavailable)
     water = np.full((10, 10), int(SurfaceClass.WATER), np.uint8)
     bm = BaseMap(np.zeros((10, 10, 3), np.uint8), water, (-300.0, 300.0, -300.0, 300.0), 60.0)
-    page = write_report(_results(EPISODES[:2]), tmp_path, basemaps={"scenario1": bm}).read_text(
+    page = write_report(_results(EPISODES[:3]), tmp_path, basemaps={"scenario1": bm}).read_text(
         encoding="utf-8"
     )
     assert "Rationale clusters not drawn" in page
     assert "pip install &#x27;landfall[bench]&#x27;" in page
     assert not (tmp_path / "figures" / "rationales.png").exists()
     assert (tmp_path / "figures" / "map_scenario1.png").exists()
+
+
+def test_a_run_with_few_rationales_lists_them_without_loading_the_embedding_model(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def not_wanted(texts: list[str], k: int | None = None, seed: int = 0) -> None:
+        raise AssertionError("few rationales were sent to the embedding model")
+
+    monkeypatch.setattr(report_page, "cluster_rationales", not_wanted)
+    few = [_episode(1, (0.0, -27.0), "rooftop_clear", True, [*ROOF_TEXTS[:2], ROOF_TEXTS[0], SCRIPT])]
+    page = write_report(_results(few), tmp_path).read_text(encoding="utf-8")
+    assert "4 rationales from the rank and confirm stages, 3 of them distinct: too few to cluster" in page
+    assert page.count("<blockquote>") == 3
+    assert f"2 x (rank 2)<blockquote>{ROOF_TEXTS[0]}</blockquote>" in page  # the most said first
+    assert "&lt;script&gt;" in page
+    assert "<script>" not in page
+    assert not (tmp_path / "figures" / "rationales.png").exists()
 
 
 def test_write_report_without_matplotlib_names_the_extra(

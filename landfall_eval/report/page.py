@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from landfall_eval.basemap import BaseMap
-from landfall_eval.rationales import EmbeddingsUnavailable, cluster_rationales
+from landfall_eval.rationales import MIN_TO_CLUSTER, EmbeddingsUnavailable, cluster_rationales
 from landfall_eval.stats import safe_interval
 from landfall_eval.study import (
     STUDY_JACCARD,
@@ -382,6 +382,8 @@ def _clusters(eps: list[Episode], fig_dir: Path) -> str:
     items = [(stage, text) for e in eps for stage, text in e.rationales]
     if not items:
         return out[0] + '<p class="note">No rationales in this run.</p>'
+    if len({t for _, t in items}) < MIN_TO_CLUSTER:
+        return _rationale_list(items)
     try:
         cl = cluster_rationales([t for _, t in items])
     except EmbeddingsUnavailable as exc:
@@ -400,6 +402,24 @@ def _clusters(eps: list[Episode], fig_dir: Path) -> str:
         mix = ", ".join(f"{s} {n}" for s, n in sorted(by_stage.items()))
         quotes = "".join(f"<blockquote>{escape(short(t))}</blockquote>" for t in c.representatives)
         out.append(f"<li><b>C{c.label + 1}</b>: {c.size} rationales ({escape(mix)}){quotes}</li>")
+    out.append("</ol>")
+    return "\n".join(out)
+
+
+def _rationale_list(items: list[tuple[str, str]]) -> str:
+    """A run with few distinct rationales: each one with its stages, most said first, unclustered."""
+    stages: dict[str, Counter[str]] = defaultdict(Counter)  # text -> how often each stage said it
+    for stage, text in items:
+        stages[text][stage] += 1
+    out = [
+        "<h2>Rationale clusters</h2>",
+        f"<p>{len(items)} rationales from the rank and confirm stages, {len(stages)} of them distinct: too "
+        f"few to cluster (clusters are drawn from {MIN_TO_CLUSTER} distinct texts), so each is listed.</p>",
+        "<ol>",
+    ]
+    for text, by_stage in sorted(stages.items(), key=lambda kv: -kv[1].total()):  # most said first
+        mix = escape(", ".join(f"{s} {k}" for s, k in sorted(by_stage.items())))
+        out.append(f"<li>{by_stage.total()} x ({mix})<blockquote>{escape(short(text))}</blockquote></li>")
     out.append("</ol>")
     return "\n".join(out)
 
