@@ -24,6 +24,7 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
+from landfall_eval.episode_grade import record_events
 from landfall_eval.grading import trapezoid_time_s
 from simbridge.control import ControlLimits
 
@@ -31,18 +32,18 @@ LOOK_STATES = ("acquire", "surface_id", "rank", "confirm")
 PARTS = ("excess_s", "looks_s", "final_approach_s", "rest_s")
 
 
-def _rows(path: Path) -> list[dict[str, Any]]:
+def _log_rows(path: Path) -> list[dict[str, Any]]:
+    """simbridge's episode log, a JSON object a line."""
     with path.open(encoding="utf-8") as fh:
         return [json.loads(line) for line in fh if line.strip()]
 
 
 def split_episode(episode: dict[str, Any], folder: Path, speed: float) -> dict[str, Any] | None:
     """One safe landing's excess over its bound in parts; None when its record or log is missing."""
-    records = sorted(folder.glob("record/*/events.jsonl"))
     log_path = folder / "episode.jsonl"
-    if not records or not log_path.exists() or not episode.get("safe"):
+    if not log_path.exists() or not episode.get("safe"):
         return None
-    events = _rows(records[0])
+    events = record_events(folder / "record")
     states = [(float(r["time_mono_s"]), str(r["state"])) for r in events if r.get("kind") == "state"]
     ends = [float(r["time_mono_s"]) for r in events if r.get("kind") == "outcome"]
     if not states or not ends:
@@ -50,7 +51,7 @@ def split_episode(episode: dict[str, Any], folder: Path, speed: float) -> dict[s
     sim_s: Counter[str] = Counter()
     for (t, state), t_next in zip(states, [t for t, _ in states[1:]] + ends[:1], strict=True):
         sim_s[state] += (t_next - t) * speed
-    log = _rows(log_path)
+    log = _log_rows(log_path)
     switched = next((r["t_s"] for r in log if r["event"] == "mode" and "LAND" in str(r["mode"])), None)
     if switched is None:
         return None
