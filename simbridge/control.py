@@ -32,12 +32,17 @@ class ControlLimits:
     max_speed_down_m_s: float = 1.5  # MPC_Z_VEL_MAX_DN
     max_tilt_rad: float = math.radians(35.0)  # MPC_TILTMAX_AIR
     max_accel_xy_m_s2: float = 3.0  # MPC_ACC_HOR
+    # ArduCopter's PSC_JERK_XY: its position controller shapes each target's path within it (None:
+    # PX4's offboard control, which flies its setpoints without a planned path)
+    max_jerk_xy_m_s3: float | None = None
     max_accel_z_m_s2: float = 3.0  # MPC_ACC_UP_MAX / MPC_ACC_DOWN_MAX
     max_yaw_rate_rad_s: float = math.radians(60.0)  # MPC_YAWRAUTO_MAX
 
     def __post_init__(self) -> None:
         for name in self.__dataclass_fields__:
             value = getattr(self, name)
+            if value is None and name == "max_jerk_xy_m_s3":
+                continue
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"ControlLimits.{name} must be a positive number, got {value!r}")
         if self.max_tilt_rad >= math.radians(89):
@@ -123,6 +128,7 @@ class MulticopterController:
         self._vel_int = [0.0, 0.0, 0.0]
         self._prev_vel: Vec3 | None = None
         self._vel_sp: list[float] | None = None
+        self._acc_ff = [0.0, 0.0]
         self._rate_int = [0.0, 0.0, 0.0]
         self._prev_rates: Vec3 | None = None
         self._yaw_hold: float | None = None
@@ -163,7 +169,16 @@ class MulticopterController:
             dn, de = dn * max_dh / dh, de * max_dh / dh
         dz = _clamp(vd - prev[2], -lim.max_accel_z_m_s2 * dt_s, lim.max_accel_z_m_s2 * dt_s)
         vel_sp = (prev[0] + dn, prev[1] + de, prev[2] + dz)
-        acc_ff = (dn / dt_s, de / dt_s, dz / dt_s)  # the shaped setpoint's own acceleration
+        # the shaped setpoint's own acceleration fed forward, across changing at most at the jerk
+        # limit: a step in the position target tilts the airframe over some tenths of a second, not
+        # in one physics step (a tilt step, at the attitude loop's rate limit, rocked the airframe)
+        fn, fe = dn / dt_s - self._acc_ff[0], de / dt_s - self._acc_ff[1]
+        if lim.max_jerk_xy_m_s3 is not None:
+            f, max_f = math.hypot(fn, fe), lim.max_jerk_xy_m_s3 * dt_s
+            if f > max_f:
+                fn, fe = fn * max_f / f, fe * max_f / f
+        self._acc_ff = [self._acc_ff[0] + fn, self._acc_ff[1] + fe]
+        acc_ff = (self._acc_ff[0], self._acc_ff[1], dz / dt_s)
         self._vel_sp = list(vel_sp)
 
         # --- velocity -> acceleration setpoint (PID, derivative on measurement)

@@ -199,3 +199,39 @@ def test_a_vehicle_flying_on_the_nominal_estimate_hovers_without_rocking() -> No
     assert max(rates) < 5.0, max(rates)
     bn, be, _bd = est.bias_ned_m
     assert math.hypot(bn, be) > 0.1  # there is a bias to fly on
+
+
+def _peak_turn_after_a_step(flavour: str, step_m: float) -> float:
+    """An emulated vehicle hovering 3 m up on the nominal estimate, its target moved ``step_m`` across:
+    the fastest it turns (deg/s, roll and pitch) in the 8 s after."""
+    v = Vehicle(GeoOrigin(), FlatTerrain())
+    v.reset((0.0, 0.0, -3.0), 0.0)
+    est = EstimateError(estimate_preset("nominal") or TRUTH, np.random.default_rng(1))
+    ap = Autopilot(flavour_named(flavour), v, (0.0, 0.0, 0.0), lambda *_: None, lambda *_: None, estimate=est)
+    ap.spawn_in_air(v.state)
+    target = (0.0, 0.0, -3.0)
+    ap.external_setpoint(Setpoint.hold(target), False)
+    assert ap.set_mode(ap.flavour.mode("GUIDED" if flavour == "ardupilot" else "OFFBOARD")).result == 0
+    rates = []
+    for k in range(120 * 16):
+        if k == 120 * 8:
+            target = (0.0, step_m, -3.0)
+        if k % 6 == 0:
+            ap.external_setpoint(Setpoint.hold(target), False)
+        v.step(ap.tick(v.state), ap.armed)
+        if k > 120 * 8:
+            rates.append(math.degrees(math.hypot(*v.state.rates_frd_rad_s[:2])))
+    return max(rates)
+
+
+def test_arducopter_shapes_a_step_in_its_target_within_its_jerk_limit() -> None:
+    """ArduCopter's position controller shapes the path to a new target (PSC_JERK_XY, 5 m/s3): a
+    landing target that moves 0.33 m near the ground tilts the airframe gently (37 deg/s at most,
+    2026-12-05; 121 deg/s when the setpoint's acceleration was fed forward at once, which set the
+    emulated land mode rocking at 120-230 deg/s under a companion's precision landing). PX4's
+    offboard control flies its setpoints without a planned path, and stays so."""
+    ardupilot = flavour_named("ardupilot")
+    defaults = {p.name: float(p.default) for p in ardupilot.params}
+    assert ardupilot.tunables(defaults).limits.max_jerk_xy_m_s3 == 5.0
+    assert _peak_turn_after_a_step("ardupilot", 0.33) < 60.0
+    assert _peak_turn_after_a_step("px4", 0.33) > 90.0
