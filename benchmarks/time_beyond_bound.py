@@ -26,6 +26,7 @@ from typing import Any
 
 from landfall_eval.episode_grade import record_events
 from landfall_eval.grading import trapezoid_time_s
+from landfall_eval.processes import JsonlTail
 from simbridge.control import ControlLimits
 
 LOOK_STATES = ("acquire", "surface_id", "rank", "confirm")
@@ -33,9 +34,12 @@ PARTS = ("excess_s", "looks_s", "final_approach_s", "rest_s")
 
 
 def _log_rows(path: Path) -> list[dict[str, Any]]:
-    """simbridge's episode log, a JSON object a line."""
-    with path.open(encoding="utf-8") as fh:
-        return [json.loads(line) for line in fh if line.strip()]
+    """simbridge's episode log, read as the harness reads it."""
+    tail = JsonlTail(path)
+    try:
+        return tail.lines()
+    finally:
+        tail.close()
 
 
 def split_episode(episode: dict[str, Any], folder: Path, speed: float) -> dict[str, Any] | None:
