@@ -37,6 +37,7 @@ class FakeController:
         self.precision: PrecisionLanding | None = None
         self.fence: Fence | None = None
         self.released = 0
+        self.landing_targets: list[tuple[tuple[float, float, float], int]] = []  # body FRD, time_usec
 
     async def goto(
         self, n: float, e: float, d: float, *, tolerance_m: float, speed_m_s: float, timeout_s: float
@@ -58,6 +59,9 @@ class FakeController:
 
     def check_interruption(self) -> None:
         return None
+
+    def send_landing_target(self, target_frd_m: tuple[float, float, float], time_usec: int) -> None:
+        self.landing_targets.append((target_frd_m, time_usec))
 
     async def land(self, timeout_s: float, mode: Mode = Mode.LAND) -> None:
         self.lands.append(mode)

@@ -66,6 +66,36 @@ def test_ardupilot_land_waits_over_a_target_farther_than_plnd_xy_dist_max() -> N
     assert math.dist(v.state.pos_ned_m[:2], (4.0, 0.0)) < 0.2
 
 
+def test_ardupilot_places_a_late_line_of_sight_with_the_pose_at_its_stamp() -> None:
+    """A line of sight drawn from the pose at one moment and heard 0.3 s later, while the vehicle
+    flies toward a target 3 m off: placed with the pose at its stamp it lands on the target; placed with
+    the pose when heard, it would be off by the way flown since (as ArduCopter's would with a
+    ``PLND_LAG`` short of the link's latency)."""
+    target = (3.0, 1.0)
+    ap, v, _ = _rig()
+    _land_with_target(ap, v, target, 1.5)  # flying across toward it, tilted
+    s = v.state
+    stamp = s.t_s
+    est = ap.estimated_state
+    rel = (target[0] - est.pos_ned_m[0], target[1] - est.pos_ned_m[1], -est.pos_ned_m[2])
+    w, x, y, z = est.quat
+    frd = rotate_body_to_ned((w, -x, -y, -z), rel)
+    for _ in range(round(0.3 * STEPS_S)):
+        v.step(ap.tick(v.state), ap.armed)
+    moved = math.dist(v.state.pos_ned_m[:2], s.pos_ned_m[:2])
+    assert moved > 0.15  # it flew on: a target placed from the pose now would be that far off
+    ap.landing_target(frd, math.dist((0, 0, 0), rel), stamp)
+    placed = ap._precision_target(v.state)
+    assert placed is not None
+    assert math.dist(placed, target) < 0.03
+    ap.landing_target(frd, math.dist((0, 0, 0), rel))  # unstamped: the pose now
+    unstamped = ap._precision_target(v.state)
+    assert unstamped is not None
+    assert math.dist(unstamped, target) > 0.1
+    ap.landing_target(frd, math.dist((0, 0, 0), rel), stamp - 5.0)  # older than the history: now
+    assert ap._precision_target(v.state) == pytest.approx(unstamped)
+
+
 def test_ardupilot_land_ignores_the_target_with_precision_landing_off() -> None:
     ap, v, _ = _rig()
     ap.set_param("PLND_ENABLED", 0)
@@ -195,10 +225,12 @@ def _server(ap: Autopilot) -> AutopilotServer:
     return AutopilotServer(ap, Telemetry(ap, GeoOrigin()), _Sent())
 
 
-def _landing_target(frame: int, position_valid: int, xyz: tuple[float, float, float]) -> Any:
+def _landing_target(
+    frame: int, position_valid: int, xyz: tuple[float, float, float], time_usec: int = 0
+) -> Any:
     mav = mavlink2.MAVLink(None)
     msg = mav.landing_target_encode(
-        0, 0, frame, 0.1, -0.2, 5.0, 0.0, 0.0, *xyz, [1.0, 0.0, 0.0, 0.0], 0, position_valid
+        time_usec, 0, frame, 0.1, -0.2, 5.0, 0.0, 0.0, *xyz, [1.0, 0.0, 0.0, 0.0], 0, position_valid
     )
     return mavlink2.MAVLink(None).decode(bytearray(msg.pack(mav)))
 
@@ -211,9 +243,12 @@ def test_server_reads_body_frd_positions_and_refuses_other_frames() -> None:
     assert ap._plnd_seen is None
     server.handle(_landing_target(mavlink2.MAV_FRAME_BODY_FRD, 1, (3.0, 4.0, 12.0)), None)
     assert ap._plnd_seen is not None
-    _t, unit, distance = ap._plnd_seen
+    _t, unit, distance, stamp = ap._plnd_seen
     assert unit == pytest.approx((3 / 13, 4 / 13, 12 / 13))
     assert distance == 5.0  # the message's own distance field
+    assert stamp is None  # time_usec 0: no stamp, the pose when heard
+    server.handle(_landing_target(mavlink2.MAV_FRAME_BODY_FRD, 1, (3.0, 4.0, 12.0), 12_345_000), None)
+    assert ap._plnd_seen[3] == pytest.approx(12.345)  # the boot clock's seconds
 
 
 def test_server_reads_angles_as_arducopter_does() -> None:
@@ -221,7 +256,7 @@ def test_server_reads_angles_as_arducopter_does() -> None:
     ap, _v, _ = _rig()
     _server(ap).handle(_landing_target(mavlink2.MAV_FRAME_BODY_FRD, 0, (0.0, 0.0, 0.0)), None)
     assert ap._plnd_seen is not None
-    _t, unit, _d = ap._plnd_seen
+    _t, unit, _d, _stamp = ap._plnd_seen
     los = (-math.tan(-0.2), math.tan(0.1), 1.0)
     norm = math.sqrt(sum(c * c for c in los))
     assert unit == pytest.approx(tuple(c / norm for c in los))

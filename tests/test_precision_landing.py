@@ -150,8 +150,10 @@ def test_precision_landing_on_emulated_arducopter_with_estimator_errors(tmp_path
     """scenario1's gravel roof, the emulated ArduCopter flying on an estimate with an EKF's errors
     (``--ekf-error nominal``: without the camera, 1.6 m from what the chosen pixel shows): the site is
     found again before the descent steps, LANDING_TARGET goes to land mode while it is found, and the
-    touchdown is near what the chosen pixel shows (0.08-0.64 m in seven flights, 2026-12-02)."""
-    e, out, why = _fly_scenario1(tmp_path, "--ekf-error", "nominal")
+    touchdown is near what the chosen pixel shows (docs/development.md: the flights measured)."""
+    # at 4x: the companion's looks are paced in wall time, and at 8x on a loaded machine the estimate's
+    # drift between two of them (0.5-0.9 m in 8 s) outran the search 3.5 m over the roof
+    e, out, why = _fly_scenario1(tmp_path, "--ekf-error", "nominal", speed=4.0)
     assert e["outcome"] == "landed", why
     assert e["surface"] == "rooftop_clear", why
     pl = e["precision_landing"]

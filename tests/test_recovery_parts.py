@@ -17,6 +17,7 @@ import pytest
 import companion.recovery
 from companion.alarms import Criticality
 from companion.flavour import Mode
+from companion.precision import PrecisionLanding
 from companion.reasoning.onboard import OnboardReasoner
 from companion.recovery import Outcome, Recovery, RecoveryParams, State
 from companion.recovery import landing as landing_module
@@ -155,6 +156,71 @@ def test_follower_does_not_look_in_a_frame_taken_while_the_vehicle_turned_fast()
     asyncio.run(follower.follow(frame(image=texture, time_boot_ms=13_500), (4.0, 3.0, 0.0)))
     looked = _record(ctx).of("site_track")[-1]
     assert "turning" not in looked["reason"]
+
+
+def test_follower_draws_each_landing_target_with_the_attitude_at_the_time_it_stamps() -> None:
+    """ArduPilot's LANDING_TARGET: where the site is from the newest position, in the body axes of the
+    estimate's attitude at that position's time (not the newest attitude, heard later and turned since),
+    stamped with that time on the autopilot's boot clock: the autopilot turns it with its pose then."""
+    ctx = context(pos_ned_m=(1.0, 2.0, -10.0))
+    tm = ctx.tm
+    tm.state.t_boot_s = 20.0
+    for t in (19.9, 20.0):
+        tm.poses.add_position(t, (1.0, 2.0, -10.0), (0.0, 0.0, 0.0))
+    level = (1.0, 0.0, 0.0, 0.0)
+    yawed = (math.cos(math.pi / 4), 0.0, 0.0, math.sin(math.pi / 4))  # 90 degrees right
+    tm.poses.add_attitude(19.9, level)
+    tm.poses.add_attitude(20.0, level)
+    tm.poses.add_attitude(20.05, yawed)
+    tm.state.quat_wxyz = yawed  # the newest attitude heard
+    follower = SiteFollower(ctx)
+    stats: dict[str, Any] = {"seen": (19.5, np.array([4.0, 6.0, 0.0])), "sent": 0}
+
+    async def feed() -> None:
+        with pytest.raises(TimeoutError):
+            await asyncio.wait_for(follower._send_landing_targets(stats, local_ned=False), 0.2)
+
+    asyncio.run(feed())
+    ((frd, stamp),) = _ctl(ctx).landing_targets  # once: the clock did not move on
+    assert frd == pytest.approx((3.0, 4.0, 10.0))  # level: body axes are north, east, down
+    assert stamp == 20_000_000
+    assert stats["sent"] == 1
+
+
+def test_follower_lands_toward_the_last_confirmations_find_before_its_own_looks_find_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Just before the land mode the last confirmation found the site 0.8 m north of the vehicle; the
+    land mode's own looks find nothing (here: frames without an image, as from too close they see too
+    little): LANDING_TARGET goes out toward that find all the same, while it is fresh."""
+    ctx = context(frame(image=None, time_boot_ms=20_100), pos_ned_m=(0.0, 0.0, -3.4))
+    tm = ctx.tm
+    tm.state.t_boot_s = 20.1
+    for t in (20.0, 20.1):
+        tm.poses.add_position(t, (0.0, 0.0, -3.4), (0.0, 0.0, 0.0))
+        tm.poses.add_attitude(t, (1.0, 0.0, 0.0, 0.0))
+    follower = SiteFollower(ctx)
+    follower.follow_from(frame(image=np.zeros((48, 64, 3), np.uint8), time_boot_ms=10_000), (0.0, 0.0, 0.0))
+    assert follower._site_seen is not None
+    follower._site_seen.append((20.0, 0.8, 0.0))  # the confirmation's find, as its look keeps it
+    ctl = _ctl(ctx)
+    landed = ctl.land
+
+    async def slow_land(timeout_s: float, mode: Mode = Mode.LAND) -> None:
+        await asyncio.sleep(0.3)  # the land mode's descent, while the targets go out
+        await landed(timeout_s, mode)
+
+    monkeypatch.setattr(ctl, "land", slow_land)
+    asyncio.run(follower.land_on_site(PrecisionLanding(True, "PLND_ENABLED 1, PLND_TYPE 1")))
+    assert ctl.landing_targets, "no landing target went out"
+    frd, stamp = ctl.landing_targets[0]
+    assert frd == pytest.approx((0.8, 0.0, 3.4))
+    assert stamp == 20_100_000
+    (event,) = _record(ctx).of("precision_landing")
+    assert event["used"]
+    assert event["targets_sent"] >= 1
+    assert event["looks_found"] == 0
+    assert event["last_site_ned_m"] == [0.8, 0.0, 0.0]
 
 
 def test_follower_forgotten_lands_on_the_absolute_target_in_land_mode() -> None:

@@ -10,8 +10,10 @@ import pytest
 
 from companion.guidance.frames import PinholeCamera
 from companion.perception.site_track import SiteView, TrackParams, centre_down, track_site
+from companion.recovery.following import FollowState, look_for_site
 from simbridge.geo import euler_to_quat
 from simbridge.world.live import LiveWorld
+from tests.recovery_fakes import frame
 from tests.views import world
 
 LAUNCH = (0.0, 0.0, -110.0)
@@ -207,6 +209,49 @@ def test_track_site_out_of_view_and_too_close(scenario1: LiveWorld) -> None:
     close = _view(scenario1, (truth[0], truth[1], truth[2] - 1.2), q)
     assert track_site(ref, truth, close).reason == "too close to the surface to see around the site"
     assert track_site(close, truth, ref).reason == "the reference frame saw too little around the site"
+
+
+def test_a_reference_too_coarse_for_a_close_view_is_not_matched(scenario1: LiveWorld) -> None:
+    """From 3.5 m over the gravel roof the camera holds about a metre around the site: the frame it was
+    chosen in, 88 m up (0.18 m a pixel there), gives a patch of a few cells in that, which is refused;
+    a frame from 17.5 m (fine enough cells) is matched."""
+    truth = np.array([5.13, -27.5, -22.0])  # where curated scenario1's chosen pixel lies
+    q = euler_to_quat(0.0, 0.0, YAW)
+    close = _view(scenario1, (truth[0] + 0.3, truth[1] - 0.2, truth[2] - 3.5), q, seed=3)
+    chosen = _view(scenario1, LAUNCH, q)
+    coarse = track_site(chosen, truth, close)
+    assert coarse.reason == "the reference is too coarse for a view this close"
+    assert not coarse.found
+    assert 0.15 < coarse.cell_m < 0.2
+    tried = track_site(chosen, truth, close, TrackParams(min_patch_cells=0))  # matched without the rule
+    assert tried.reason != coarse.reason
+    assert math.isfinite(tried.score)
+    nearer = _view(scenario1, (truth[0] - 0.5, truth[1] + 0.4, truth[2] - 17.5), q, seed=5)
+    found = track_site(nearer, truth, close)
+    assert found.found, found.reason
+    assert math.dist(found.site_ned_m[:2], truth[:2]) < 0.15
+
+
+def test_a_look_is_centred_where_the_site_was_last_found(scenario1: LiveWorld) -> None:
+    """The site's reference frame is from 17.6 m; since, the estimate has moved 0.75 m north and a look
+    from 13 m that did not become the reference found it there. From 3.4 m the search reaches about
+    0.8 m: centred on the reference's site it does not reach the site; centred where the site was last
+    found it finds it there."""
+    truth = np.array([5.13, -27.5, -22.0])
+    q = euler_to_quat(0.0, 0.0, YAW)
+    ref = _view(scenario1, (truth[0] - 0.5, truth[1] + 0.4, truth[2] - 17.6), q)
+    bias = (0.75, 0.0, 0.0)
+    close = _view(scenario1, (truth[0] + 0.05, truth[1] - 0.05, truth[2] - 3.4), q, bias, seed=3)
+    now = frame(image=close.image, pos_ned_m=close.pos_ned_m, quat_wxyz=q, camera=close.camera)
+    site = (float(truth[0]), float(truth[1]), float(truth[2]))
+    old = look_for_site(now, FollowState((ref, site), None, ()), TrackParams())
+    assert old is not None
+    assert not old.result.found, old.result  # the search does not reach where the site is now
+    last = (10.0, truth[0] + bias[0], truth[1] + bias[1])  # (t_boot_s, north, east)
+    look = look_for_site(now, FollowState((ref, site), None, (last,)), TrackParams())
+    assert look is not None
+    assert look.result.found, look.result.reason
+    assert math.dist(look.result.site_ned_m[:2], last[1:]) < 0.15
 
 
 def test_track_site_without_texture_says_so() -> None:

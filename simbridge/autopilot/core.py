@@ -14,6 +14,8 @@ project avoids); the flavours' tables (:mod:`simbridge.autopilot.flavours`) and 
 
 from __future__ import annotations
 
+import bisect
+import collections
 import dataclasses
 import math
 from collections.abc import Callable
@@ -58,6 +60,9 @@ TextSink = Callable[[int, str], None]
 # both 1 s (real ArduCopter SITL on simbridge's F450 said ON_GROUND 1.5 s after the gear touched:
 # tests/test_firmware_parity.py)
 _LANDED_CONFIRM_S = 1.0
+# a LANDING_TARGET's line of sight is placed with the estimated pose at its time stamp, looked up this
+# far back (ArduCopter's AC_PrecLand keeps an inertial history for PLND_LAG, at most 0.25 s)
+_PLND_POSE_HISTORY_S = 1.0
 _TAKEOFF_REACHED_M = 0.3
 
 
@@ -132,7 +137,12 @@ class Autopilot:
         self._fence_breached = False  # latched for the flight: one breach, one action
         # precision landing: the last LANDING_TARGET (when, the line of sight in body FRD, its
         # distance) and the target's world position estimated from it (held through the landing)
-        self._plnd_seen: tuple[float, Vec3, float] | None = None
+        self._plnd_seen: tuple[float, Vec3, float, float | None] | None = None
+        # the estimated pose of the last _PLND_POSE_HISTORY_S (when, position, attitude): the history
+        # each line of sight is placed from
+        self._pose_history: collections.deque[tuple[float, Vec3, tuple[float, float, float, float]]] = (
+            collections.deque()
+        )
         self._plnd_target_ne: tuple[float, float] | None = None
         self._plnd_wait_d: float | None = None  # the height held while the target is too far across
         # PX4's AUTO.PRECLAND: the newest LANDING_TARGET in the local frame (when, where), and the mode's run
@@ -352,6 +362,7 @@ class Autopilot:
         self._t_s = s.t_s
         if self.estimate is not None:
             self.estimate.step(s)
+        self._remember_pose(s.t_s)
         self._update_land_detector(s)
         self._watch_estimator(s)
         if not self.armed:
@@ -448,20 +459,49 @@ class Autopilot:
         return self._hold
 
     # ------------------------------------------------------------------ precision landing
-    def landing_target(self, los_frd: Vec3, distance_m: float) -> None:
-        """A LANDING_TARGET: the line of sight to the target in body FRD (any length) and its
-        distance (0: unknown, the height above the ground scales it)."""
+    def landing_target(self, los_frd: Vec3, distance_m: float, stamp_s: float | None = None) -> None:
+        """A LANDING_TARGET: the line of sight to the target in body FRD (any length), its distance
+        (0: unknown, the height above the ground scales it) and when it was true on the boot clock
+        (``time_usec``; None: now)."""
         norm = math.sqrt(sum(v * v for v in los_frd))
         if not (math.isfinite(norm) and norm > 0 and math.isfinite(distance_m)):
             return
         unit = (los_frd[0] / norm, los_frd[1] / norm, los_frd[2] / norm)
-        self._plnd_seen = (self.vehicle.state.t_s, unit, max(0.0, distance_m))
+        self._plnd_seen = (self.vehicle.state.t_s, unit, max(0.0, distance_m), stamp_s)
+
+    def _remember_pose(self, t_s: float) -> None:
+        """The estimated pose this step, kept ``_PLND_POSE_HISTORY_S`` (:meth:`_pose_at`)."""
+        est = self.estimated_state
+        h = self._pose_history
+        if h and t_s <= h[-1][0]:  # a reset clock (a new episode) or the same step twice
+            h.clear()
+        h.append((t_s, est.pos_ned_m, est.quat))
+        while len(h) > 1 and h[0][0] < t_s - _PLND_POSE_HISTORY_S:
+            h.popleft()
+
+    def _pose_at(self, stamp_s: float | None) -> tuple[Vec3, tuple[float, float, float, float]]:
+        """The estimated pose at ``stamp_s``: the newest of the history at or before it (telemetry
+        reports the estimate made at one step with the clock of the next, in whole milliseconds, and a
+        step is 1/600 s: this is the estimate that telemetry carried). Unstamped, or older than the
+        history: the pose now.
+
+        ArduCopter's precision landing takes the pose ``PLND_LAG`` back (its inertial history), a lag
+        set once to the link's latency; here it is what each line of sight's stamp says: a simulation
+        run faster than real time delivers a message late by a varying number of simulated milliseconds
+        (the machine's load, times the speed), where a real link's latency is steady."""
+        h = self._pose_history
+        if stamp_s is None or not h or stamp_s < h[0][0]:
+            est = self.estimated_state
+            return est.pos_ned_m, est.quat
+        i = bisect.bisect_right(h, stamp_s, key=lambda e: e[0]) - 1
+        _t, pos, quat = h[i]
+        return pos, quat
 
     def _precision_target(self, s: VehicleState) -> tuple[float, float] | None:
         """Where land mode goes (world north, east) on the companion's target: each fresh line of sight
-        between PLND_ALT_MIN and PLND_ALT_MAX places the target from the estimated pose (as the
-        firmware does: an attitude or position error moves the target with it); the last place holds
-        for the rest of the landing. None: no target (land where the vehicle is)."""
+        between PLND_ALT_MIN and PLND_ALT_MAX places the target from the estimated pose at its stamp
+        (as the firmware does: an attitude or position error moves the target with it); the last place
+        holds for the rest of the landing. None: no target (land where the vehicle is)."""
         tune = self.flavour.precision_landing(self.params)
         if tune is None:
             self._plnd_target_ne = None
@@ -469,14 +509,14 @@ class Autopilot:
         seen = self._plnd_seen
         agl = s.height_agl_m
         if seen is not None and s.t_s - seen[0] <= tune.timeout_s and tune.alt_min_m <= agl <= tune.alt_max_m:
-            _t, unit, distance = seen
+            _t, unit, distance, stamp_s = seen
             if unit[2] > 0.05:
-                est = self.estimated_state
+                pos, quat = self._pose_at(stamp_s)
                 rng = distance if distance > 0 else agl / unit[2]
-                dn, de, _dd = rotate_body_to_ned(est.quat, (unit[0] * rng, unit[1] * rng, unit[2] * rng))
+                dn, de, _dd = rotate_body_to_ned(quat, (unit[0] * rng, unit[1] * rng, unit[2] * rng))
                 bn, be = self.estimate.bias_ned_m[:2] if self.estimate is not None else (0.0, 0.0)
                 # estimated target -> world: the estimator's bias is where the vehicle flies it
-                self._plnd_target_ne = (est.pos_ned_m[0] + dn - bn, est.pos_ned_m[1] + de - be)
+                self._plnd_target_ne = (pos[0] + dn - bn, pos[1] + de - be)
             self._plnd_seen = None  # each line of sight places the target once
         return self._plnd_target_ne
 

@@ -316,7 +316,8 @@ class AutopilotServer:
             los = (float(msg.x), float(msg.y), float(msg.z))
         else:
             los = (-math.tan(float(msg.angle_y)), math.tan(float(msg.angle_x)), 1.0)
-        self.ap.landing_target(los, float(msg.distance))
+        stamp_us = int(msg.time_usec)  # on the boot clock, as the companion stamps it; 0: none
+        self.ap.landing_target(los, float(msg.distance), stamp_us / 1e6 if stamp_us > 0 else None)
 
     # ------------------------------------------------------------------ liveness
     def _on_ping(self, msg: Any) -> None:
