@@ -17,7 +17,6 @@ import pytest
 import companion.recovery
 from companion.alarms import Criticality
 from companion.flavour import Mode
-from companion.precision import PrecisionLanding
 from companion.reasoning.onboard import OnboardReasoner
 from companion.recovery import Outcome, Recovery, RecoveryParams, State
 from companion.recovery import landing as landing_module
@@ -185,42 +184,6 @@ def test_follower_draws_each_landing_target_with_the_attitude_at_the_time_it_sta
     assert frd == pytest.approx((3.0, 4.0, 10.0))  # level: body axes are north, east, down
     assert stamp == 20_000_000
     assert stats["sent"] == 1
-
-
-def test_follower_lands_toward_the_last_confirmations_find_before_its_own_looks_find_it(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
-    """Just before the land mode the last confirmation found the site 0.8 m north of the vehicle; the
-    land mode's own looks find nothing (here: frames without an image, as from too close they see too
-    little): LANDING_TARGET goes out toward that find all the same, while it is fresh."""
-    ctx = context(frame(image=None, time_boot_ms=20_100), pos_ned_m=(0.0, 0.0, -3.4))
-    tm = ctx.tm
-    tm.state.t_boot_s = 20.1
-    for t in (20.0, 20.1):
-        tm.poses.add_position(t, (0.0, 0.0, -3.4), (0.0, 0.0, 0.0))
-        tm.poses.add_attitude(t, (1.0, 0.0, 0.0, 0.0))
-    follower = SiteFollower(ctx)
-    follower.follow_from(frame(image=np.zeros((48, 64, 3), np.uint8), time_boot_ms=10_000), (0.0, 0.0, 0.0))
-    assert follower._site_seen is not None
-    follower._site_seen.append((20.0, 0.8, 0.0))  # the confirmation's find, as its look keeps it
-    ctl = _ctl(ctx)
-    landed = ctl.land
-
-    async def slow_land(timeout_s: float, mode: Mode = Mode.LAND) -> None:
-        await asyncio.sleep(0.3)  # the land mode's descent, while the targets go out
-        await landed(timeout_s, mode)
-
-    monkeypatch.setattr(ctl, "land", slow_land)
-    asyncio.run(follower.land_on_site(PrecisionLanding(True, "PLND_ENABLED 1, PLND_TYPE 1")))
-    assert ctl.landing_targets, "no landing target went out"
-    frd, stamp = ctl.landing_targets[0]
-    assert frd == pytest.approx((0.8, 0.0, 3.4))
-    assert stamp == 20_100_000
-    (event,) = _record(ctx).of("precision_landing")
-    assert event["used"]
-    assert event["targets_sent"] >= 1
-    assert event["looks_found"] == 0
-    assert event["last_site_ned_m"] == [0.8, 0.0, 0.0]
 
 
 def test_follower_forgotten_lands_on_the_absolute_target_in_land_mode() -> None:

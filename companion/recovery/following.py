@@ -538,17 +538,6 @@ class SiteFollower:
             stats["sent"] += 1
             stats["last_site_ned_m"] = [round(float(v), 3) for v in site]
 
-    def _newest_find(self) -> tuple[float, np.ndarray] | None:
-        """Where the newest look found the site (its frame's time, the site in the estimate), the
-        landing's first targets: the last confirmation's find goes out while the land mode's own looks
-        begin, and those from its height may not see enough around the site to find it (a vehicle whose
-        estimate drifted 0.4 m while it hovered to confirm, found 0.8 m off the site at 3.4 m, then too
-        close in every look after: it landed 0.83 m off)."""
-        if not self._site_seen or self.track is None:
-            return None
-        t, n, e = self._site_seen[-1]
-        return (t, np.array([n, e, self.track[1][2]]))
-
     async def land_on_site(self, setup: PrecisionLanding | None) -> None:
         """The autopilot's land mode; with its precision landing fed from the camera when it is set up
         for one and the site is in view; recorded as ``precision_landing``."""
@@ -564,7 +553,7 @@ class SiteFollower:
             "looks_found": 0,
             "lost": [],
             "last_site_ned_m": None,
-            "seen": self._newest_find(),
+            "seen": None,
         }
         feed = None
         if ready and setup is not None:
