@@ -30,7 +30,9 @@ learnt from its place; the regression is fitted once per fold on the other folds
 whole read is held out in the same way. The threshold for the mean is the one with the most
 confirmations right pooled over the folds among those with at most ``--max-false-accept`` false accepts
 (:func:`landfall_train.fold_figures.choose_threshold`); the report (``--report``) gives the pooled
-figures and those per place and per set, as the folds' own report does.
+figures and those per place and per set, as the folds' own report does. Those pooled figures choose the
+threshold on the photographs they score; the report's ``nested`` entry (:func:`nested`) holds the
+threshold out as well: each fold judged at the threshold chosen on the other folds alone.
 """
 
 from __future__ import annotations
@@ -194,6 +196,44 @@ def fold_report(
     }  # fmt: skip
 
 
+def nested(
+    photos: Sequence[Photo],
+    folds: dict[str, Any],
+    x: np.ndarray,
+    whole: np.ndarray,
+    max_false_accept: float,
+    c: float = C,
+    extra: tuple[np.ndarray, np.ndarray] | None = None,
+    weight: float = WEIGHT,
+) -> dict[str, Any]:
+    """The folds' figures with the threshold held out too: each fold judged (on ``whole``, its
+    :func:`held_out` reads) at the threshold chosen on the other folds' photographs alone, whose whole
+    reads are fitted once more without the judged fold; summed over the folds, with each fold's
+    threshold. The pooled figures choose the threshold on the photographs they score; these do not.
+    (Each photograph's net reading still comes from the fold model that learnt from every other fold.)"""
+    seen = folds["photos"]
+    t_fold = float(folds["folds"][0]["threshold"])
+    fold_places = [f["places"] for f in folds["folds"]]
+    total: dict[str, Any] = {}
+    thresholds = []
+    for k, names in enumerate(fold_places):
+        judged = np.array([place(p) in names for p in photos])
+        others = [p for p, j in zip(photos, judged, strict=True) if not j]
+        inner = held_out(others, x[~judged], [f for i, f in enumerate(fold_places) if i != k], c, extra)
+        mix = {
+            str(p.path): mixed(seen[str(p.path)]["clear_p"], float(w), weight)
+            for p, w in zip(others, inner, strict=True)
+        }
+        t = choose_threshold(others, seen, t_fold, max_false_accept, mix)
+        mine = [p for p, j in zip(photos, judged, strict=True) if j]
+        mix_k = {str(p.path): mixed(seen[str(p.path)]["clear_p"], float(w), weight)
+                 for p, w in zip(mine, whole[judged], strict=True)}  # fmt: skip
+        f = figures(mine, seen, t, t_fold, mix_k)
+        total = {key: total.get(key, 0) + f[key] for key in f}
+        thresholds.append(t)
+    return total | {"thresholds": thresholds}
+
+
 def export(w: np.ndarray, b: float, out: Path, threads: int = 1) -> tuple[Path, float]:
     """``out`` (an ONNX file): the ImageNet backbone, the mean over the image and the regression; the
     largest difference between ONNX Runtime, OpenCV's DNN module and torch on random inputs.
@@ -264,6 +304,8 @@ def attach(model: Path, whole: Path, entry: dict[str, Any], threshold: float, so
 def _table(report: dict[str, Any]) -> str:
     rows = [*report["per_set"].items(), *report["per_place"].items(), ("pooled", report["pooled"]),
             ("net alone", report["net_alone"])]  # fmt: skip
+    if "nested" in report:
+        rows.append(("threshold held out too (nested)", report["nested"]))
     lines = [f"{'':>48} {'confirm':>9} {'rank':>13} {'false acc.':>10} {'false ref.':>10}"]
     for name, f in rows:
         lines.append(
@@ -311,6 +353,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     extra = closeup_features(args.closeups, args.threads)
     whole = held_out(photos, x, fold_places, args.c, extra)
     report = fold_report(photos, folds, whole, args.max_false_accept, args.weight)
+    report["nested"] = nested(photos, folds, x, whole, args.max_false_accept, args.c, extra, args.weight)
     report |= {"command": command, "folds": str(args.folds), "c": args.c, "side_px": SIDE_PX,
                "closeups": args.closeups,
                "views": VIEWS, "commit": _commit(), "seconds": round(time.monotonic() - t0, 1)}  # fmt: skip

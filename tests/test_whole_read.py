@@ -252,3 +252,35 @@ def test_roof_close_ups_join_every_fold_fit_and_are_never_scored() -> None:
     assert alone.shape == both.shape == (12,)
     assert not np.isnan(both).any()
     assert not np.allclose(alone, both)
+
+
+def test_the_nested_figures_choose_each_folds_threshold_without_it() -> None:
+    """whole_read's ``nested`` entry: a fold's threshold is chosen on the other folds' photographs, their
+    whole reads fitted without it, so its own labels never move it; every labelled photograph is judged
+    once."""
+    from landfall_train.whole_read import nested
+
+    photos, x = _photos()
+    names = [["Kampala"], ["Banepa"], ["Zanzibar"]]
+
+    def report(ps: list[Photo]) -> dict[str, Any]:
+        whole = held_out(ps, x, names)
+        seen = {
+            str(p.path): {"confirmed": True, "clear_p": 0.9 if p.land else 0.3 + 0.02 * k,
+                          "rank_score": 1.0 if p.land else 0.0}
+            for k, p in enumerate(ps)
+        }  # fmt: skip
+        folds = {"photos": seen, "chosen_threshold": 0.9,
+                 "folds": [{"places": n, "threshold": 0.5} for n in names]}  # fmt: skip
+        return nested(ps, folds, x, whole, max_false_accept=0.05)
+
+    before = report(photos)
+    assert before["confirm_cases"] == len(photos)
+    assert len(before["thresholds"]) == 3
+    flipped = [
+        Photo(p.path, p.label, (not p.land) if p.source == "Kampala" else p.land, p.source, p.licence)
+        for p in photos
+    ]
+    after = report(flipped)
+    assert after["thresholds"][0] == before["thresholds"][0]  # Kampala's labels never chose its threshold
+    assert after["thresholds"][1:] != before["thresholds"][1:]  # they did choose the others'
