@@ -158,6 +158,16 @@ def held_out(
     return out
 
 
+def mixes(
+    photos: Sequence[Photo], seen: dict[str, dict[str, Any]], whole: np.ndarray, weight: float = WEIGHT
+) -> dict[str, float]:
+    """Each photograph's confirmation probability: its fold reading's (``seen``) mixed with ``whole``."""
+    return {
+        str(p.path): mixed(seen[str(p.path)]["clear_p"], float(w), weight)
+        for p, w in zip(photos, whole, strict=True)
+    }
+
+
 def fold_report(
     photos: Sequence[Photo],
     folds: dict[str, Any],
@@ -169,10 +179,7 @@ def fold_report(
     own, per place and per set, and each photograph's three probabilities."""
     seen = folds["photos"]
     t_fold = float(folds["folds"][0]["threshold"])
-    mix = {
-        str(p.path): mixed(seen[str(p.path)]["clear_p"], float(w), weight)
-        for p, w in zip(photos, whole, strict=True)
-    }
+    mix = mixes(photos, seen, whole, weight)
     chosen = choose_threshold(photos, seen, t_fold, max_false_accept, mix)
     groups = [[p for p in photos if place(p) in f["places"]] for f in folds["folds"]]
     sets = sorted({str(p.path.parent.parent) for p in photos})
@@ -220,15 +227,9 @@ def nested(
         judged = np.array([place(p) in names for p in photos])
         others = [p for p, j in zip(photos, judged, strict=True) if not j]
         inner = held_out(others, x[~judged], [f for i, f in enumerate(fold_places) if i != k], c, extra)
-        mix = {
-            str(p.path): mixed(seen[str(p.path)]["clear_p"], float(w), weight)
-            for p, w in zip(others, inner, strict=True)
-        }
-        t = choose_threshold(others, seen, t_fold, max_false_accept, mix)
+        t = choose_threshold(others, seen, t_fold, max_false_accept, mixes(others, seen, inner, weight))
         mine = [p for p, j in zip(photos, judged, strict=True) if j]
-        mix_k = {str(p.path): mixed(seen[str(p.path)]["clear_p"], float(w), weight)
-                 for p, w in zip(mine, whole[judged], strict=True)}  # fmt: skip
-        f = figures(mine, seen, t, t_fold, mix_k)
+        f = figures(mine, seen, t, t_fold, mixes(mine, seen, whole[judged], weight))
         total = {key: total.get(key, 0) + f[key] for key in f}
         thresholds.append(t)
     return total | {"thresholds": thresholds}
