@@ -40,6 +40,7 @@ from landfall_eval.episode import EpisodeSpec, EpisodeTimes
 from landfall_eval.episode_grade import describe_last_state
 from landfall_eval.grading import summarise
 from landfall_eval.launches import halton_launches
+from landfall_eval.usage import RunUsage, campaign_usage
 from simbridge.args import non_negative_seed
 from simbridge.world.places import DEFAULT_PLACE, PLACES
 from simbridge.world.scenario_file import builtin_scenario_names
@@ -404,6 +405,7 @@ def run_episodes(
         cpus_per_episode=args.cpus_per_episode, ahead=args.launch_ahead,
     )  # fmt: skip
     errors = 0
+    usage, run, flown = RunUsage(local=args.executor == "local"), results["config"], 0
     bar = tqdm(
         total=len(todo), unit="episode", disable=args.quiet or not todo, file=sys.stderr, dynamic_ncols=True
     )
@@ -411,6 +413,9 @@ def run_episodes(
         for entry in executor.run(jobs):
             results["episodes"].append(entry)
             results["episodes"].sort(key=lambda e: str(e["id"]))
+            flown += 1
+            run["usage"] = usage.entry(flown)
+            results["usage"] = campaign_usage(results["runs"])
             save_results(out, results)
             errors += entry.get("outcome") == "error"
             eps = results["episodes"]
@@ -542,6 +547,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"median kinematic ratio {s['median_kinematic_ratio']}",
             file=sys.stderr,
         )
+    if (u := results.get("usage")) and u["episodes_per_core_hour"]:
+        print(f"{u['episodes_per_core_hour']} episodes per core-hour ({u['episodes']} episodes, "
+              f"{u['core_hours']} core-hours, {u['runs']} run(s))", file=sys.stderr)  # fmt: skip
     print(f"results: {out / RESULTS} ({time.monotonic() - t0:.0f} s)", file=sys.stderr)
     try:
         from landfall_eval.report import write_report

@@ -292,6 +292,13 @@ def test_a_campaign_killed_outright_loses_nothing_and_resumes(tmp_path: Path) ->
     assert [e["id"] for e in episodes] == [f"scenario1-r{k}-onboard-crop-clear-px4" for k in range(2)]
     assert [e for e in episodes if e["id"] == first[0]["id"]] == first  # kept as it was
     assert all(e["safe"] for e in episodes), [e["reasons"] for e in episodes]
+    # each run kept what it cost as its episodes ended, the killed one too; the campaign sums them
+    saved = json.loads(results.read_text())
+    assert [r["usage"]["episodes"] for r in saved["runs"]] == [1, 1]
+    assert all(r["usage"]["cpu_s"] > 0 and r["usage"]["episodes_per_core_hour"] > 0 for r in saved["runs"])
+    assert saved["usage"]["runs"] == 2
+    assert saved["usage"]["episodes"] == 2
+    assert "episodes per core-hour (2 episodes" in again.stderr
 
 
 @pytest.mark.slow

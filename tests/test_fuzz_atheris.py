@@ -5,6 +5,7 @@ covers the same readers."""
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
@@ -23,12 +24,15 @@ def test_atheris_finds_no_crash(target: str, tmp_path: Path) -> None:
     runs = RUNS[target]
     # libFuzzer's RSS limit reads the process's peak RSS (ru_maxrss), which a child inherits from its
     # parent at fork: run under a test worker that has rendered frames (2 GB and more), the fuzzer would
-    # report out-of-memory before its first input. The limit on one allocation stays.
+    # report out-of-memory before its first input. The limit on one allocation stays. The harness's
+    # corpus and scratch directories (tempfile) go under tmp_path, which pytest clears, not /tmp.
     res = subprocess.run(
         [sys.executable, str(ROOT / "tests" / "fuzz_atheris.py"), target, f"-runs={runs}", "-seed=1",
          f"-artifact_prefix={tmp_path}/", "-rss_limit_mb=0", "-malloc_limit_mb=2048"],
         capture_output=True, text=True, timeout=600, cwd=tmp_path,
+        env={**os.environ, "TMPDIR": str(tmp_path)},
     )  # fmt: skip
+    assert list(tmp_path.glob(f"landfall-fuzz-{target}-*")), "the corpus went elsewhere than tmp_path"
     crashes = list(tmp_path.glob("crash-*"))
     assert res.returncode == 0, res.stderr[-4000:]
     assert not crashes
