@@ -8,7 +8,10 @@ from __future__ import annotations
 import asyncio
 from typing import Any
 
-from companion.recovery.core import TRANSIT_CLEARANCE_M, TRANSIT_NEAR_M
+import pytest
+
+from companion.alarms import Criticality
+from companion.recovery.core import TRANSIT_CLEARANCE_M, TRANSIT_CORRIDOR_M, TRANSIT_NEAR_M
 from companion.recovery.landing import Lander
 from companion.recovery.searching import Searcher
 from companion.site_ledger import Hazard, LedgerSite
@@ -83,3 +86,32 @@ def test_a_search_leg_with_no_roof_near_climbs_or_descends_as_before() -> None:
     ctx = context(pos_ned_m=(0.0, 0.0, -60.0))
     assert _leg_to(ctx, (0.0, 100.0, -35.0)) == [(0.0, 100.0, -60.0), (0.0, 100.0, -35.0)]
     assert ctx.record.of("transit_climb") == []
+
+
+def test_a_move_between_two_sites_climbs_over_a_tower_the_lidar_measured_between_them() -> None:
+    """City 35 in fog (2026-12-05): the fallback flew from a roof 31 m up, 41 m high, toward ground 100 m
+    on, through a 46 m building the ledger never held. The search's LiDAR map had swept it: the level
+    move now keeps TRANSIT_CLEARANCE_M over it, and a move beside it, off the corridor, does not climb."""
+    from companion.recovery.search_plan import SearchPlanner
+    from tests.recovery_fakes import frame
+    from tests.test_search import sweep
+
+    plan = SearchPlanner(Criticality.HIGH)
+    seen_from = (0.0, 50.0, -75.0)  # the search's altitude, earlier
+    tower = (-10.0, 10.0, 44.0, 56.0, 46.0)  # north 20 m by east 12 m, 46 m up, half way along the move
+    plan.observe(
+        frame(lidar_frd=sweep(seen_from, [tower, (-10.0, 10.0, -10.0, 10.0, 31.0)]), pos_ned_m=seen_from)
+    )
+    ctx = context(pos_ned_m=(0.0, 0.0, -41.0))
+    ctx.ledger.add(LedgerSite((0.0, 0.0, -31.0), Hazard.DOUBTED, "a roof, doubted", 7, False, 4.0, "site 1"))
+    ground = LedgerSite((0.0, 100.0, -0.5), Hazard.STREET, "level ground", 2, False, 6.0, "site 0")
+    ctx.ledger.add(ground)
+    assert ctx.transit_d(ground.ned_m) == -41.0  # the ledger alone: level at 41 m, into the tower
+    ctx.path_top = plan.highest_near_path
+    assert ctx.transit_d(ground.ned_m) == pytest.approx(-46.0 - TRANSIT_CLEARANCE_M)
+    # a move north, 40 m and more from the tower: the ledger's roof near its start is all it clears
+    assert ctx.transit_d((60.0, 0.0, -0.5)) == -41.0
+    assert plan.highest_near_path((40.0, 0.0), (40.0, 100.0), TRANSIT_CORRIDOR_M) == pytest.approx(0.0)
+    nothing: Any = None
+    assert asyncio.run(Lander(ctx, looker=nothing, follower=nothing).fly_over(ground, ground.label))
+    assert ctx.ctl.gotos == [(0.0, 0.0, pytest.approx(-56.0)), (0.0, 100.0, pytest.approx(-56.0))]

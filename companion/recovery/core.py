@@ -32,6 +32,7 @@ PEOPLE_LOOK_AGAIN_S = 2.0  # wall seconds between two looks at people near a sit
 PEOPLE_WATCH_STEP_S = 1.0  # wall seconds between two looks at people near a site on the way down
 TRANSIT_CLEARANCE_M = 10.0  # a level move flies at least this far above every roof measured near it
 TRANSIT_NEAR_M = 100.0  # ... within this of where it starts or ends
+TRANSIT_CORRIDOR_M = 15.0  # ... and over every LiDAR return measured this near its path (cell centres)
 GO_AROUND_M = 15.0  # a final approach stopped for people climbs back this high above the site
 GO_AROUND_MIN_M = 2.0  # below this height above the site the final approach is not stopped any more
 QUIET_LOOKS = 2  # looks in a row without anyone before a site where people were seen is descended onto
@@ -180,6 +181,9 @@ class RecoveryContext:
     record: Record = field(default_factory=NoRecord)
     log: logging.Logger = field(default_factory=lambda: logging.getLogger("companion.recovery"))
     fault: FaultHook = field(default_factory=FaultHook)  # a test-only fault per stage (companion.faults)
+    # the highest return the LiDAR measured within a corridor of a path (metres up; None: nothing
+    # measured there): the search's map (SearchPlanner.highest_near_path), set by the recovery
+    path_top: Callable[[tuple[float, float], tuple[float, float], float], float | None] | None = None
     state: State = State.IDLE
     round: int = 0
     best: Site | None = None  # the site confirmed for descent
@@ -240,7 +244,10 @@ class RecoveryContext:
         """The height (NED down, metres) a level move from here to ``to_ned`` flies at: where the vehicle
         is, or higher where that is less than ``TRANSIT_CLEARANCE_M`` above a surface the recovery
         measured within ``TRANSIT_NEAR_M`` of either end (every roof in the ledger, the destination's
-        own). A descent stopped low among taller buildings must not fly on level into their walls."""
+        own) or a return the LiDAR measured within ``TRANSIT_CORRIDOR_M`` of the path (``path_top``).
+        A descent stopped low among taller buildings must not fly on level into their walls, nor into
+        a tower between two sites (city 35 in fog: a fallback from one roof to the next, 41 m up,
+        into the side of a 46 m building the ledger never held)."""
         n, e, d = self.tm.state.pos_ned_m
         ends = ((n, e), (to_ned[0], to_ned[1]))
         near = [
@@ -251,6 +258,9 @@ class RecoveryContext:
         ]
         if math.isfinite(to_ned[2]):
             near.append(to_ned[2])
+        top = self.path_top(*ends, TRANSIT_CORRIDOR_M) if self.path_top is not None else None
+        if top is not None and math.isfinite(top):
+            near.append(-top)
         if not near or not math.isfinite(d):
             return d
         return min(d, min(near) - TRANSIT_CLEARANCE_M)

@@ -115,6 +115,7 @@ class Recovery:
         plan = SearchPlanner(
             alarm.criticality, p.search, search_agl_m=p.search_agl_m, lidar_range_m=p.lidar_range_m
         )
+        ctx.path_top = plan.highest_near_path  # a level move's clearance (RecoveryContext.transit_d)
         onboard = onboard_tier(reasoner)
         self.looker = Looker(ctx, reasoner=reasoner, onboard=onboard, plan=plan)
         self.follower = SiteFollower(ctx)

@@ -52,6 +52,7 @@ LEVEL_STD_M = 0.6  # elevated returns in one cell within this spread: a level su
 MIN_CELL_RETURNS = 3
 HEADINGS = 12  # candidate headings of a new-ground leg, evenly spaced
 CAMERA_BAD = ("water", "road", "marking")  # LandNet-S classes that make ground no place to look for roofs
+LEG_CORRIDOR_M = 30.0  # a leg keeps clearance_m over every return measured this near its path
 CAMERA_TILES = (3, 2)  # columns, rows: the frame is read in tiles near the scale the net learnt
 
 
@@ -504,30 +505,38 @@ class SearchPlanner:
         fenced = ", as far as the autopilot's fence allows" if go_m < step - 0.5 else ""
         return tn, te, "new ground", f"{go_m:.0f} m {bearing} to ground not yet seen ({why}{fenced})"
 
+    def highest_near_path(
+        self, here: tuple[float, float], to: tuple[float, float], corridor_m: float
+    ) -> float | None:
+        """The highest LiDAR return measured (metres up) in the map's cells whose centres lie within
+        ``corridor_m`` of the straight path from ``here`` to ``to`` (north, east); None where no cell
+        near it was measured. A cell is ``cell_m`` wide: a return up to half its diagonal farther from
+        the path than ``corridor_m`` may count, none nearer is missed."""
+        if not self._cells:
+            return None
+        cells = np.array(list(self._cells.keys()), dtype=float)
+        tops = np.array([acc[4] for acc in self._cells.values()])
+        centres = (cells + 0.5) * self.cell_m - np.asarray(here)
+        seg = np.subtract(to, here)
+        length = float(np.hypot(*seg))
+        along = np.clip(centres @ seg / length, 0.0, length) if length > 0 else np.zeros(len(centres))
+        unit = seg / length if length > 0 else np.zeros(2)
+        near = np.hypot(*(centres - along[:, None] * unit).T) < corridor_m
+        return float(tops[near].max()) if near.any() else None
+
     def _leg_down(
         self, here: tuple[float, float], to: tuple[float, float], d: float, rangefinder_m: float
     ) -> float:
         """The leg's altitude (NED down, metres): ``search_agl_m`` above the ground, and
-        ``clearance_m`` above the highest return measured within 30 m of the path."""
+        ``clearance_m`` above the highest return measured within ``LEG_CORRIDOR_M`` of the path."""
         if self.ground_up_m is not None:
             ground_up = self.ground_up_m
         elif math.isfinite(rangefinder_m):
             ground_up = -(d + rangefinder_m)
         else:
             return d  # nothing known of the ground: keep the altitude
-        top = ground_up
-        if self._cells:
-            cells = np.array(list(self._cells.keys()), dtype=float)
-            tops = np.array([acc[4] for acc in self._cells.values()])
-            centres = (cells + 0.5) * self.cell_m - np.asarray(here)
-            seg = np.subtract(to, here)
-            length = float(np.hypot(*seg))
-            along = np.clip(centres @ seg / length, 0.0, length) if length > 0 else np.zeros(len(centres))
-            unit = seg / length if length > 0 else np.zeros(2)
-            off = np.hypot(*(centres - along[:, None] * unit).T)
-            near = off < 30.0
-            if near.any():
-                top = max(top, float(tops[near].max()))
+        highest = self.highest_near_path(here, to, LEG_CORRIDOR_M)
+        top = ground_up if highest is None else max(ground_up, highest)
         up = max(ground_up + self.search_agl_m, top + self.clearance_m)
         return -up
 
