@@ -122,10 +122,11 @@ def package(model: Path, into: Path, *, full: bool = False) -> dict[str, Any]:
     diffs = []
     for src, shape, entry in files:
         dst = into / src.name
-        if full or halved(src):
-            shutil.copyfile(src, dst)  # float32 kept, or a packaged file packaged again: as it is
-            if not full:
-                diffs.append(float(earlier.get("parity_max_abs_diff", 0.0)))
+        if full:
+            shutil.copyfile(src, dst)
+        elif halved(src):  # a packaged file packaged again: as it is, with the parity it was packaged at
+            shutil.copyfile(src, dst)
+            diffs.append(float(earlier.get("parity_max_abs_diff", 0.0)))
         else:
             halve(src, dst)
             diffs.append(parity(src, dst, shape))

@@ -46,7 +46,7 @@ import logging
 import sys
 import tempfile
 import time
-from collections.abc import Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -84,11 +84,9 @@ def whole_blob(rgb: np.ndarray, side: int = SIDE_PX, views: int = VIEWS) -> np.n
     return whole_batch(rgb, side, views, mean, std)
 
 
-def features(
-    photos: Sequence[Photo], threads: int = 1, side: int = SIDE_PX, views: int = VIEWS
-) -> np.ndarray:
-    """(len(photos), 1280): the frozen ImageNet backbone's pooled head features of each photograph read
-    whole at ``side`` in ``views`` views (:func:`whole_blob`), its views averaged."""
+def _pooled(images: Iterable[np.ndarray], threads: int, side: int, views: int) -> np.ndarray:
+    """(n, 1280): the frozen ImageNet backbone's head features of each RGB image read whole at ``side``
+    in ``views`` views (:func:`whole_blob`), pooled over the image and averaged over its views."""
     from landfall_train.effnet import EfficientNetLite0, features_runner, pretrained_state
 
     net = EfficientNetLite0()
@@ -96,9 +94,15 @@ def features(
     net.eval()
     with tempfile.TemporaryDirectory() as tmp:
         run = features_runner(net, Path(tmp) / "features.onnx", threads)
-        blobs = (whole_blob(read_rgb(p.path), side, views) for p in photos)
-        out = [run(blob)[2].mean(axis=(2, 3)).mean(axis=0) for blob in blobs]
-    return np.stack(out).astype(np.float64)
+        out = [run(whole_blob(rgb, side, views))[2].mean(axis=(2, 3)).mean(axis=0) for rgb in images]
+    return np.stack(out).astype(np.float64) if out else np.zeros((0, 1280))
+
+
+def features(
+    photos: Sequence[Photo], threads: int = 1, side: int = SIDE_PX, views: int = VIEWS
+) -> np.ndarray:
+    """(len(photos), 1280): each photograph's pooled features (:func:`_pooled`)."""
+    return _pooled((read_rgb(p.path) for p in photos), threads, side, views)
 
 
 def closeup_features(
@@ -107,21 +111,18 @@ def closeup_features(
     """(n, 1280) features of ``n`` procedural close-ups (:mod:`landfall_train.closeups`) read as the
     photographs are, and their labels (1.0: nothing stands on the roof)."""
     from landfall_train.closeups import OBJECT, closeup
-    from landfall_train.effnet import EfficientNetLite0, features_runner, pretrained_state
 
     if n <= 0:
         return np.zeros((0, 1280)), np.zeros(0)
-    net = EfficientNetLite0()
-    net.load_state_dict(pretrained_state(), strict=True)
-    net.eval()
-    xs, ys = [], []
-    with tempfile.TemporaryDirectory() as tmp:
-        run = features_runner(net, Path(tmp) / "features.onnx", threads)
+    ys: list[float] = []
+
+    def images() -> Iterator[np.ndarray]:
         for k in range(n):
             img, lab = closeup(CLOSEUP_SEED, k, CLOSEUP_PX)
-            xs.append(run(whole_blob(img, side, views))[2].mean(axis=(2, 3)).mean(axis=0))
             ys.append(0.0 if (lab == OBJECT).any() else 1.0)
-    return np.stack(xs).astype(np.float64), np.array(ys)
+            yield img
+
+    return _pooled(images(), threads, side, views), np.array(ys)
 
 
 def fit(x: np.ndarray, y: np.ndarray, c: float = C) -> tuple[np.ndarray, float]:
