@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 from landfall_eval.episode import EpisodeSpec, EpisodeTimes, run_episode
+from simbridge.warmup import warm_up
 
 
 def _show(source: str, text: str) -> None:
@@ -50,6 +51,10 @@ def main(argv: list[str] | None = None) -> int:
         f"[demo] simbridge: {args.scenario}, {args.autopilot}, {args.weather}, {args.speed:g}x real time",
         flush=True,
     )
+    # a fresh install compiles simbridge's renderer first: done here, said, and out of the episode's
+    # start-up budget (on a loaded machine it outlasted the wait for the sensor stream)
+    print("[demo] warming up simbridge's renderer (a fresh install compiles it first: 1.5 min on one core)")
+    print(f"[demo] simbridge's renderer ready in {warm_up():.0f} s", flush=True)
     spec = EpisodeSpec(
         "curated", args.scenario, 0, weather=args.weather, autopilot=args.autopilot,
         criticality=args.criticality, reason=args.reason, run=0,
