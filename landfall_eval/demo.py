@@ -53,7 +53,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     # a fresh install compiles simbridge's renderer first: done here, said, and out of the episode's
     # start-up budget (on a loaded machine it outlasted the wait for the sensor stream)
-    print("[demo] warming up simbridge's renderer (a fresh install compiles it first: 1.5 min on one core)")
+    print("[demo] warming up simbridge's renderer (a fresh install compiles it first: 1.5-2.5 min)")
     print(f"[demo] simbridge's renderer ready in {warm_up():.0f} s", flush=True)
     spec = EpisodeSpec(
         "curated", args.scenario, 0, weather=args.weather, autopilot=args.autopilot,

@@ -2,7 +2,7 @@
 
 The ray caster, the shading and the LiDAR sweep are numba kernels cached in the package's
 ``__pycache__`` (``cache=True``). On a fresh install the first simbridge to render compiles them before
-its sensor server opens: about a minute and a half on one core, several minutes on a loaded machine,
+its sensor server opens: 1.5-2.5 minutes on one core (137 s on 2026-12-06), more on a loaded machine,
 while the companion waits for a sensor stream. A frame rendered and a sweep cast over scenario1 here
 compiles them once; with the cache filled it takes a few seconds (building scenario1, one frame). The
 demo runs it first and says so; ``make test`` runs it beside the linters (tests/warmup.py).
