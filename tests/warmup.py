@@ -2,8 +2,8 @@
 
 ``make test`` runs this beside the linters, so the kernels are in __pycache__ (``cache=True``) before
 pytest starts; pytest's own ``pytest_configure`` (tests/conftest.py) calls it again, which then takes a
-few seconds. On a fresh clone the compilation alone takes about a minute and a half on one core. The
-work is :func:`simbridge.warmup.warm_up`'s.
+few seconds. On a fresh clone the compilation alone takes 1.5-2.5 minutes on one core. The work is
+:func:`simbridge.warmup.warm_up`'s.
 """
 
 from __future__ import annotations
